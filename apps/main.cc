@@ -1,0 +1,106 @@
+// The `evio` command-line tool. All flag parsing lives here (CLI11 is included in this file only);
+// each subcommand's work is in its own <name>_command.cc. Exit codes: 0 success, 1 bad input
+// (file, line and expected form on one line of stderr), 2 usage error, 3 internal error.
+#include <cstdio>
+#include <iostream>
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+#include "evio/calib/error.h"
+#include "evio/calib/log.h"
+#include "info_command.h"
+
+namespace {
+
+// Parses "WxH" into a sensor size.
+std::string parse_sensor(const std::string& s, evio::SensorSize* out) {
+  int w = 0, h = 0;
+  char x = 0, extra = 0;
+  if (std::sscanf(s.c_str(), "%d%c%d%c", &w, &x, &h, &extra) != 3 || (x != 'x' && x != 'X') || w <= 0 || h <= 0) {
+    return "expected WIDTHxHEIGHT in pixels, e.g. 240x180; got '" + s + "'";
+  }
+  out->width = w;
+  out->height = h;
+  return {};
+}
+
+// Flags shared by every command that reads a dataset.
+void add_dataset_options(CLI::App* cmd, evio::DatasetOptions* opts, std::string* format, std::string* time_unit,
+                         std::string* on_bad_line) {
+  cmd->add_option("--format", *format, "Dataset format; auto detects it from the folder layout and extension")
+      ->check(CLI::IsMember({"auto", "ecd", "ecd-events"}))
+      ->capture_default_str();
+  cmd->add_option("--time-unit", *time_unit,
+                  "Unit of the time column of text files: s, ms, us, ns; auto = decimal point means s, "
+                  "integers mean us (ns above 1e17 or when all are multiples of 1000)")
+      ->check(CLI::IsMember({"auto", "s", "ms", "us", "ns"}))
+      ->capture_default_str();
+  cmd->add_option_function<std::string>(
+      "--sensor",
+      [opts](const std::string& s) {
+        const std::string err = parse_sensor(s, &opts->text.sensor);
+        if (!err.empty()) throw CLI::ValidationError("--sensor", err);
+      },
+      "Sensor size WIDTHxHEIGHT in pixels; events outside it are bad lines (default: unknown, not checked)");
+  cmd->add_option("--on-bad-line", *on_bad_line,
+                  "What to do with a malformed, out-of-order or out-of-sensor line: error = stop with file, "
+                  "line and expected form; warn = skip it and report counts")
+      ->check(CLI::IsMember({"error", "warn"}))
+      ->capture_default_str();
+  cmd->add_flag_callback(
+      "--no-time-unit-check", [opts] { opts->text.check_time_unit = false; },
+      "Accept a time unit even when the first records imply an implausible event rate (outside 10 Hz..2 GHz) "
+      "or IMU/pose rate (outside 0.1 Hz..100 kHz)");
+}
+
+void apply_dataset_strings(const std::string& format, const std::string& time_unit, const std::string& on_bad_line,
+                           evio::DatasetOptions* opts) {
+  opts->format = *evio::dataset_format_from_name(format);
+  opts->text.time_unit = *evio::time_unit_from_name(time_unit);
+  opts->text.on_bad_line = on_bad_line == "warn" ? evio::BadLinePolicy::kWarnAndSkip : evio::BadLinePolicy::kError;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"evio: event-camera odometry, mosaicing and mapping on recorded datasets (no ROS).\n"
+               "Times are printed in seconds; pixel sizes in px."};
+  app.set_version_flag("--version", "evio 0.1.0");
+  app.require_subcommand(1);
+  bool quiet = false, verbose = false;
+  app.add_flag("-q,--quiet", quiet, "Print only warnings and errors on stderr (no progress, no conventions)");
+  app.add_flag("-v,--verbose", verbose, "Also print debug messages on stderr");
+
+  evio::apps::InfoArgs info;
+  std::string info_format = "auto", info_unit = "auto", info_bad = "error";
+  CLI::App* info_cmd = app.add_subcommand(
+      "info", "Summarise a recording: format, sensor size, duration, event count and rate, polarity balance, "
+              "IMU rate, frames, ground-truth span, calibration");
+  info_cmd->add_option("PATH", info.path, "Dataset folder (ECD layout) or events text file")->required();
+  add_dataset_options(info_cmd, &info.dataset, &info_format, &info_unit, &info_bad);
+  info_cmd->add_flag("--json", info.json, "Print one JSON object instead of the table");
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e) == 0 ? 0 : 2;
+  }
+  if (quiet) evio::set_log_level(evio::LogLevel::kWarning);
+  if (verbose) evio::set_log_level(evio::LogLevel::kDebug);
+
+  try {
+    if (info_cmd->parsed()) {
+      apply_dataset_strings(info_format, info_unit, info_bad, &info.dataset);
+      info.progress = !quiet;
+      return evio::apps::run_info(info, std::cout);
+    }
+  } catch (const evio::InputError& e) {
+    std::fprintf(stderr, "evio: error: %s\n", e.what());
+    return 1;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "evio: internal error: %s\n", e.what());
+    return 3;
+  }
+  return 2;
+}

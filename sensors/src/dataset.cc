@@ -1,0 +1,169 @@
+#include "evio/sensors/dataset.h"
+
+#include <filesystem>
+
+#include "evio/calib/error.h"
+#include "evio/calib/log.h"
+#include "evio/sensors/ecd.h"
+
+namespace evio {
+namespace fs = std::filesystem;
+
+const char* dataset_format_name(DatasetFormat f) {
+  switch (f) {
+    case DatasetFormat::kAuto: return "auto";
+    case DatasetFormat::kEcdFolder: return "ecd";
+    case DatasetFormat::kEcdEvents: return "ecd-events";
+  }
+  return "?";
+}
+
+std::optional<DatasetFormat> dataset_format_from_name(const std::string& name) {
+  for (DatasetFormat f : {DatasetFormat::kAuto, DatasetFormat::kEcdFolder, DatasetFormat::kEcdEvents}) {
+    if (name == dataset_format_name(f)) return f;
+  }
+  return std::nullopt;
+}
+
+bool DatasetOptions::Validate(std::string* why) const {
+  if (!text.Validate(why)) return false;
+  if (ecd_calib_sensor.width <= 0 || ecd_calib_sensor.height <= 0) {
+    if (why != nullptr) *why = "ecd_calib_sensor must be a positive size in px";
+    return false;
+  }
+  return true;
+}
+
+DatasetFormat detect_dataset_format(const std::string& path) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) throw InputError(path, 0, "no such file or directory", "a dataset folder or file");
+  if (fs::is_directory(path, ec)) {
+    if (fs::is_regular_file(fs::path(path) / "events.txt", ec)) return DatasetFormat::kEcdFolder;
+    throw InputError(path, 0, "folder of unknown layout (no events.txt)",
+                     "an Event Camera Dataset folder (events.txt [imu.txt groundtruth.txt images.txt calib.txt])");
+  }
+  const std::string ext = fs::path(path).extension().string();
+  if (ext == ".txt" || ext == ".dat" || ext == ".csv") return DatasetFormat::kEcdEvents;
+  throw InputError(path, 0, "unknown file format (extension '" + ext + "')",
+                   "an ECD folder or an events text file (.txt); or name the format with --format");
+}
+
+namespace {
+
+// ECD folder, or a bare events file (then only events).
+class EcdDatasetReader final : public DatasetReader {
+ public:
+  EcdDatasetReader(const std::string& path, DatasetFormat format, const DatasetOptions& options)
+      : format_(format), path_(path), options_(options) {
+    if (format == DatasetFormat::kEcdFolder) {
+      folder_ = find_ecd_folder(path);
+    } else {
+      folder_.events = path;
+    }
+    events_ = std::make_unique<EcdEventReader>(folder_.events, options_.text);
+    log_info(folder_.events + ": time unit " + time_unit_name(events_->time_unit()) + " (" +
+             events_->report().time_unit_reason + ")");
+  }
+
+  DatasetFormat format() const override { return format_; }
+  const std::string& path() const override { return path_; }
+  SensorSize sensor_size() const override { return options_.text.sensor; }
+  size_t read_events(EventBuffer* out, size_t max_events) override { return events_->read(out, max_events); }
+  double progress() const override { return events_->progress(); }
+  const ReadReport& event_report() const override { return events_->report(); }
+
+  std::vector<ImuSample> read_imu() override {
+    return folder_.imu.empty() ? std::vector<ImuSample>() : read_ecd_imu(folder_.imu, side_options());
+  }
+  std::vector<Frame> read_frames() override {
+    return folder_.images.empty() ? std::vector<Frame>() : read_ecd_image_list(folder_.images, side_options());
+  }
+  std::optional<Trajectory> read_groundtruth() override {
+    if (folder_.groundtruth.empty()) return std::nullopt;
+    return read_tum(folder_.groundtruth, side_options());
+  }
+  std::optional<calib::CameraCalibration> read_calibration() override {
+    if (folder_.calib.empty()) return std::nullopt;
+    const SensorSize s = options_.text.sensor.known() ? options_.text.sensor : options_.ecd_calib_sensor;
+    return calib::load_ecd_calib(folder_.calib, s.width, s.height);
+  }
+
+ private:
+  // Side files of an ECD folder are in seconds like events.txt; each file still detects its unit.
+  TextReadOptions side_options() const {
+    TextReadOptions o = options_.text;
+    o.sensor = SensorSize{};
+    return o;
+  }
+
+  DatasetFormat format_;
+  std::string path_;
+  DatasetOptions options_;
+  EcdFolder folder_;
+  std::unique_ptr<EcdEventReader> events_;
+};
+
+}  // namespace
+
+std::unique_ptr<DatasetReader> open_dataset(const std::string& path, const DatasetOptions& options) {
+  std::string why;
+  if (!options.Validate(&why)) throw InputError(path, 0, "invalid dataset options: " + why);
+  const DatasetFormat f = options.format == DatasetFormat::kAuto ? detect_dataset_format(path) : options.format;
+  switch (f) {
+    case DatasetFormat::kEcdFolder:
+    case DatasetFormat::kEcdEvents:
+      return std::make_unique<EcdDatasetReader>(path, f, options);
+    case DatasetFormat::kAuto:
+      break;
+  }
+  throw InputError(path, 0, "no reader for this format");
+}
+
+double DatasetSummary::rate_hz(int64_t n, int64_t t_first_ns, int64_t t_last_ns) {
+  if (n < 2 || t_last_ns <= t_first_ns) return 0.0;
+  return static_cast<double>(n - 1) / (static_cast<double>(t_last_ns - t_first_ns) * 1e-9);
+}
+
+DatasetSummary summarize_dataset(DatasetReader* reader, const std::function<void(double)>& progress) {
+  DatasetSummary s;
+  s.path = reader->path();
+  s.format = reader->format();
+  s.sensor = reader->sensor_size();
+  EventBuffer chunk;
+  double next_report = 0.01;
+  for (;;) {
+    chunk.clear();
+    if (reader->read_events(&chunk, size_t{1} << 18) == 0) break;
+    s.events.add(chunk.span());
+    if (progress && reader->progress() >= next_report) {
+      progress(reader->progress());
+      next_report = reader->progress() + 0.01;
+    }
+  }
+  s.events_report = reader->event_report();
+  const std::vector<ImuSample> imu = reader->read_imu();
+  s.imu_samples = static_cast<int64_t>(imu.size());
+  if (!imu.empty()) {
+    s.imu_t_first_ns = imu.front().t_ns;
+    s.imu_t_last_ns = imu.back().t_ns;
+  }
+  std::vector<Frame> frames = reader->read_frames();
+  s.frames = static_cast<int64_t>(frames.size());
+  if (!frames.empty()) {
+    s.frames_t_first_ns = frames.front().t_ns;
+    s.frames_t_last_ns = frames.back().t_ns;
+    load_frame_image(&frames.front());
+    s.frame_width = frames.front().image.cols;
+    s.frame_height = frames.front().image.rows;
+  }
+  if (const auto gt = reader->read_groundtruth()) {
+    s.poses = static_cast<int64_t>(gt->size());
+    s.gt_t_first_ns = gt->t_begin_ns();
+    s.gt_t_last_ns = gt->t_end_ns();
+    s.gt_path_length_m = gt->path_length_m();
+  }
+  s.calibration = reader->read_calibration();
+  return s;
+}
+
+}  // namespace evio

@@ -1,0 +1,430 @@
+#include "evio/sensors/ecd.h"
+
+#include <cerrno>
+#include <charconv>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include "evio/calib/error.h"
+#include "evio/calib/log.h"
+#include "text_common.h"
+
+namespace evio {
+namespace fs = std::filesystem;
+using detail::is_space;
+using detail::skip_space;
+
+namespace {
+
+std::string quote_line(std::string_view line) {
+  constexpr size_t kMax = 96;
+  std::string s = "\"";
+  s.append(line.substr(0, kMax));
+  if (line.size() > kMax) s += "...";
+  return s + "\"";
+}
+
+std::string event_form(const ReadReport& r) {
+  return std::string("`t x y p`: time in ") + time_unit_name(r.time_unit) +
+         ", integer pixel x and y, polarity 0/1 or -1/+1 (e.g. `0.003811000 96 133 0`)";
+}
+
+// Parses an unsigned integer pixel coordinate; returns false when there is no digit.
+inline bool parse_coord(const char*& p, const char* end, uint32_t* v) {
+  uint32_t x = 0;
+  const char* b = p;
+  while (p < end && static_cast<unsigned>(*p - '0') < 10u && p - b < 9) {
+    x = x * 10 + static_cast<uint32_t>(*p - '0');
+    ++p;
+  }
+  *v = x;
+  return p != b;
+}
+
+std::string existing(const fs::path& p) {
+  std::error_code ec;
+  return fs::is_regular_file(p, ec) ? p.string() : std::string();
+}
+
+}  // namespace
+
+EcdFolder find_ecd_folder(const std::string& dir) {
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) {
+    throw InputError(dir, 0, "not a directory", "an Event Camera Dataset folder with events.txt");
+  }
+  EcdFolder f;
+  f.dir = dir;
+  const fs::path d(dir);
+  f.events = existing(d / "events.txt");
+  if (f.events.empty()) {
+    throw InputError(dir, 0, "no events.txt in this folder",
+                     "an Event Camera Dataset folder: events.txt [imu.txt groundtruth.txt images.txt calib.txt]");
+  }
+  f.imu = existing(d / "imu.txt");
+  f.groundtruth = existing(d / "groundtruth.txt");
+  f.images = existing(d / "images.txt");
+  f.calib = existing(d / "calib.txt");
+  return f;
+}
+
+// ---------------------------------------------------------------------------------------------
+// events.txt
+
+EcdEventReader::EcdEventReader(const std::string& path, const TextReadOptions& options)
+    : options_(options), lines_(path) {
+  std::string why;
+  if (!options_.Validate(&why)) throw InputError(path, 0, "invalid read options: " + why);
+  report_.path = path;
+  exponent_ = detail::prepare_time_unit(path, options_, 0, "event", 10.0, 2e9, 1000, &report_);
+}
+
+double EcdEventReader::progress() const {
+  return lines_.file_size() > 0 ? static_cast<double>(lines_.bytes_consumed()) / lines_.file_size() : 1.0;
+}
+
+void EcdEventReader::bad(const char* kind, std::string_view line, const std::string& problem) {
+  detail::BadLineHandler(report_.path, options_.on_bad_line, &report_)
+      .bad(kind, lines_.line_number(), problem + " in " + quote_line(line), event_form(report_));
+}
+
+size_t EcdEventReader::read(EventBuffer* out, size_t max_events) {
+  std::vector<Event>& v = out->events();
+  const size_t n0 = v.size();
+  const uint32_t width = static_cast<uint32_t>(options_.sensor.width);
+  const uint32_t height = static_cast<uint32_t>(options_.sensor.height);
+  const bool bounded = options_.sensor.known();
+  std::string_view line;
+  size_t n = 0;
+  while (n < max_events && lines_.next(&line)) {
+    const char* p = line.data();
+    const char* end = p + line.size();
+    p = skip_space(p, end);
+    if (p == end || *p == '#' || *p == '%') continue;
+
+    Event e;
+    if (!detail::parse_time(p, end, exponent_, &e.t_ns) || (p < end && !is_space(*p))) {
+      bad("malformed", line, "time is not a number");
+      continue;
+    }
+    p = skip_space(p, end);
+    uint32_t x = 0, y = 0;
+    const bool has_x = parse_coord(p, end, &x);
+    if (has_x && p < end && *p == '.') {
+      bad("malformed", line, "fractional pixel coordinate (undistorted events are not integer pixels)");
+      continue;
+    }
+    if (!has_x || p == end || !is_space(*p)) {
+      bad("malformed", line, "expected 4 columns, found " + std::to_string(detail::count_tokens(line)) +
+                                 (has_x ? "" : " or x is not a non-negative integer"));
+      continue;
+    }
+    p = skip_space(p, end);
+    const bool has_y = parse_coord(p, end, &y);
+    if (has_y && p < end && *p == '.') {
+      bad("malformed", line, "fractional pixel coordinate (undistorted events are not integer pixels)");
+      continue;
+    }
+    if (!has_y || p == end || !is_space(*p)) {
+      bad("malformed", line, "expected 4 columns, found " + std::to_string(detail::count_tokens(line)) +
+                                 (has_y ? "" : " or y is not a non-negative integer"));
+      continue;
+    }
+    p = skip_space(p, end);
+    // Polarity: 0/1 or -1/+1 (also "+1"); the two conventions may not mix within one file.
+    PolarityConvention conv = PolarityConvention::kUnknown;
+    bool polarity_ok = true;
+    if (p < end && *p == '1') {
+      e.polarity = 1;
+      ++p;
+    } else if (p < end && *p == '0') {
+      e.polarity = -1;
+      conv = PolarityConvention::kZeroOne;
+      ++p;
+    } else if (end - p >= 2 && p[0] == '-' && p[1] == '1') {
+      e.polarity = -1;
+      conv = PolarityConvention::kMinusPlusOne;
+      p += 2;
+    } else if (end - p >= 2 && p[0] == '+' && p[1] == '1') {
+      e.polarity = 1;
+      conv = PolarityConvention::kMinusPlusOne;
+      p += 2;
+    } else {
+      polarity_ok = false;
+    }
+    p = skip_space(p, end);
+    if (!polarity_ok || p != end) {
+      if (detail::count_tokens(line) != 4) {
+        bad("malformed", line, "expected 4 columns, found " + std::to_string(detail::count_tokens(line)));
+      } else {
+        bad("polarity", line, "polarity is not 0, 1, -1 or +1");
+      }
+      continue;
+    }
+    if (conv != PolarityConvention::kUnknown && conv != report_.polarity) {
+      if (report_.polarity != PolarityConvention::kUnknown) {
+        bad("polarity", line,
+            std::string("polarity convention ") + polarity_convention_name(conv) + " mixed with " +
+                polarity_convention_name(report_.polarity) + " used earlier in the file");
+        continue;
+      }
+      report_.polarity = conv;
+    }
+    if (x > 65535 || y > 65535 || (bounded && (x >= width || y >= height))) {
+      bad("outside sensor", line,
+          "pixel (" + std::to_string(x) + ", " + std::to_string(y) + ") outside the " +
+              (bounded ? std::to_string(width) + "x" + std::to_string(height) + " sensor" : std::string("uint16 range")));
+      continue;
+    }
+    if (e.t_ns < last_t_ns_) {
+      bad("time order", line,
+          "timestamp " + format_seconds(e.t_ns) + " s is earlier than the previous event's " +
+              format_seconds(last_t_ns_) + " s");
+      continue;
+    }
+    last_t_ns_ = e.t_ns;
+    e.x = static_cast<uint16_t>(x);
+    e.y = static_cast<uint16_t>(y);
+    v.push_back(e);
+    ++n;
+  }
+  report_.records += static_cast<int64_t>(v.size() - n0);
+  report_.lines = lines_.line_number();
+  if (n == 0 && !finished_) {
+    finished_ = true;
+    detail::BadLineHandler(report_.path, options_.on_bad_line, &report_).finish();
+  }
+  return n;
+}
+
+EventBuffer read_ecd_events(const std::string& path, const TextReadOptions& options, ReadReport* report) {
+  EcdEventReader reader(path, options);
+  EventBuffer events;
+  while (reader.read(&events, size_t{1} << 20) > 0) {
+  }
+  if (report != nullptr) *report = reader.report();
+  return events;
+}
+
+// ---------------------------------------------------------------------------------------------
+// imu.txt
+
+std::vector<ImuSample> read_ecd_imu(const std::string& path, const TextReadOptions& options, ReadReport* report) {
+  ReadReport local;
+  ReadReport& r = report != nullptr ? *report : local;
+  r = ReadReport();
+  r.path = path;
+  LineReader lines(path);
+  const int e = detail::prepare_time_unit(path, options, 0, "IMU", 0.1, 1e5, 10, &r);
+  detail::BadLineHandler handler(path, options.on_bad_line, &r);
+  const std::string form = std::string("`t ax ay az gx gy gz`: time in ") + time_unit_name(r.time_unit) +
+                           ", accelerometer in m/s^2, gyroscope in rad/s";
+  std::vector<ImuSample> out;
+  std::string_view line;
+  int64_t last = INT64_MIN;
+  while (lines.next(&line)) {
+    if (detail::is_comment_or_blank(line)) continue;
+    const char* p = skip_space(line.data(), line.data() + line.size());
+    const char* end = line.data() + line.size();
+    ImuSample s;
+    double v[6];
+    bool ok = detail::parse_time(p, end, e, &s.t_ns) && (p == end || is_space(*p));
+    for (int i = 0; ok && i < 6; ++i) {
+      p = skip_space(p, end);
+      ok = detail::parse_double(p, end, &v[i]) && (p == end || is_space(*p));
+    }
+    if (ok) p = skip_space(p, end);
+    if (!ok || p != end) {
+      const int n = detail::count_tokens(line);
+      handler.bad("malformed", lines.line_number(),
+                  (n != 7 ? "expected 7 columns, found " + std::to_string(n) : std::string("a value is not a number")) +
+                      " in " + quote_line(line),
+                  form);
+      continue;
+    }
+    bool finite = true;
+    for (double x : v) finite = finite && std::isfinite(x);
+    if (!finite) {
+      handler.bad("non-finite", lines.line_number(), "NaN or infinite IMU value in " + quote_line(line), form);
+      continue;
+    }
+    if (s.t_ns <= last) {
+      handler.bad("time order", lines.line_number(),
+                  "timestamp " + format_seconds(s.t_ns) + " s is not after the previous sample's " +
+                      format_seconds(last) + " s",
+                  form + ", strictly increasing time");
+      continue;
+    }
+    last = s.t_ns;
+    s.accel = Eigen::Vector3d(v[0], v[1], v[2]);
+    s.gyro = Eigen::Vector3d(v[3], v[4], v[5]);
+    out.push_back(s);
+  }
+  r.records = static_cast<int64_t>(out.size());
+  r.lines = lines.line_number();
+  handler.finish();
+  return out;
+}
+
+// ---------------------------------------------------------------------------------------------
+// images.txt
+
+std::vector<Frame> read_ecd_image_list(const std::string& path, const TextReadOptions& options, ReadReport* report) {
+  ReadReport local;
+  ReadReport& r = report != nullptr ? *report : local;
+  r = ReadReport();
+  r.path = path;
+  LineReader lines(path);
+  const int e = detail::prepare_time_unit(path, options, 0, "frame", 0.01, 1e5, 10, &r);
+  detail::BadLineHandler handler(path, options.on_bad_line, &r);
+  const std::string form = std::string("`t path`: time in ") + time_unit_name(r.time_unit) +
+                           ", image path relative to the folder of images.txt";
+  const fs::path base = fs::path(path).parent_path();
+  std::vector<Frame> out;
+  std::string_view line;
+  int64_t last = INT64_MIN;
+  while (lines.next(&line)) {
+    if (detail::is_comment_or_blank(line)) continue;
+    const char* end = line.data() + line.size();
+    const char* p = skip_space(line.data(), end);
+    Frame f;
+    if (!detail::parse_time(p, end, e, &f.t_ns) || p == end || !is_space(*p)) {
+      handler.bad("malformed", lines.line_number(), "expected a time and a path in " + quote_line(line), form);
+      continue;
+    }
+    p = skip_space(p, end);
+    const char* q = end;
+    while (q > p && (q[-1] == ' ' || q[-1] == '\t')) --q;
+    const fs::path rel(std::string(p, static_cast<size_t>(q - p)));
+    const fs::path full = rel.is_absolute() ? rel : base / rel;
+    std::error_code ec;
+    if (!fs::is_regular_file(full, ec)) {
+      handler.bad("missing image", lines.line_number(), "image file " + full.string() + " does not exist", form);
+      continue;
+    }
+    if (f.t_ns <= last) {
+      handler.bad("time order", lines.line_number(),
+                  "timestamp " + format_seconds(f.t_ns) + " s is not after the previous frame's " +
+                      format_seconds(last) + " s",
+                  form + ", strictly increasing time");
+      continue;
+    }
+    last = f.t_ns;
+    f.path = full.string();
+    out.push_back(std::move(f));
+  }
+  r.records = static_cast<int64_t>(out.size());
+  r.lines = lines.line_number();
+  handler.finish();
+  return out;
+}
+
+void load_frame_image(Frame* frame) {
+  frame->image = cv::imread(frame->path, cv::IMREAD_UNCHANGED);
+  if (frame->image.empty()) {
+    throw InputError(frame->path, 0, "cannot decode image", "an image file OpenCV can read (PNG, JPEG, ...)");
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// writers
+
+namespace {
+std::FILE* open_for_writing(const std::string& path) {
+  std::error_code ec;
+  const fs::path parent = fs::path(path).parent_path();
+  if (!parent.empty()) fs::create_directories(parent, ec);
+  std::FILE* f = std::fopen(path.c_str(), "wb");
+  if (f == nullptr) throw InputError(path, 0, std::string("cannot create: ") + std::strerror(errno), "a writable path");
+  return f;
+}
+}  // namespace
+
+EcdEventWriter::EcdEventWriter(const std::string& path, PolarityConvention polarity)
+    : path_(path), file_(open_for_writing(path)), buf_(size_t{1} << 20),
+      zero_one_(polarity != PolarityConvention::kMinusPlusOne) {}
+
+EcdEventWriter::~EcdEventWriter() {
+  if (file_ != nullptr) {
+    std::fwrite(buf_.data(), 1, used_, file_);
+    std::fclose(file_);
+  }
+}
+
+void EcdEventWriter::flush() {
+  if (used_ > 0 && std::fwrite(buf_.data(), 1, used_, file_) != used_) {
+    throw InputError(path_, 0, std::string("write failed: ") + std::strerror(errno), "a writable path with free space");
+  }
+  used_ = 0;
+}
+
+void EcdEventWriter::write(EventSpan events) {
+  if (file_ == nullptr) throw InputError(path_, 0, "write after close");
+  constexpr size_t kMaxLine = 64;
+  for (const Event& e : events) {
+    if (buf_.size() - used_ < kMaxLine) flush();
+    char* w = buf_.data() + used_;
+    w = format_seconds(e.t_ns, w);
+    *w++ = ' ';
+    w = std::to_chars(w, w + 8, e.x).ptr;
+    *w++ = ' ';
+    w = std::to_chars(w, w + 8, e.y).ptr;
+    *w++ = ' ';
+    if (zero_one_) {
+      *w++ = e.polarity > 0 ? '1' : '0';
+    } else {
+      if (e.polarity < 0) *w++ = '-';
+      *w++ = '1';
+    }
+    *w++ = '\n';
+    used_ = static_cast<size_t>(w - buf_.data());
+  }
+}
+
+void EcdEventWriter::close() {
+  if (file_ == nullptr) return;
+  flush();
+  const bool failed = std::fclose(file_) != 0;
+  file_ = nullptr;
+  if (failed) throw InputError(path_, 0, "closing failed", "a writable path with free space");
+}
+
+void write_ecd_imu(const std::string& path, const std::vector<ImuSample>& imu) {
+  std::FILE* f = open_for_writing(path);
+  bool ok = true;
+  for (const ImuSample& s : imu) {
+    const std::string t = format_seconds(s.t_ns);
+    ok = ok && std::fprintf(f, "%s %.17g %.17g %.17g %.17g %.17g %.17g\n", t.c_str(), s.accel.x(), s.accel.y(),
+                            s.accel.z(), s.gyro.x(), s.gyro.y(), s.gyro.z()) > 0;
+  }
+  ok = (std::fclose(f) == 0) && ok;
+  if (!ok) throw InputError(path, 0, "write failed", "a writable path with free space");
+}
+
+void write_ecd_images(const std::string& dir, const std::vector<Frame>& frames) {
+  const fs::path images_dir = fs::path(dir) / "images";
+  std::error_code ec;
+  fs::create_directories(images_dir, ec);
+  const std::string list_path = (fs::path(dir) / "images.txt").string();
+  std::FILE* f = open_for_writing(list_path);
+  bool ok = true;
+  for (size_t i = 0; i < frames.size(); ++i) {
+    Frame fr = frames[i];
+    if (fr.image.empty()) load_frame_image(&fr);
+    char name[64];
+    std::snprintf(name, sizeof(name), "images/frame_%08zu.png", i);
+    const std::string out = (fs::path(dir) / name).string();
+    if (!cv::imwrite(out, fr.image)) {
+      std::fclose(f);
+      throw InputError(out, 0, "cannot write image", "a writable path");
+    }
+    ok = ok && std::fprintf(f, "%s %s\n", format_seconds(fr.t_ns).c_str(), name) > 0;
+  }
+  ok = (std::fclose(f) == 0) && ok;
+  if (!ok) throw InputError(list_path, 0, "write failed", "a writable path with free space");
+}
+
+}  // namespace evio
