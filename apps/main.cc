@@ -68,6 +68,7 @@ int main(int argc, char** argv) {
                "Times are printed in seconds; pixel sizes in px."};
   app.set_version_flag("--version", "evio 0.1.0");
   app.require_subcommand(1);
+  app.fallthrough();  // global flags (-q, -v) may also follow the subcommand
   bool quiet = false, verbose = false;
   app.add_flag("-q,--quiet", quiet, "Print only warnings and errors on stderr (no progress, no conventions)");
   app.add_flag("-v,--verbose", verbose, "Also print debug messages on stderr");

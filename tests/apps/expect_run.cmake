@@ -1,0 +1,21 @@
+# Runs CMD (arguments separated by |) and checks its exit code and output.
+#   -DCMD=... -DEXPECT_RC=N [-DSTDOUT_REGEX=...] [-DSTDERR_REGEX=...] [-DONE_ERROR_LINE=ON]
+string(REPLACE "|" ";" CMD "${CMD}")
+execute_process(COMMAND ${CMD} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+if(NOT rc EQUAL EXPECT_RC)
+  message(FATAL_ERROR "exit code ${rc}, expected ${EXPECT_RC}\nstdout:\n${out}\nstderr:\n${err}")
+endif()
+if(DEFINED STDOUT_REGEX AND NOT out MATCHES "${STDOUT_REGEX}")
+  message(FATAL_ERROR "stdout does not match '${STDOUT_REGEX}':\n${out}")
+endif()
+if(DEFINED STDERR_REGEX AND NOT err MATCHES "${STDERR_REGEX}")
+  message(FATAL_ERROR "stderr does not match '${STDERR_REGEX}':\n${err}")
+endif()
+if(ONE_ERROR_LINE)
+  string(REPLACE ";" "," err_flat "${err}")  # ';' would split the CMake list
+  string(REGEX MATCHALL "evio: error:[^\n]*" lines "${err_flat}")
+  list(LENGTH lines n)
+  if(NOT n EQUAL 1)
+    message(FATAL_ERROR "expected exactly one 'evio: error:' line, got ${n}:\n${err}")
+  endif()
+endif()

@@ -1,0 +1,60 @@
+#include "info_command.h"
+
+#include <sstream>
+
+#include <gtest/gtest.h>
+
+#include "evio/calib/error.h"
+#include "evio_test/real_data.h"
+#include "evio_test/temp_dir.h"
+
+namespace evio::apps {
+namespace {
+
+TEST(InfoCommand, PrintsCountsRatesAndSpans) {
+  evio_test::TempDir dir;
+  std::string events;
+  for (int i = 0; i < 1000; ++i) events += "0." + std::to_string(100000 + i) + " " + std::to_string(i % 240) + " 5 " + std::to_string(i % 4 == 0) + "\n";
+  dir.write("events.txt", events);
+  std::string imu;
+  for (int i = 0; i < 100; ++i) imu += "0." + std::to_string(100 + i) + " 0 0 9.81 0 0 0.5\n";
+  dir.write("imu.txt", imu);
+  InfoArgs args;
+  args.path = dir.path();
+  std::ostringstream text;
+  ASSERT_EQ(run_info(args, text), 0);
+  const std::string t = text.str();
+  EXPECT_NE(t.find("events         1000\n"), std::string::npos) << t;
+  EXPECT_NE(t.find("250 ON / 750 OFF (25.0% ON), file convention 0/1"), std::string::npos) << t;
+  EXPECT_NE(t.find("imu            100 samples, 0.100000000 .. 0.199000000 s, 1000.0 Hz"), std::string::npos) << t;
+  EXPECT_NE(t.find("frames         none"), std::string::npos) << t;
+  args.json = true;
+  std::ostringstream json;
+  ASSERT_EQ(run_info(args, json), 0);
+  EXPECT_NE(json.str().find("\"count\": 1000, \"on\": 250, \"off\": 750"), std::string::npos) << json.str();
+  EXPECT_NE(json.str().find("\"imu\": {\"count\": 100, \"rate_hz\": 1000"), std::string::npos) << json.str();
+}
+
+TEST(InfoCommand, BadInputThrowsInputError) {
+  InfoArgs args;
+  args.path = "/nonexistent/evio";
+  std::ostringstream out;
+  EXPECT_THROW(run_info(args, out), InputError);
+}
+
+TEST(InfoCommandRealData, SliderDepthHead) {
+  const auto dir = evio_test::real_data_dir("ecd_slider_depth_head");
+  if (!dir) GTEST_SKIP() << "real data not found (../shared/data/real/ecd_slider_depth_head)";
+  InfoArgs args;
+  args.path = *dir;
+  args.dataset.text.sensor = SensorSize{240, 180};
+  std::ostringstream out;
+  ASSERT_EQ(run_info(args, out), 0);
+  const std::string t = out.str();
+  EXPECT_NE(t.find("events         50000\n"), std::string::npos) << t;
+  EXPECT_NE(t.find("frames         87 (240 x 180)"), std::string::npos) << t;
+  EXPECT_NE(t.find("ground truth   339 poses"), std::string::npos) << t;
+}
+
+}  // namespace
+}  // namespace evio::apps
