@@ -71,6 +71,7 @@ void write_evio(benchmark::State& state) {
 
 class CollectingReporter : public benchmark::ConsoleReporter {
  public:
+  CollectingReporter() : ConsoleReporter(OO_Tabular) {}
   std::map<std::string, double> rate;
   void ReportRuns(const std::vector<Run>& runs) override {
     ConsoleReporter::ReportRuns(runs);
@@ -107,7 +108,7 @@ int main(int argc, char** argv) {
       ->Unit(benchmark::kMillisecond)->Iterations(1)->UseRealTime();
   benchmark::RegisterBenchmark("ecd_write/evio", write_evio)->Unit(benchmark::kMillisecond)->Iterations(2)->UseRealTime();
   benchmark::Initialize(&argc, argv);
-  CollectingReporter reporter;
+  CollectingReporter reporter;  // plain output (no colour codes) so logs and JSON lines stay clean
   benchmark::RunSpecifiedBenchmarks(&reporter);
   const double base = reporter.rate["ecd_parse/iostream_baseline"];
   for (const auto& [name, r] : reporter.rate) {

@@ -15,17 +15,10 @@
 namespace evio {
 namespace fs = std::filesystem;
 using detail::is_space;
+using detail::quote_line;
 using detail::skip_space;
 
 namespace {
-
-std::string quote_line(std::string_view line) {
-  constexpr size_t kMax = 96;
-  std::string s = "\"";
-  s.append(line.substr(0, kMax));
-  if (line.size() > kMax) s += "...";
-  return s + "\"";
-}
 
 std::string event_form(const ReadReport& r) {
   return std::string("`t x y p`: time in ") + time_unit_name(r.time_unit) +

@@ -46,6 +46,14 @@ std::string ReadReport::summary() const {
 
 namespace detail {
 
+std::string quote_line(std::string_view line) {
+  constexpr size_t kMax = 96;
+  std::string s = "\"";
+  s.append(line.substr(0, kMax));
+  if (line.size() > kMax) s += "...";
+  return s + "\"";
+}
+
 int count_tokens(std::string_view line) {
   int n = 0;
   const char* p = line.data();

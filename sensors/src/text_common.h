@@ -25,6 +25,9 @@ inline bool is_comment_or_blank(std::string_view line) {
   return p == line.data() + line.size() || *p == '#' || *p == '%';
 }
 
+// The line in double quotes, cut after 96 characters (for error messages).
+std::string quote_line(std::string_view line);
+
 // Number of whitespace/comma separated tokens (for error messages).
 int count_tokens(std::string_view line);
 

@@ -14,6 +14,7 @@
 
 namespace evio {
 using detail::is_space;
+using detail::quote_line;
 using detail::skip_space;
 
 Trajectory::Trajectory(std::vector<StampedPose> poses) : poses_(std::move(poses)) {
@@ -53,13 +54,6 @@ double Trajectory::path_length_m() const {
 }
 
 namespace {
-
-std::string quote_line(std::string_view line) {
-  std::string s = "\"";
-  s.append(line.substr(0, 96));
-  if (line.size() > 96) s += "...";
-  return s + "\"";
-}
 
 // Validates and stores one pose; `q` is (x, y, z, w).
 void add_pose(Trajectory* traj, int64_t t, const double pos[3], const double q[4], int64_t line_no,
