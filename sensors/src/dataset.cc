@@ -14,12 +14,26 @@ const char* dataset_format_name(DatasetFormat f) {
     case DatasetFormat::kAuto: return "auto";
     case DatasetFormat::kEcdFolder: return "ecd";
     case DatasetFormat::kEcdEvents: return "ecd-events";
+    case DatasetFormat::kHdf5: return "h5";
+    case DatasetFormat::kAedat4: return "aedat4";
+    case DatasetFormat::kEvt2: return "evt2";
+    case DatasetFormat::kEvt3: return "evt3";
+    case DatasetFormat::kRosbag: return "rosbag";
+    case DatasetFormat::kAedat2: return "aedat2";
   }
   return "?";
 }
 
+const std::vector<DatasetFormat>& all_dataset_formats() {
+  static const std::vector<DatasetFormat> all = {
+      DatasetFormat::kEcdFolder, DatasetFormat::kEcdEvents, DatasetFormat::kHdf5,   DatasetFormat::kAedat4,
+      DatasetFormat::kEvt2,      DatasetFormat::kEvt3,      DatasetFormat::kRosbag, DatasetFormat::kAedat2};
+  return all;
+}
+
 std::optional<DatasetFormat> dataset_format_from_name(const std::string& name) {
-  for (DatasetFormat f : {DatasetFormat::kAuto, DatasetFormat::kEcdFolder, DatasetFormat::kEcdEvents}) {
+  if (name == "auto") return DatasetFormat::kAuto;
+  for (DatasetFormat f : all_dataset_formats()) {
     if (name == dataset_format_name(f)) return f;
   }
   return std::nullopt;

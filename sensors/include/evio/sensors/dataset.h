@@ -1,6 +1,8 @@
 // One interface over recorded datasets: format detection (by folder layout, extension and, for
 // binary formats, magic bytes) with an override, a streaming event source, and whole-file access
-// to IMU, frames, ground truth and calibration. Formats: ECD text folder, a bare ECD events.txt.
+// to IMU, frames, triggers, ground truth and calibration. Formats: ECD text folder, a bare ECD
+// events.txt, HDF5 (DSEC and configurable layouts), AEDAT 4.0, Prophesee EVT 2.0/3.0, ROS1 bag,
+// jAER AEDAT 2.0.
 #pragma once
 
 #include <cstdint>
@@ -20,23 +22,67 @@ namespace evio {
 
 enum class DatasetFormat {
   kAuto,
-  kEcdFolder,  // folder with events.txt [imu.txt groundtruth.txt images.txt calib.txt]
-  kEcdEvents,  // a single text file of `t x y p` lines
+  kEcdFolder,  // "ecd": folder with events.txt [imu.txt groundtruth.txt images.txt calib.txt]
+  kEcdEvents,  // "ecd-events": a single text file of `t x y p` lines
+  kHdf5,       // "h5": HDF5 events (DSEC/TUM-VIE layout or a configured layout)
+  kAedat4,     // "aedat4": iniVation AEDAT 4.0
+  kEvt2,       // "evt2": Prophesee RAW EVT 2.0
+  kEvt3,       // "evt3": Prophesee RAW EVT 3.0
+  kRosbag,     // "rosbag": ROS1 bag v2.0
+  kAedat2,     // "aedat2": jAER AEDAT 2.0 (DVS128)
 };
-const char* dataset_format_name(DatasetFormat f);  // "auto", "ecd", "ecd-events"
+const char* dataset_format_name(DatasetFormat f);
 std::optional<DatasetFormat> dataset_format_from_name(const std::string& name);
+// All formats but kAuto, in declaration order (for help texts and tests).
+const std::vector<DatasetFormat>& all_dataset_formats();
+
+// HDF5 layout: where the event arrays are and how to read them. The default is DSEC/TUM-VIE
+// (`events/x`, `events/y`, `events/t` in us relative to `t_offset`, `events/p` 0/1, `ms_to_idx`).
+struct H5Layout {
+  enum class Kind {
+    kAuto,     // DSEC if events/t exists, else event_utils if events/ts exists, else MVSEC matrix
+    kColumns,  // one 1-D dataset per field (DSEC, event_utils, custom names)
+    kMatrix,   // one N x 4 dataset with columns t x y p (MVSEC: float64, polarity -1/+1)
+  };
+  Kind kind = Kind::kAuto;
+  std::string x = "events/x", y = "events/y", t = "events/t", p = "events/p";  // kColumns datasets
+  std::string matrix = "davis/left/events";  // kMatrix dataset
+  std::string t_offset = "t_offset";         // optional scalar added to t (in the time unit); "" = none
+  std::string ms_to_idx = "ms_to_idx";       // optional index: first event at or after each ms; "" = none
+  TimeUnit time_unit = TimeUnit::kAuto;      // kAuto: us for DSEC, s for float ts / MVSEC
+  PolarityConvention polarity = PolarityConvention::kUnknown;  // kUnknown: accept 0/1 and -1/+1
+};
+
+// ROS1 bag topic selection; empty strings pick the single topic of the matching message type.
+struct BagTopics {
+  std::string events;  // dvs_msgs/EventArray or event_camera_msgs/EventPacket
+  std::string imu;     // sensor_msgs/Imu
+  std::string image;   // sensor_msgs/Image (mono8)
+};
 
 struct DatasetOptions {
   DatasetFormat format = DatasetFormat::kAuto;  // kAuto: detect_dataset_format()
   TextReadOptions text;                         // time unit, bad-line policy, sensor size for text formats
   // Sensor size assumed for an ECD calib.txt, which does not store it (DAVIS240C), px.
   SensorSize ecd_calib_sensor{240, 180};
+  H5Layout h5;       // HDF5 layout (auto-detected by default)
+  BagTopics topics;  // ROS1 bag topic selection
 
   bool Validate(std::string* why) const;
 };
 
-// Throws InputError naming what was looked at when the format cannot be recognised.
+// By folder layout, magic bytes (AEDAT "#!AER-DAT4.0", "#!AER-DAT2.0", "#ROSBAG V2.0", HDF5
+// signature, Prophesee "% " header with its evt version) and extension. Throws InputError naming
+// what was looked at when the format cannot be recognised.
 DatasetFormat detect_dataset_format(const std::string& path);
+
+// A named stream inside a container (bag topic, AEDAT4 stream), for `evio info`.
+struct StreamInfo {
+  std::string name;   // topic or stream name
+  std::string type;   // message / stream type, e.g. "dvs_msgs/EventArray", "EVTS"
+  int64_t messages = 0;  // messages / packets in the file (-1 if unknown without a full pass)
+  bool selected = false;  // read by this reader
+};
 
 class DatasetReader {
  public:
@@ -54,11 +100,22 @@ class DatasetReader {
   // Conventions the event reader applied (time unit, polarity mapping) and skipped lines.
   virtual const ReadReport& event_report() const = 0;
 
-  // Whole-stream accessors; empty / nullopt when the dataset has none.
+  // Positions the event stream so the next event returned is the first with t >= t_ns.
+  // Returns false when the reader cannot seek (then the caller skips by reading); readers with
+  // an index (HDF5 ms_to_idx) seek without reading the events before t_ns.
+  virtual bool seek_events(int64_t /*t_ns*/) { return false; }
+
+  // Whole-stream accessors; empty / nullopt when the dataset has none. They are independent of
+  // the event stream's position.
   virtual std::vector<ImuSample> read_imu() = 0;
-  virtual std::vector<Frame> read_frames() = 0;  // references; decode with load_frame_image()
+  // Frames in time order. Containers fill Frame::image; file-based formats (ECD) give Frame::path
+  // only, to be decoded with load_frame_image().
+  virtual std::vector<Frame> read_frames() = 0;
+  virtual std::vector<Trigger> read_triggers() { return {}; }
   virtual std::optional<Trajectory> read_groundtruth() = 0;
   virtual std::optional<calib::CameraCalibration> read_calibration() = 0;
+  // Streams/topics inside the container with their types; empty for single-stream formats.
+  virtual std::vector<StreamInfo> streams() const { return {}; }
 };
 
 std::unique_ptr<DatasetReader> open_dataset(const std::string& path, const DatasetOptions& options = {});
@@ -75,6 +132,8 @@ struct DatasetSummary {
   int64_t frames = 0;
   int64_t frames_t_first_ns = 0, frames_t_last_ns = 0;
   int frame_width = 0, frame_height = 0;  // of the first frame, 0 if none
+  int64_t triggers = 0;
+  std::vector<StreamInfo> streams;
   int64_t poses = 0;
   int64_t gt_t_first_ns = 0, gt_t_last_ns = 0;
   double gt_path_length_m = 0;

@@ -41,6 +41,14 @@ struct Frame {
   cv::Mat image;  // CV_8UC1 (mono8) unless stated otherwise
 };
 
+// An external trigger / special event (DAVIS trigger input, Prophesee EXT_TRIGGER), kept apart
+// from the CD (contrast detection) event stream.
+struct Trigger {
+  int64_t t_ns = 0;
+  int32_t channel = 0;  // trigger input id as the format states it
+  int8_t polarity = 1;  // +1 rising edge, -1 falling edge (or the format's pulse type)
+};
+
 // Sensor geometry in pixels; 0 means unknown.
 struct SensorSize {
   int width = 0;
