@@ -73,6 +73,12 @@ void print_text(const DatasetSummary& s, std::ostream& out) {
   } else {
     out << "frames         none\n";
   }
+  if (s.triggers > 0) out << "triggers       " << s.triggers << "\n";
+  for (const StreamInfo& st : s.streams) {
+    out << "stream         " << st.name << " [" << st.type << "]";
+    if (st.messages >= 0) out << " " << st.messages << " messages";
+    out << (st.selected ? " (read)" : "") << "\n";
+  }
   if (s.poses > 0) {
     out << "ground truth   " << s.poses << " poses, " << format_seconds(s.gt_t_first_ns) << " .. "
         << format_seconds(s.gt_t_last_ns) << " s, "
@@ -105,6 +111,13 @@ void print_json(const DatasetSummary& s, std::ostream& out) {
     << ", \"rate_hz\": " << DatasetSummary::rate_hz(s.imu_samples, s.imu_t_first_ns, s.imu_t_last_ns) << "}";
   o << ", \"frames\": {\"count\": " << s.frames << ", \"width\": " << s.frame_width << ", \"height\": " << s.frame_height
     << ", \"rate_hz\": " << DatasetSummary::rate_hz(s.frames, s.frames_t_first_ns, s.frames_t_last_ns) << "}";
+  o << ", \"triggers\": " << s.triggers << ", \"streams\": [";
+  for (size_t i = 0; i < s.streams.size(); ++i) {
+    o << (i ? ", " : "") << "{\"name\": \"" << json_escape(s.streams[i].name) << "\", \"type\": \""
+      << json_escape(s.streams[i].type) << "\", \"messages\": " << s.streams[i].messages
+      << ", \"selected\": " << (s.streams[i].selected ? "true" : "false") << "}";
+  }
+  o << "]";
   o << ", \"ground_truth\": {\"count\": " << s.poses << ", \"t_first_s\": " << format_seconds(s.gt_t_first_ns)
     << ", \"t_last_s\": " << format_seconds(s.gt_t_last_ns) << ", \"path_length_m\": " << s.gt_path_length_m << "}";
   o << ", \"calibration\": "

@@ -9,6 +9,8 @@
 
 #include "evio/calib/error.h"
 #include "evio/calib/log.h"
+#include "convert_command.h"
+#include "evio/sensors/time.h"
 #include "info_command.h"
 
 namespace {
@@ -29,7 +31,7 @@ std::string parse_sensor(const std::string& s, evio::SensorSize* out) {
 void add_dataset_options(CLI::App* cmd, evio::DatasetOptions* opts, std::string* format, std::string* time_unit,
                          std::string* on_bad_line) {
   cmd->add_option("--format", *format, "Dataset format; auto detects it from the folder layout and extension")
-      ->check(CLI::IsMember({"auto", "ecd", "ecd-events"}))
+      ->check(CLI::IsMember({"auto", "ecd", "ecd-events", "h5", "aedat4", "evt2", "evt3", "rosbag", "aedat2"}))
       ->capture_default_str();
   cmd->add_option("--time-unit", *time_unit,
                   "Unit of the time column of text files: s, ms, us, ns; auto = decimal point means s, "
@@ -52,6 +54,20 @@ void add_dataset_options(CLI::App* cmd, evio::DatasetOptions* opts, std::string*
       "--no-time-unit-check", [opts] { opts->text.check_time_unit = false; },
       "Accept a time unit even when the first records imply an implausible event rate (outside 10 Hz..2 GHz) "
       "or IMU/pose rate (outside 0.1 Hz..100 kHz)");
+  cmd->add_option("--events-topic", opts->topics.events,
+                  "ROS bag: topic of dvs_msgs/EventArray or event_camera_msgs/EventPacket (default: the only one)");
+  cmd->add_option("--imu-topic", opts->topics.imu, "ROS bag: topic of sensor_msgs/Imu (default: the only one)");
+  cmd->add_option("--image-topic", opts->topics.image, "ROS bag: topic of sensor_msgs/Image mono8 (default: the only one)");
+}
+
+// Seconds as text -> exact int64 ns (no detour through double).
+int64_t parse_seconds_flag(const std::string& flag, const std::string& s) {
+  const char* p = s.c_str();
+  int64_t t = 0;
+  if (!evio::parse_decimal_time_ns(p, s.c_str() + s.size(), 9, &t) || *p != '\0') {
+    throw CLI::ValidationError(flag, "expected a time in seconds, e.g. 12.5; got '" + s + "'");
+  }
+  return t;
 }
 
 void apply_dataset_strings(const std::string& format, const std::string& time_unit, const std::string& on_bad_line,
@@ -82,6 +98,37 @@ int main(int argc, char** argv) {
   add_dataset_options(info_cmd, &info.dataset, &info_format, &info_unit, &info_bad);
   info_cmd->add_flag("--json", info.json, "Print one JSON object instead of the table");
 
+  evio::apps::ConvertArgs conv;
+  std::string conv_format = "auto", conv_unit = "auto", conv_bad = "error", conv_to = "auto";
+  std::string conv_polarity = "input", conv_h5_unit = "ns";
+  CLI::App* conv_cmd = app.add_subcommand(
+      "convert", "Convert a recording (any readable format) to an Event Camera Dataset text folder or an evio "
+                 "HDF5 file (DSEC layout), streaming, optionally sliced in time");
+  conv_cmd->add_option("IN", conv.in, "Input dataset (folder or file)")->required();
+  conv_cmd->add_option("OUT", conv.out, "Output: a folder (ECD layout) or a .h5 file")->required();
+  add_dataset_options(conv_cmd, &conv.dataset, &conv_format, &conv_unit, &conv_bad);
+  conv_cmd->add_option("--to", conv_to, "Output format: ecd, h5, or auto (h5 for a .h5/.hdf5 OUT, else ecd)")
+      ->check(CLI::IsMember({"auto", "ecd", "h5"}))
+      ->capture_default_str();
+  conv_cmd->add_option_function<std::string>(
+      "--t-start", [&conv](const std::string& s) { conv.t_start_ns = parse_seconds_flag("--t-start", s); },
+      "Keep data with t >= T_START, in seconds of the input's time axis (as `evio info` prints it)");
+  conv_cmd->add_option_function<std::string>(
+      "--t-end", [&conv](const std::string& s) { conv.t_end_ns = parse_seconds_flag("--t-end", s); },
+      "Keep data with t < T_END, in seconds of the input's time axis");
+  conv_cmd->add_option("--polarity", conv_polarity,
+                       "ECD output polarity: 01 (ECD), pm1 (-1/+1), or input (the input's convention; 0/1 for "
+                       "binary formats)")
+      ->check(CLI::IsMember({"input", "01", "pm1"}))
+      ->capture_default_str();
+  conv_cmd->add_option("--h5-time-unit", conv_h5_unit,
+                       "HDF5 output time unit: ns (lossless) or us (DSEC, rounds to whole microseconds)")
+      ->check(CLI::IsMember({"ns", "us"}))
+      ->capture_default_str();
+  conv_cmd->add_option("--h5-compression", conv.h5_compression, "HDF5 output compression: none, gzip or blosc")
+      ->check(CLI::IsMember({"none", "gzip", "blosc"}))
+      ->capture_default_str();
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -95,6 +142,18 @@ int main(int argc, char** argv) {
       apply_dataset_strings(info_format, info_unit, info_bad, &info.dataset);
       info.progress = !quiet;
       return evio::apps::run_info(info, std::cout);
+    }
+    if (conv_cmd->parsed()) {
+      apply_dataset_strings(conv_format, conv_unit, conv_bad, &conv.dataset);
+      conv.to = conv_to == "h5" ? evio::apps::ConvertTarget::kH5
+                : conv_to == "ecd" ? evio::apps::ConvertTarget::kEcd
+                                   : evio::apps::ConvertTarget::kAuto;
+      conv.polarity = conv_polarity == "01"    ? evio::PolarityConvention::kZeroOne
+                      : conv_polarity == "pm1" ? evio::PolarityConvention::kMinusPlusOne
+                                               : evio::PolarityConvention::kUnknown;
+      conv.h5_time_unit = conv_h5_unit == "us" ? evio::TimeUnit::kMicroseconds : evio::TimeUnit::kNanoseconds;
+      conv.progress = !quiet;
+      return evio::apps::run_convert(conv, std::cout);
     }
   } catch (const evio::InputError& e) {
     std::fprintf(stderr, "evio: error: %s\n", e.what());

@@ -1,9 +1,14 @@
 #include "evio/sensors/dataset.h"
 
+#include <cctype>
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
 #include <filesystem>
 
 #include "evio/calib/error.h"
 #include "evio/calib/log.h"
+#include "evio/sensors/aedat2.h"
 #include "evio/sensors/ecd.h"
 
 namespace evio {
@@ -48,6 +53,27 @@ bool DatasetOptions::Validate(std::string* why) const {
   return true;
 }
 
+namespace {
+
+// The Prophesee RAW header ('%' lines) names the encoding as "% evt 3.0" or "% format EVT3;...".
+std::optional<DatasetFormat> evt_version_from_header(const std::string& path) {
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (f == nullptr) return std::nullopt;
+  std::optional<DatasetFormat> found;
+  char line[4096];
+  for (int i = 0; i < 1000 && std::fgets(line, sizeof(line), f) != nullptr && line[0] == '%'; ++i) {
+    std::string l(line);
+    for (char& c : l) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    if (l.find("evt 3") != std::string::npos || l.find("evt3") != std::string::npos) found = DatasetFormat::kEvt3;
+    if (l.find("evt 2") != std::string::npos || l.find("evt2") != std::string::npos) found = DatasetFormat::kEvt2;
+    if (l.rfind("% end", 0) == 0) break;
+  }
+  std::fclose(f);
+  return found;
+}
+
+}  // namespace
+
 DatasetFormat detect_dataset_format(const std::string& path) {
   std::error_code ec;
   if (!fs::exists(path, ec)) throw InputError(path, 0, "no such file or directory", "a dataset folder or file");
@@ -56,10 +82,30 @@ DatasetFormat detect_dataset_format(const std::string& path) {
     throw InputError(path, 0, "folder of unknown layout (no events.txt)",
                      "an Event Camera Dataset folder (events.txt [imu.txt groundtruth.txt images.txt calib.txt])");
   }
+  // Magic bytes first, extension second.
+  char head[16] = {};
+  if (std::FILE* f = std::fopen(path.c_str(), "rb")) {
+    const size_t n = std::fread(head, 1, sizeof(head), f);
+    std::fclose(f);
+    const std::string h(head, n);
+    if (h.rfind("#!AER-DAT4", 0) == 0) return DatasetFormat::kAedat4;
+    if (h.rfind("#!AER-DAT", 0) == 0) return DatasetFormat::kAedat2;  // the reader names unsupported versions
+    if (h.rfind("#ROSBAG V2.0", 0) == 0) return DatasetFormat::kRosbag;
+    if (h.rfind("\x89HDF\r\n\x1a\n", 0) == 0) return DatasetFormat::kHdf5;
+    if (h.rfind("%", 0) == 0) {
+      if (const auto v = evt_version_from_header(path)) return *v;
+      throw InputError(path, 0, "'%' header without an EVT version",
+                       "a Prophesee RAW header with '% evt 2.0|3.0' or '% format EVT2|EVT3'; or give --format");
+    }
+  } else {
+    throw InputError(path, 0, std::string("cannot open: ") + std::strerror(errno), "a readable dataset file");
+  }
   const std::string ext = fs::path(path).extension().string();
+  if (ext == ".h5" || ext == ".hdf5" || ext == ".hdf") return DatasetFormat::kHdf5;
   if (ext == ".txt" || ext == ".dat" || ext == ".csv") return DatasetFormat::kEcdEvents;
-  throw InputError(path, 0, "unknown file format (extension '" + ext + "')",
-                   "an ECD folder or an events text file (.txt); or name the format with --format");
+  throw InputError(path, 0, "unknown file format (no known magic bytes, extension '" + ext + "')",
+                   "an ECD folder or events .txt, HDF5, AEDAT 4.0/2.0, Prophesee RAW EVT 2.0/3.0 or ROS1 bag; "
+                   "or name the format with --format");
 }
 
 namespace {
@@ -127,6 +173,8 @@ std::unique_ptr<DatasetReader> open_dataset(const std::string& path, const Datas
     case DatasetFormat::kEcdFolder:
     case DatasetFormat::kEcdEvents:
       return std::make_unique<EcdDatasetReader>(path, f, options);
+    case DatasetFormat::kAedat2:
+      return open_aedat2_dataset(path, options);
     case DatasetFormat::kAuto:
       break;
   }
@@ -170,6 +218,8 @@ DatasetSummary summarize_dataset(DatasetReader* reader, const std::function<void
     s.frame_width = frames.front().image.cols;
     s.frame_height = frames.front().image.rows;
   }
+  s.triggers = static_cast<int64_t>(reader->read_triggers().size());
+  s.streams = reader->streams();
   if (const auto gt = reader->read_groundtruth()) {
     s.poses = static_cast<int64_t>(gt->size());
     s.gt_t_first_ns = gt->t_begin_ns();
