@@ -10,6 +10,7 @@
 #include "evio/calib/error.h"
 #include "evio/calib/log.h"
 #include "evio/sensors/ecd.h"
+#include "evio/sensors/h5.h"
 #include "evio/sensors/time.h"
 
 namespace evio::apps {
@@ -62,34 +63,52 @@ int run_convert(const ConvertArgs& args, std::ostream& out) {
     const std::string ext = fs::path(args.out).extension().string();
     to = (ext == ".h5" || ext == ".hdf5") ? ConvertTarget::kH5 : ConvertTarget::kEcd;
   }
-  if (to == ConvertTarget::kH5) {
-    throw InputError(args.out, 0, "HDF5 output is not available in this build", "an ECD output folder");
-  }
   auto reader = open_dataset(args.in, args.dataset);
-  std::error_code ec;
-  fs::create_directories(args.out, ec);
-  if (!fs::is_directory(args.out, ec)) throw InputError(args.out, 0, "cannot create output folder", "a writable folder path");
+  if (to == ConvertTarget::kEcd) {
+    std::error_code ec;
+    fs::create_directories(args.out, ec);
+    if (!fs::is_directory(args.out, ec)) throw InputError(args.out, 0, "cannot create output folder", "a writable folder path");
+  } else if (!fs::path(args.out).parent_path().empty()) {
+    std::error_code ec;
+    fs::create_directories(fs::path(args.out).parent_path(), ec);
+  }
 
   // Events: seek when the reader has an index, else skip by reading; stop at t_end.
   if (args.t_start_ns) reader->seek_events(*args.t_start_ns);
-  // The writer is opened after the first chunk, when the input's polarity convention is known.
-  std::unique_ptr<EcdEventWriter> writer;
+  // Writers are opened after the first chunk, when the input's polarity convention and the
+  // sensor size are known.
+  std::unique_ptr<EcdEventWriter> ecd_writer;
+  std::unique_ptr<H5EventWriter> h5_writer;
   auto open_writer = [&] {
+    if (to == ConvertTarget::kH5) {
+      H5WriteOptions o;
+      o.time_unit = args.h5_time_unit;
+      o.compression = args.h5_compression == "gzip"    ? H5WriteOptions::Compression::kGzip
+                      : args.h5_compression == "blosc" ? H5WriteOptions::Compression::kBlosc
+                                                       : H5WriteOptions::Compression::kNone;
+      o.sensor = reader->sensor_size();
+      h5_writer = std::make_unique<H5EventWriter>(args.out, o);
+      return;
+    }
     PolarityConvention pol = args.polarity;
     if (pol == PolarityConvention::kUnknown) {
       pol = reader->event_report().polarity == PolarityConvention::kMinusPlusOne ? PolarityConvention::kMinusPlusOne
                                                                                   : PolarityConvention::kZeroOne;
     }
-    writer = std::make_unique<EcdEventWriter>((fs::path(args.out) / "events.txt").string(), pol);
+    ecd_writer = std::make_unique<EcdEventWriter>((fs::path(args.out) / "events.txt").string(), pol);
   };
   EventBuffer chunk;
   EventStatistics written;
   Progress progress(args.progress);
   bool past_end = false;
+  bool opened = false;
   while (!past_end) {
     chunk.clear();
     const size_t got = reader->read_events(&chunk, size_t{1} << 20);
-    if (!writer) open_writer();
+    if (!opened) {
+      open_writer();
+      opened = true;
+    }
     if (got == 0) break;
     EventSpan s = chunk.span();
     if (args.t_start_ns || args.t_end_ns) {
@@ -98,12 +117,37 @@ int run_convert(const ConvertArgs& args, std::ostream& out) {
       past_end = !s.empty() && s.back().t_ns >= hi;
       s = s.slice(lo, hi);
     }
-    writer->write(s);
+    if (h5_writer) {
+      h5_writer->write(s);
+    } else {
+      ecd_writer->write(s);
+    }
     written.add(s);
     progress.update(reader->progress(), written.count);
   }
-  if (!writer) open_writer();
-  writer->close();
+  if (!opened) open_writer();
+
+  if (h5_writer) {
+    const int64_t rounded = h5_writer->close();
+    out << "wrote " << args.out << " (HDF5, DSEC layout, t in " << time_unit_name(args.h5_time_unit) << ", "
+        << args.h5_compression << "): " << written.count << " events";
+    if (written.count > 0) {
+      out << " " << format_seconds(written.t_first_ns) << " .. " << format_seconds(written.t_last_ns) << " s";
+    }
+    if (rounded > 0) out << ", " << rounded << " timestamps rounded to whole microseconds";
+    out << "\n";
+    // The DSEC layout holds events only: say what the input had besides them.
+    const size_t imu = reader->read_imu().size(), frames = reader->read_frames().size(),
+                 triggers = reader->read_triggers().size();
+    const auto gt = reader->read_groundtruth();
+    if (imu + frames + triggers > 0 || (gt && !gt->empty())) {
+      log_warning("HDF5 output holds events only; not written: " + std::to_string(imu) + " IMU samples, " +
+                  std::to_string(frames) + " frames, " + std::to_string(triggers) + " triggers, " +
+                  std::to_string(gt ? gt->size() : 0) + " poses (convert to an ECD folder to keep them)");
+    }
+    return 0;
+  }
+  ecd_writer->close();
 
   // Side streams, sliced to the same window.
   std::vector<ImuSample> imu;

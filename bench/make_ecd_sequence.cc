@@ -1,5 +1,6 @@
 #include "make_ecd_sequence.h"
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <random>
@@ -11,18 +12,14 @@
 
 namespace evio::bench {
 
-std::string make_ecd_sequence(const std::string& dir, const SequenceSpec& spec) {
-  std::filesystem::create_directories(dir);
-  const std::string events_path = dir + "/events.txt";
+EventBuffer make_synthetic_events(const SequenceSpec& spec) {
   std::mt19937_64 rng(spec.seed);
   std::uniform_real_distribution<double> u01(0.0, 1.0);
   std::uniform_int_distribution<int> ux(0, spec.width - 1), uy(0, spec.height - 1);
   const double dt_mean_ns = 1e9 / spec.event_rate_hz;
   const double sweep_period_s = 0.5;  // the edge crosses the sensor twice a second
-
-  EcdEventWriter writer(events_path);
-  std::vector<Event> chunk;
-  chunk.reserve(1 << 16);
+  EventBuffer events;
+  events.reserve(static_cast<size_t>(spec.events));
   double t = 1e6;  // start 1 ms in
   for (int64_t i = 0; i < spec.events; ++i) {
     t += -std::log(1.0 - u01(rng)) * dt_mean_ns;  // Poisson arrivals
@@ -39,14 +36,20 @@ std::string make_ecd_sequence(const std::string& dir, const SequenceSpec& spec) 
       e.y = static_cast<uint16_t>(uy(rng));
       e.polarity = static_cast<int8_t>(u01(rng) < 0.5 ? 1 : -1);
     }
-    chunk.push_back(e);
-    if (chunk.size() == chunk.capacity()) {
-      writer.write(EventSpan(chunk.data(), chunk.size()));
-      chunk.clear();
-    }
+    events.push_back(e);
   }
-  writer.write(EventSpan(chunk.data(), chunk.size()));
+  return events;
+}
+
+std::string make_ecd_sequence(const std::string& dir, const SequenceSpec& spec) {
+  std::filesystem::create_directories(dir);
+  const std::string events_path = dir + "/events.txt";
+  const EventBuffer events = make_synthetic_events(spec);
+  EcdEventWriter writer(events_path);
+  writer.write(events.span());
   writer.close();
+  std::mt19937_64 rng(spec.seed + 1);
+  const double t = events.empty() ? 1e6 : static_cast<double>(events.back().t_ns);
   if (!spec.side_files) return events_path;
 
   // Camera yawing at a constant 0.5 rad/s about the body z axis, gravity along -z in the world.

@@ -7,6 +7,8 @@
 #include <cstdint>
 #include <string>
 
+#include "evio/sensors/event_buffer.h"
+
 namespace evio::bench {
 
 struct SequenceSpec {
@@ -16,6 +18,9 @@ struct SequenceSpec {
   bool side_files = true;    // also imu.txt, groundtruth.txt, calib.txt
   uint64_t seed = 1;
 };
+
+// The events of the sequence (edge sweep + background activity), in time order.
+EventBuffer make_synthetic_events(const SequenceSpec& spec);
 
 // Creates dir if needed; returns the path of events.txt.
 std::string make_ecd_sequence(const std::string& dir, const SequenceSpec& spec);

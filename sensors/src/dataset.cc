@@ -9,7 +9,11 @@
 #include "evio/calib/error.h"
 #include "evio/calib/log.h"
 #include "evio/sensors/aedat2.h"
+#include "evio/sensors/aedat4.h"
 #include "evio/sensors/ecd.h"
+#include "evio/sensors/evt.h"
+#include "evio/sensors/h5.h"
+#include "evio/sensors/rosbag.h"
 
 namespace evio {
 namespace fs = std::filesystem;
@@ -53,27 +57,6 @@ bool DatasetOptions::Validate(std::string* why) const {
   return true;
 }
 
-namespace {
-
-// The Prophesee RAW header ('%' lines) names the encoding as "% evt 3.0" or "% format EVT3;...".
-std::optional<DatasetFormat> evt_version_from_header(const std::string& path) {
-  std::FILE* f = std::fopen(path.c_str(), "rb");
-  if (f == nullptr) return std::nullopt;
-  std::optional<DatasetFormat> found;
-  char line[4096];
-  for (int i = 0; i < 1000 && std::fgets(line, sizeof(line), f) != nullptr && line[0] == '%'; ++i) {
-    std::string l(line);
-    for (char& c : l) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-    if (l.find("evt 3") != std::string::npos || l.find("evt3") != std::string::npos) found = DatasetFormat::kEvt3;
-    if (l.find("evt 2") != std::string::npos || l.find("evt2") != std::string::npos) found = DatasetFormat::kEvt2;
-    if (l.rfind("% end", 0) == 0) break;
-  }
-  std::fclose(f);
-  return found;
-}
-
-}  // namespace
-
 DatasetFormat detect_dataset_format(const std::string& path) {
   std::error_code ec;
   if (!fs::exists(path, ec)) throw InputError(path, 0, "no such file or directory", "a dataset folder or file");
@@ -93,9 +76,14 @@ DatasetFormat detect_dataset_format(const std::string& path) {
     if (h.rfind("#ROSBAG V2.0", 0) == 0) return DatasetFormat::kRosbag;
     if (h.rfind("\x89HDF\r\n\x1a\n", 0) == 0) return DatasetFormat::kHdf5;
     if (h.rfind("%", 0) == 0) {
-      if (const auto v = evt_version_from_header(path)) return *v;
-      throw InputError(path, 0, "'%' header without an EVT version",
-                       "a Prophesee RAW header with '% evt 2.0|3.0' or '% format EVT2|EVT3'; or give --format");
+      const EvtRawHeader header = parse_evt_raw_header(path);
+      if (header.version == 2) return DatasetFormat::kEvt2;
+      if (header.version == 3) return DatasetFormat::kEvt3;
+      throw InputError(path, 0,
+                       header.version_text.empty() ? "Prophesee RAW header names no EVT version"
+                                                   : "Prophesee RAW version '" + header.version_text + "' is not supported",
+                       "EVT 2.0 or 3.0 ('% evt 2.0|3.0' or '% format EVT2|EVT3'); for a header without a version "
+                       "give --format evt2|evt3");
     }
   } else {
     throw InputError(path, 0, std::string("cannot open: ") + std::strerror(errno), "a readable dataset file");
@@ -175,6 +163,15 @@ std::unique_ptr<DatasetReader> open_dataset(const std::string& path, const Datas
       return std::make_unique<EcdDatasetReader>(path, f, options);
     case DatasetFormat::kAedat2:
       return open_aedat2_dataset(path, options);
+    case DatasetFormat::kAedat4:
+      return open_aedat4_dataset(path, options);
+    case DatasetFormat::kEvt2:
+    case DatasetFormat::kEvt3:
+      return open_evt_dataset(path, options);  // the RAW header names the version
+    case DatasetFormat::kHdf5:
+      return open_h5_dataset(path, options);
+    case DatasetFormat::kRosbag:
+      return open_rosbag_dataset(path, options);
     case DatasetFormat::kAuto:
       break;
   }
