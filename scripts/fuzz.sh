@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
-# Builds the libFuzzer targets (clang, ASan + UBSan) and runs each for SECONDS (default 300),
-# seeded from the real samples in ../shared/data/real when present and from files the tests
-# write. Prints executions and crashes per target; crash inputs are kept in build-fuzz/crashes.
+# Builds the libFuzzer targets (clang, ASan + UBSan) and runs each for SECONDS (default 300).
+# Seeds: the small valid and malformed files the reader tests write (they export them when
+# EVIO_FUZZ_SEED_DIR is set), plus the first 64 KiB of each real sample in ../shared/data/real.
+# Prints executions and crashes per target; crash inputs are kept in build-fuzz/crashes.
 #   scripts/fuzz.sh [SECONDS] [TARGET ...]      (default: every fuzz_* target)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -19,6 +20,14 @@ fi
 cmake --build "$build" -j"$(nproc)" --target "${targets[@]}"
 real=../shared/data/real
 mkdir -p "$build/crashes"
+# Seed files from the reader tests (Release build of the test binaries in BUILD_DIR).
+test_build=${BUILD_DIR:-build}
+cmake -S . -B "$test_build" -DCMAKE_BUILD_TYPE=Release >/dev/null
+cmake --build "$test_build" -j"$(nproc)" --target test_aedat2 test_aedat4 test_evt test_h5 test_rosbag >/dev/null
+rm -rf "$build/seeds"
+for t in test_aedat2 test_aedat4 test_evt test_h5 test_rosbag; do
+  EVIO_FUZZ_SEED_DIR="$build/seeds" "$test_build/tests/sensors/$t" --gtest_brief=1 >/dev/null 2>&1 || true
+done
 for t in "${targets[@]}"; do
   corpus="$build/corpus/$t"
   mkdir -p "$corpus"
@@ -34,6 +43,8 @@ for t in "${targets[@]}"; do
   for s in "${seeds[@]}"; do
     [ -f "$s" ] && head -c 65536 "$s" > "$corpus/seed_$(basename "$s")"
   done
+  [ -d "$build/seeds/$t" ] && cp "$build/seeds/$t"/* "$corpus/" 2>/dev/null
+  echo "$t: corpus of $(ls "$corpus" | wc -l) files" >&2
   log="$build/$t.log"
   set +e
   "$build/tests/fuzz/$t" "$corpus" -max_total_time="$seconds" -max_len=262144 -rss_limit_mb=4096 \

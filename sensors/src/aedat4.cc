@@ -631,7 +631,7 @@ class Aedat4Reader final : public DatasetReader {
   std::vector<Stream> streams_;
   std::map<int32_t, size_t> stream_index_;
   std::vector<PacketRef> table_;  // file data table, sorted by offset
-  // Packet counts per stream id: from the data table, or after a complete scan (mutable cache).
+  // Packet counts per stream id: from the data table, or filled by the first complete header scan.
   std::map<int32_t, int64_t> packet_counts_;
   bool counts_known_ = false;
   int event_stream_ = -1, imu_stream_ = -1, frame_stream_ = -1, trigger_stream_ = -1;  // index into streams_

@@ -618,7 +618,8 @@ class EvtReader final : public DatasetReader {
           if (policy_ == BadLinePolicy::kError) {
             throw InputError(path_, 0,
                              "trigger time goes back from " + std::to_string(last) + " ns to " +
-                                 std::to_string(triggers[i].t_ns) + " ns in the bytes before offset " + std::to_string(offset),
+                                 std::to_string(triggers[i].t_ns) + " ns in the data between byte offsets " +
+                                 std::to_string(offset - n) + " and " + std::to_string(offset),
                              "non-decreasing trigger time");
           }
           ++skipped;

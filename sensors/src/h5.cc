@@ -333,7 +333,7 @@ void convert_times(const T* in, size_t stride, size_t n, const TimeConv& c, int6
 
 // True when every component of `path` exists as a link inside the file; external links (which
 // would open other files) count as absent-with-reason via *external.
-bool link_exists(hid_t file, const std::string& path, bool* external = nullptr) {
+bool link_exists(hid_t file, const std::string& path, hid_t apl, bool* external = nullptr) {
   if (external != nullptr) *external = false;
   if (path.empty()) return false;
   size_t pos = 0;
@@ -342,12 +342,12 @@ bool link_exists(hid_t file, const std::string& path, bool* external = nullptr) 
     if (next == std::string::npos) next = path.size();
     const std::string prefix = path.substr(0, next);
     if (!prefix.empty() && prefix.back() != '/') {
-      if (H5Lexists(file, prefix.c_str(), H5P_DEFAULT) <= 0) {
+      if (H5Lexists(file, prefix.c_str(), apl) <= 0) {
         H5Eclear2(H5E_DEFAULT);
         return false;
       }
       H5L_info_t info;
-      if (H5Lget_info(file, prefix.c_str(), &info, H5P_DEFAULT) < 0) {
+      if (H5Lget_info(file, prefix.c_str(), &info, apl) < 0) {
         H5Eclear2(H5E_DEFAULT);
         return false;
       }
@@ -361,9 +361,22 @@ bool link_exists(hid_t file, const std::string& path, bool* external = nullptr) 
   return true;
 }
 
-bool is_dataset(hid_t file, const std::string& path) {
-  if (!link_exists(file, path)) return false;
-  Hid obj(H5Oopen(file, path.c_str(), H5P_DEFAULT));
+// External links (reached through soft links) would open other files: refuse to traverse them.
+herr_t refuse_external_link(const char* /*parent_file*/, const char* /*parent_group*/, const char* /*child_file*/,
+                            const char* /*child_object*/, unsigned* /*acc_flags*/, hid_t /*fapl*/, void* /*data*/) {
+  return -1;
+}
+
+// A dataset access list (also usable as link access list) that refuses external links.
+Hid make_access_list() {
+  Hid apl(H5Pcreate(H5P_DATASET_ACCESS));
+  if (apl.valid() && H5Pset_elink_cb(apl.get(), refuse_external_link, nullptr) < 0) return Hid();
+  return apl;
+}
+
+bool is_dataset(hid_t file, const std::string& path, hid_t apl) {
+  if (!link_exists(file, path, apl)) return false;
+  Hid obj(H5Oopen(file, path.c_str(), apl));
   if (!obj.valid()) {
     H5Eclear2(H5E_DEFAULT);
     return false;
@@ -386,7 +399,7 @@ std::vector<std::string> member_names(hid_t group) {
 }
 
 // "a (group: b, c), d (dataset)" for the top level of the file.
-std::string describe_top_level(hid_t file) {
+std::string describe_top_level(hid_t file, hid_t apl) {
   std::vector<std::string> names = member_names(file);
   if (names.empty()) return "none (the file is empty)";
   std::string s;
@@ -399,11 +412,11 @@ std::string describe_top_level(hid_t file) {
     s += (s.empty() ? "" : ", ") + n;
     ++shown;
     bool ext = false;
-    if (!link_exists(file, n, &ext)) {
+    if (!link_exists(file, n, apl, &ext)) {
       s += ext ? " (external link)" : " (dangling link)";
       continue;
     }
-    Hid obj(H5Oopen(file, n.c_str(), H5P_DEFAULT));
+    Hid obj(H5Oopen(file, n.c_str(), apl));
     if (!obj.valid()) {
       H5Eclear2(H5E_DEFAULT);
       continue;
@@ -438,6 +451,68 @@ std::optional<TimeUnit> parse_unit_text(std::string u) {
   if (u == "microseconds" || u == "microsecond" || u == "usec" || u == "\xC2\xB5s") return TimeUnit::kMicroseconds;
   if (u == "nanoseconds" || u == "nanosecond" || u == "nsec") return TimeUnit::kNanoseconds;
   return std::nullopt;
+}
+
+// Checks the one part of an HDF5 version 0/1 superblock that libhdf5 1.10 trusts before it reads
+// it: the driver information block, whose 32-bit size libhdf5 allocates (up to 4 GiB for a
+// 50-byte file). Returns an empty string when the superblock is plausible, else the problem.
+// Later versions (2, 3) carry a checksum that libhdf5 verifies.
+std::string check_superblock(const std::string& path) {
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (f == nullptr) return {};
+  std::string problem;
+  std::fseek(f, 0, SEEK_END);
+  const long size_l = std::ftell(f);
+  const uint64_t size = size_l > 0 ? static_cast<uint64_t>(size_l) : 0;
+  auto read_at = [&](uint64_t off, unsigned char* buf, size_t n) {
+    return off + n <= size && std::fseek(f, static_cast<long>(off), SEEK_SET) == 0 && std::fread(buf, 1, n, f) == n;
+  };
+  // Like libhdf5, reads past the end of the file as zeros.
+  auto read_zero = [&](uint64_t off, unsigned char* buf, size_t n) {
+    std::memset(buf, 0, n);
+    if (off >= size) return;
+    const size_t avail = static_cast<size_t>(std::min<uint64_t>(n, size - off));
+    if (std::fseek(f, static_cast<long>(off), SEEK_SET) == 0) (void)std::fread(buf, 1, avail, f);
+  };
+  auto le = [](const unsigned char* b, unsigned n) {
+    uint64_t v = 0;
+    for (unsigned i = 0; i < n && i < 8; ++i) v |= static_cast<uint64_t>(b[i]) << (8 * i);
+    return v;
+  };
+  static const unsigned char kSig[8] = {0x89, 'H', 'D', 'F', '\r', '\n', 0x1a, '\n'};
+  // The signature is at 0, 512, 1024, 2048, ... (after a user block).
+  for (uint64_t base = 0; base + 8 <= size; base = base == 0 ? 512 : base * 2) {
+    unsigned char sb[64] = {0};
+    if (!read_at(base, sb, 8) || std::memcmp(sb, kSig, 8) != 0) continue;
+    if (!read_at(base, sb, 24)) break;  // libhdf5 reports the truncation itself
+    const unsigned version = sb[8];
+    if (version > 1) break;
+    const unsigned so = sb[13], sl = sb[14];
+    const auto valid_size = [](unsigned v) { return v == 2 || v == 4 || v == 8 || v == 16 || v == 32; };
+    if (!valid_size(so) || !valid_size(sl)) {
+      problem = "HDF5 superblock at byte offset " + std::to_string(base) + " declares " + std::to_string(so) +
+                "-byte addresses and " + std::to_string(sl) + "-byte lengths";
+      break;
+    }
+    if (so > 8) break;  // not produced in practice; libhdf5 decides
+    const uint64_t fixed = 24 + (version == 1 ? 4 : 0);
+    unsigned char addr[8] = {0};
+    read_zero(base + fixed + 3 * so, addr, so);
+    const uint64_t undefined = so == 8 ? ~uint64_t{0} : (uint64_t{1} << (8 * so)) - 1;
+    const uint64_t driver = le(addr, so);
+    if (driver == undefined) break;
+    unsigned char hdr[16] = {0};
+    if (driver <= size) read_zero(base + driver, hdr, 16);
+    const uint64_t info_size = driver <= size ? le(hdr + 4, 4) : ~uint64_t{0};
+    if (driver > size || info_size > size || base + driver + 16 + info_size > size) {
+      problem = "HDF5 superblock at byte offset " + std::to_string(base) + " points to a driver information block at " +
+                std::to_string(driver) + (info_size == ~uint64_t{0} ? std::string() : " of " + std::to_string(info_size) + " bytes") +
+                " beyond the end of the " + std::to_string(size) + "-byte file";
+    }
+    break;
+  }
+  std::fclose(f);
+  return problem;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -510,6 +585,7 @@ struct H5EventReader::Impl {
   std::string path;
   DatasetOptions options;
   std::string layout;
+  Hid apl;  // access list for every object open: refuses external links
   Hid file;
   Column x, y, t, p;
   bool matrix = false;  // x, y, t, p are the columns of one N x >=4 dataset (read together)
@@ -564,6 +640,10 @@ struct H5EventReader::Impl {
            "an HDF5 file (starting with the signature \\211HDF\\r\\n\\032\\n)");
     }
     if (is_h5 < 0) fail_h5("cannot read the file", "a readable HDF5 file");
+    const std::string bad_superblock = check_superblock(path);
+    if (!bad_superblock.empty()) fail(bad_superblock, "an intact HDF5 file");
+    apl = make_access_list();
+    if (!apl.valid()) fail_h5("HDF5 access setup failed");
     Hid fapl(H5Pcreate(H5P_FILE_ACCESS));
     if (!fapl.valid() || H5Pset_fclose_degree(fapl.get(), H5F_CLOSE_STRONG) < 0) fail_h5("HDF5 file access setup failed");
     file = Hid(H5Fopen(path.c_str(), H5F_ACC_RDONLY, fapl.get()));
@@ -574,18 +654,18 @@ struct H5EventReader::Impl {
 
   // Opens a dataset and checks everything that could make reading it fail or misbehave:
   // link kind, layout, filters (with their availability), chunk size and stored size.
-  Hid open_dataset(const std::string& name, const std::string& role, hsize_t* chunk_bytes_out) const {
+  Hid open_dataset(const std::string& name, const std::string& role) const {
     bool ext = false;
-    if (!link_exists(file.get(), name, &ext)) {
+    if (!link_exists(file.get(), name, apl.get(), &ext)) {
       if (ext) fail("dataset " + q_name(name) + " (" + role + ") is an external link to another file", "a dataset inside this file");
       fail("dataset " + q_name(name) + " (" + role + ") not found in the " + layout + " layout; top-level objects: " +
-               describe_top_level(file.get()),
+               describe_top_level(file.get(), apl.get()),
            "an HDF5 event file with the " + layout + " datasets, or set the dataset names in the HDF5 layout options");
     }
-    if (!is_dataset(file.get(), name)) {
+    if (!is_dataset(file.get(), name, apl.get())) {
       fail(q_name(name) + " (" + role + ") is not a dataset", "a dataset of event " + role);
     }
-    Hid ds(H5Dopen2(file.get(), name.c_str(), H5P_DEFAULT));
+    Hid ds(H5Dopen2(file.get(), name.c_str(), apl.get()));
     if (!ds.valid()) fail_h5("cannot open dataset " + q_name(name));
     Hid dcpl(H5Dget_create_plist(ds.get()));
     if (!dcpl.valid()) fail_h5("cannot read the creation properties of dataset " + q_name(name));
@@ -633,7 +713,7 @@ struct H5EventReader::Impl {
     // ones keep two chunks cached so a block boundary inside a chunk does not decompress it twice.
     const bool direct = lay == H5D_CHUNKED && nf == 0;
     if (direct || chunk_bytes > (hsize_t{1} << 19)) {
-      Hid dapl(H5Pcreate(H5P_DATASET_ACCESS));
+      Hid dapl = make_access_list();
       const size_t cache = direct ? 0 : static_cast<size_t>(2 * chunk_bytes);
       if (dapl.valid() && H5Pset_chunk_cache(dapl.get(), direct ? 0 : 521, cache, 1.0) >= 0) {
         ds.reset();
@@ -641,7 +721,6 @@ struct H5EventReader::Impl {
         if (!ds.valid()) fail_h5("cannot open dataset " + q_name(name));
       }
     }
-    if (chunk_bytes_out != nullptr) *chunk_bytes_out = chunk_bytes;
     return ds;
   }
 
@@ -691,7 +770,7 @@ struct H5EventReader::Impl {
   // Opens column `name`: rank 1 (or rank 2 with one column), numeric type.
   void open_column(Column* c, const std::string& name, const std::string& role) {
     c->name = name;
-    c->ds = open_dataset(name, role, nullptr);
+    c->ds = open_dataset(name, role);
     c->fspace = Hid(H5Dget_space(c->ds.get()));
     if (!c->fspace.valid()) fail_h5("cannot read the shape of dataset " + q_name(name));
     const int rank = H5Sget_simple_extent_ndims(c->fspace.get());
@@ -733,7 +812,7 @@ struct H5EventReader::Impl {
     matrix = true;
     Column m;
     m.name = name;
-    m.ds = open_dataset(name, "events", nullptr);
+    m.ds = open_dataset(name, "events");
     m.fspace = Hid(H5Dget_space(m.ds.get()));
     if (!m.fspace.valid()) fail_h5("cannot read the shape of dataset " + q_name(name));
     const int rank = H5Sget_simple_extent_ndims(m.fspace.get());
@@ -789,7 +868,7 @@ struct H5EventReader::Impl {
 
   // Reads a scalar (rank 0 or one element) numeric dataset or attribute.
   Scalar read_scalar_dataset(const std::string& name, const std::string& role) const {
-    Hid ds = open_dataset(name, role, nullptr);
+    Hid ds = open_dataset(name, role);
     Hid space(H5Dget_space(ds.get()));
     Hid ftype(H5Dget_type(ds.get()));
     if (!space.valid() || !ftype.valid()) fail_h5("cannot read dataset " + q_name(name));
@@ -891,22 +970,22 @@ struct H5EventReader::Impl {
     H5Layout::Kind kind = L.kind;
     std::string xs = L.x, ys = L.y, ts = L.t, ps = L.p;
     if (kind == H5Layout::Kind::kAuto) {
-      if (is_dataset(file.get(), L.t)) {
+      if (is_dataset(file.get(), L.t, apl.get())) {
         kind = H5Layout::Kind::kColumns;
         layout = L.t == H5Layout().t ? "DSEC" : "columns";
-      } else if (is_dataset(file.get(), "events/ts")) {
+      } else if (is_dataset(file.get(), "events/ts", apl.get())) {
         kind = H5Layout::Kind::kColumns;
         layout = "event_utils";
         xs = "events/xs";
         ys = "events/ys";
         ts = "events/ts";
         ps = "events/ps";
-      } else if (is_dataset(file.get(), L.matrix)) {
+      } else if (is_dataset(file.get(), L.matrix, apl.get())) {
         kind = H5Layout::Kind::kMatrix;
         layout = L.matrix == H5Layout().matrix ? "MVSEC" : "matrix";
       } else {
         fail("no event datasets found: looked for " + q_name(L.t) + " (DSEC/TUM-VIE), 'events/ts' (event_utils) and " +
-                 q_name(L.matrix) + " (MVSEC); top-level objects: " + describe_top_level(file.get()),
+                 q_name(L.matrix) + " (MVSEC); top-level objects: " + describe_top_level(file.get(), apl.get()),
              "an HDF5 event file in the DSEC, event_utils or MVSEC layout, or set the dataset names in the HDF5 "
              "layout options");
       }
@@ -931,10 +1010,16 @@ struct H5EventReader::Impl {
     n = t.rows;
     // DSEC and evio files carry t_offset and ms_to_idx; other layouts only when configured so.
     const bool dsec_like = layout == "DSEC" || layout == "columns";
-    if (dsec_like && !L.t_offset.empty() && link_exists(file.get(), L.t_offset)) t_offset_name = L.t_offset;
-    if (dsec_like && !L.ms_to_idx.empty() && link_exists(file.get(), L.ms_to_idx)) {
-      open_column(&ms_index, L.ms_to_idx, "ms_to_idx index");
-      if (ms_index.type.is_float) fail("dataset " + q_name(L.ms_to_idx) + " holds floats", "unsigned integer event indices");
+    if (dsec_like && !L.t_offset.empty() && link_exists(file.get(), L.t_offset, apl.get())) t_offset_name = L.t_offset;
+    if (dsec_like && !L.ms_to_idx.empty() && link_exists(file.get(), L.ms_to_idx, apl.get())) {
+      // The index only speeds up seeking: a broken one is reported and not used.
+      try {
+        open_column(&ms_index, L.ms_to_idx, "ms_to_idx index");
+        if (ms_index.type.is_float) fail("dataset " + q_name(L.ms_to_idx) + " holds floats", "unsigned integer event indices");
+      } catch (const InputError& e) {
+        log_warning(std::string(e.what()) + "; seeking without the index");
+        ms_index = Column();
+      }
     }
   }
 
@@ -956,7 +1041,7 @@ struct H5EventReader::Impl {
     std::optional<TimeUnit> off_attr;
     if (!t_offset_name.empty()) {
       off = read_scalar_dataset(t_offset_name, "time offset");
-      Hid ds = open_dataset(t_offset_name, "time offset", nullptr);
+      Hid ds = open_dataset(t_offset_name, "time offset");
       off_attr = unit_attr(ds.get(), t_offset_name);
     }
     TimeUnit unit = TimeUnit::kAuto;
@@ -1034,8 +1119,8 @@ struct H5EventReader::Impl {
   std::optional<int64_t> sensor_value(hid_t obj, const std::string& obj_name, const char* name, bool dataset_too) {
     std::optional<Scalar> s = read_number_attr(obj, obj_name, name);
     std::string where = obj_name + " attribute " + name;
-    if (!s && dataset_too && is_dataset(obj, name)) {
-      Hid ds(H5Dopen2(obj, name, H5P_DEFAULT));
+    if (!s && dataset_too && is_dataset(obj, name, apl.get())) {
+      Hid ds(H5Dopen2(obj, name, apl.get()));
       Hid space(ds.valid() ? H5Dget_space(ds.get()) : -1);
       Hid ftype(ds.valid() ? H5Dget_type(ds.get()) : -1);
       if (ds.valid() && space.valid() && ftype.valid() && H5Sget_simple_extent_npoints(space.get()) == 1) {
@@ -1058,8 +1143,8 @@ struct H5EventReader::Impl {
   void resolve_sensor() {
     std::vector<std::pair<hid_t, std::string>> places = {{file.get(), "root group"}};
     Hid events_group;
-    if (link_exists(file.get(), "events")) {
-      events_group = Hid(H5Oopen(file.get(), "events", H5P_DEFAULT));
+    if (link_exists(file.get(), "events", apl.get())) {
+      events_group = Hid(H5Oopen(file.get(), "events", apl.get()));
       H5Eclear2(H5E_DEFAULT);
       if (events_group.valid() && H5Iget_type(events_group.get()) == H5I_GROUP) places.push_back({events_group.get(), "group 'events'"});
     }
@@ -1251,14 +1336,14 @@ struct H5EventReader::Impl {
       return v;  // already a code (staging)
     } else if constexpr (std::is_same_v<P, uint8_t>) {
       return v == 1 ? 1 : v == 0 ? 2 : 0;
-    } else if constexpr (std::is_same_v<P, int8_t>) {
+    } else {
       return v == 1 ? 1 : v == 0 ? 2 : v == -1 ? 3 : 0;
     }
   }
 
-  // Appends the valid events among block elements [blk_pos, blk_pos + take) to v. XY is the
-  // coordinate type (uint32_t staging with kBadCoord, or raw uint16_t/int16_t), P the polarity
-  // type (raw uint8_t/int8_t, or staged polarity codes when kCodes).
+  // Writes the valid events among block elements [blk_pos, blk_pos + take) to dst and returns
+  // how many. XY is the coordinate type (uint32_t staging with kBadCoord, or raw uint16_t /
+  // int16_t), P the polarity type (raw uint8_t / int8_t, or staged polarity codes when kCodes).
   template <bool kCodes, typename XY, typename P>
   size_t assemble(const XY* xx, const XY* yy, const P* pp, size_t take, Event* dst) {
     const uint32_t wl = sensor.known() ? static_cast<uint32_t>(sensor.width) : 65536u;
@@ -1303,16 +1388,16 @@ struct H5EventReader::Impl {
     switch (fused) {
       case Fused::kU16U8:
         return assemble<false>(reinterpret_cast<const uint16_t*>(raw_x.data()), reinterpret_cast<const uint16_t*>(raw_y.data()),
-                        reinterpret_cast<const uint8_t*>(raw_p.data()), take, v);
+                               reinterpret_cast<const uint8_t*>(raw_p.data()), take, v);
       case Fused::kU16I8:
         return assemble<false>(reinterpret_cast<const uint16_t*>(raw_x.data()), reinterpret_cast<const uint16_t*>(raw_y.data()),
-                        reinterpret_cast<const int8_t*>(raw_p.data()), take, v);
+                               reinterpret_cast<const int8_t*>(raw_p.data()), take, v);
       case Fused::kI16U8:
         return assemble<false>(reinterpret_cast<const int16_t*>(raw_x.data()), reinterpret_cast<const int16_t*>(raw_y.data()),
-                        reinterpret_cast<const uint8_t*>(raw_p.data()), take, v);
+                               reinterpret_cast<const uint8_t*>(raw_p.data()), take, v);
       case Fused::kI16I8:
         return assemble<false>(reinterpret_cast<const int16_t*>(raw_x.data()), reinterpret_cast<const int16_t*>(raw_y.data()),
-                        reinterpret_cast<const int8_t*>(raw_p.data()), take, v);
+                               reinterpret_cast<const int8_t*>(raw_p.data()), take, v);
       case Fused::kNone:
         break;
     }
@@ -1363,7 +1448,7 @@ struct H5EventReader::Impl {
     return v[0];
   }
 
-  // ms_to_idx[i], clamped to [0, n]; nullopt when it cannot be read as an index.
+  // ms_to_idx[i] clamped to [0, n] (a hint: seek() verifies the bracket it gives).
   hsize_t index_at(hsize_t i) {
     unsigned char raw[8] = {0};
     read_rows(ms_index, i, 1, 1, raw);
@@ -1552,7 +1637,7 @@ bool H5WriteOptions::Validate(std::string* why) const {
 struct H5EventWriter::Impl {
   std::string path;
   Options opt;
-  Hid file, group, dx, dy, dt, dp, dms;
+  Hid file, dx, dy, dt, dp, dms;
   std::vector<uint16_t> bx, by;
   std::vector<uint8_t> bp;
   std::vector<int64_t> bt;

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include "evio/calib/error.h"
+#include "evio_test/fuzz_seed.h"
 #include "evio_test/real_data.h"
 #include "evio_test/temp_dir.h"
 
@@ -34,6 +35,7 @@ std::vector<Event> read_all(const std::string& path, DatasetOptions o = {}) {
 void expect_error(const std::string& bytes, const std::vector<std::string>& frags, DatasetOptions o = {}) {
   evio_test::TempDir dir;
   const std::string p = dir.write("x.aedat", bytes);
+  evio_test::export_fuzz_seed(p, "fuzz_aedat2");
   try {
     read_all(p, o);
     FAIL() << "no error";
@@ -53,6 +55,7 @@ TEST(Aedat2, DecodesDvs128AddressesTriggersAndWrap) {
   data += be32(dvs128_addr(64, 127, true)) + be32(0xFFFFFFF0u);
   data += be32(dvs128_addr(1, 2, false)) + be32(0x10u);  // wrapped: 2^32 + 16 us
   const std::string p = dir.write("a.aedat", data);
+  evio_test::export_fuzz_seed(p, "fuzz_aedat2");
   auto reader = open_aedat2_dataset(p);
   EXPECT_EQ(reader->sensor_size().width, 128);
   EventBuffer b;

@@ -17,6 +17,7 @@
 
 #include "evio/calib/error.h"
 #include "evio/calib/log.h"
+#include "evio_test/fuzz_seed.h"
 #include "evio_test/real_data.h"
 #include "evio_test/temp_dir.h"
 
@@ -359,8 +360,11 @@ FileLayout build_file(Comp c, const std::vector<Packet>& packets, bool with_tabl
 }
 
 std::string write_bytes(const std::string& path, const Bytes& b) {
-  std::ofstream f(path, std::ios::binary);
-  f.write(reinterpret_cast<const char*>(b.data()), static_cast<std::streamsize>(b.size()));
+  {
+    std::ofstream f(path, std::ios::binary);
+    f.write(reinterpret_cast<const char*>(b.data()), static_cast<std::streamsize>(b.size()));
+  }
+  evio_test::export_fuzz_seed(path, "fuzz_aedat4");
   return path;
 }
 
@@ -457,7 +461,7 @@ void expect_error(const std::string& path, const std::vector<std::string>& fragm
   }
 }
 
-class QuietLog : public ::testing::Test {
+class Aedat4Fixture : public ::testing::Test {
  protected:
   void SetUp() override { set_log_level(LogLevel::kError); }
   void TearDown() override { set_log_level(LogLevel::kInfo); }
@@ -467,7 +471,7 @@ class QuietLog : public ::testing::Test {
 // ---------------------------------------------------------------------------------------------
 // Real sample
 
-class RealAedat4 : public QuietLog {};
+class RealAedat4 : public Aedat4Fixture {};
 
 TEST_F(RealAedat4, DavisSampleCountsAndPlausibility) {
   const auto dir = evio_test::real_data_dir("davis346_aedat4");
@@ -579,7 +583,9 @@ TEST_F(RealAedat4, ChunkedReadsAndSeekAgreeWithOneRead) {
 // ---------------------------------------------------------------------------------------------
 // Written files: every compression, with and without the file data table
 
-class WrittenAedat4 : public QuietLog, public ::testing::WithParamInterface<std::tuple<Comp, bool>> {};
+class Aedat4Files : public Aedat4Fixture {};
+
+class WrittenAedat4 : public Aedat4Fixture, public ::testing::WithParamInterface<std::tuple<Comp, bool>> {};
 
 TEST_P(WrittenAedat4, RoundTripsEveryStream) {
   const auto [comp, with_table] = GetParam();
@@ -650,7 +656,7 @@ INSTANTIATE_TEST_SUITE_P(Compressions, WrittenAedat4,
                                             ::testing::Bool()),
                          param_name);
 
-TEST_F(QuietLog, StreamCountsNeedAFullPassWithoutDataTable) {
+TEST_F(Aedat4Files, StreamCountsNeedAFullPassWithoutDataTable) {
   const Sample s = make_sample();
   const std::string path = write_bytes(dir_.file("a.aedat4"), build_file(Comp::kLz4, s.packets, false).bytes);
   auto reader = open_aedat4_dataset(path, {});
@@ -660,7 +666,7 @@ TEST_F(QuietLog, StreamCountsNeedAFullPassWithoutDataTable) {
   EXPECT_EQ(reader->streams()[0].messages, 3);
 }
 
-TEST_F(QuietLog, FileWithoutEventStreamHasNoEvents) {
+TEST_F(Aedat4Files, FileWithoutEventStreamHasNoEvents) {
   const Sample s = make_sample();
   std::vector<Packet> imu_only;
   for (const Packet& p : s.packets) {
@@ -675,7 +681,7 @@ TEST_F(QuietLog, FileWithoutEventStreamHasNoEvents) {
   EXPECT_TRUE(r.frames.empty());
 }
 
-TEST_F(QuietLog, BadEventsAreErrorsOrCountedSkips) {
+TEST_F(Aedat4Files, BadEventsAreErrorsOrCountedSkips) {
   std::vector<RawEvent> ev = {{1000, 1, 1, true},   {2000, 2, 2, false}, {1500, 3, 3, true},
                               {2500, 346, 0, true}, {2600, -1, 5, true}, {2700, 4, 4, false}};
   const std::vector<Packet> packets = {{0, event_packet(ev)}};
@@ -697,7 +703,7 @@ TEST_F(QuietLog, BadEventsAreErrorsOrCountedSkips) {
             std::string::npos);
 }
 
-TEST_F(QuietLog, BadImuSamplesAreErrorsOrSkips) {
+TEST_F(Aedat4Files, BadImuSamplesAreErrorsOrSkips) {
   std::vector<RawImu> imu = {RawImu{100, {0, 0, 1}, {0, 0, 0}}, RawImu{100, {0, 0, 1}, {0, 0, 0}},
                              RawImu{200, {std::nanf(""), 0, 1}, {0, 0, 0}}, RawImu{300, {0, 0, 1}, {0, 0, 0}}};
   const FileLayout L = build_file(Comp::kLz4, {{2, imu_packet(imu)}}, false);
@@ -716,7 +722,7 @@ TEST_F(QuietLog, BadImuSamplesAreErrorsOrSkips) {
 // ---------------------------------------------------------------------------------------------
 // Malformed files
 
-class MalformedAedat4 : public QuietLog {
+class MalformedAedat4 : public Aedat4Fixture {
  protected:
   // An uncompressed recording without data table: one event packet then one IMU packet.
   FileLayout simple(Comp c = Comp::kNone, bool table = false) {

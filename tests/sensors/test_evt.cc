@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include "evio/calib/error.h"
+#include "evio_test/fuzz_seed.h"
 #include "evio_test/real_data.h"
 #include "evio_test/temp_dir.h"
 
@@ -331,8 +332,12 @@ TEST(Evt2Decoder, FeedingInPiecesOfAnySizeGivesTheSameOutput) {
 
 std::string write_raw(const TempDir& dir, const std::string& name, const std::string& header, const std::string& body) {
   const std::string path = dir.file(name);
-  std::ofstream f(path, std::ios::binary);
-  f << header << body;
+  {
+    std::ofstream f(path, std::ios::binary);
+    f << header << body;
+  }
+  const bool evt2 = header.find("EVT2") != std::string::npos || header.find("evt 2") != std::string::npos;
+  evio_test::export_fuzz_seed(path, evt2 ? "fuzz_evt2" : "fuzz_evt3");
   return path;
 }
 
@@ -498,6 +503,21 @@ TEST(EvtFile, MissingHeaderEndIsAnError) {
   expect_error(write_raw(dir, "h.raw", "% evt 3.0\n% geometry 640x480", ""),
                {"file ends inside the header", "header line at byte offset 10 has no end of line",
                 "expected: '%' header lines each ending in a newline"});
+}
+
+TEST(EvtFile, OverlongHeaderIsAnError) {
+  TempDir dir;
+  expect_error(write_raw(dir, "long.raw", "% evt 3.0\n% " + std::string((1 << 20) + 10, 'a'), ""),
+               {"header longer than 1 MiB (no line ends it)"});
+}
+
+TEST(EvtFile, HeaderOnlyFileHasNoEvents) {
+  TempDir dir;
+  auto r = open_evt_dataset(write_raw(dir, "empty.raw", kEvt3Header, ""), {});
+  EventBuffer e;
+  EXPECT_EQ(r->read_events(&e, 100), 0u);
+  EXPECT_DOUBLE_EQ(r->progress(), 1.0);
+  EXPECT_TRUE(r->read_triggers().empty());
 }
 
 TEST(EvtFile, UnknownVersionIsAnError) {

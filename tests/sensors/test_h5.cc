@@ -14,6 +14,7 @@
 #include "evio/calib/error.h"
 #include "evio/calib/log.h"
 #include "evio/sensors/ecd.h"
+#include "evio_test/fuzz_seed.h"
 #include "evio_test/real_data.h"
 #include "evio_test/temp_dir.h"
 
@@ -124,6 +125,7 @@ std::vector<Event> random_events(size_t n, uint64_t seed, int64_t t0, int64_t ma
 
 std::vector<Event> read_all(const std::string& path, const DatasetOptions& options = {}, ReadReport* report = nullptr,
                             size_t max_events = 100000) {
+  evio_test::export_fuzz_seed(path, "fuzz_h5");
   EventBuffer buf;
   {
     auto reader = open_h5_dataset(path, options);
@@ -169,6 +171,7 @@ void expect_error(const std::string& path, const std::function<void()>& f, const
 }
 
 void expect_read_error(const std::string& path, const std::vector<std::string>& fragments, const DatasetOptions& o = {}) {
+  evio_test::export_fuzz_seed(path, "fuzz_h5");
   expect_error(path, [&] { read_all(path, o); }, fragments);
 }
 
@@ -756,6 +759,27 @@ TEST(H5Seek, WrongMsToIdxFallsBackToBinarySearch) {
     ev.push_back(Event{(static_cast<int64_t>(d.t[i]) + d.t_offset_us) * 1000, d.x[i], d.y[i], static_cast<int8_t>(d.p[i] ? 1 : -1)});
   }
   check_seeks(path, ev, false, 42);
+
+  // An index that is not even integers is reported and not used.
+  const std::string float_index = dir.file("float_index.h5");
+  {
+    RawH5 f(float_index);
+    f.column("events/x", d.x);
+    f.column("events/y", d.y);
+    f.column("events/t", d.t);
+    f.column("events/p", d.p);
+    f.scalar("t_offset", d.t_offset_us);
+    f.column<double>("ms_to_idx", {0.0, 1.5});
+  }
+  std::vector<std::string> warnings;
+  set_log_sink([&](LogLevel level, const std::string& m) {
+    if (level == LogLevel::kWarning) warnings.push_back(m);
+  });
+  check_seeks(float_index, ev, false, 43);
+  set_log_sink({});
+  ASSERT_FALSE(warnings.empty());
+  EXPECT_NE(warnings[0].find("'ms_to_idx' holds floats"), std::string::npos) << warnings[0];
+  EXPECT_NE(warnings[0].find("; seeking without the index"), std::string::npos) << warnings[0];
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -943,6 +967,37 @@ TEST(H5Malformed, BadUnitAttributeAndSensorSize) {
   expect_read_error(size, {"dataset 'width' = 0", "is not a sensor size"});
 }
 
+TEST(H5Malformed, ExternalLinksAreNotFollowed) {
+  TempDir dir;
+  const std::string other = dir.file("other.h5");
+  {
+    RawH5 f(other);
+    f.column<int64_t>("t", {1, 2});
+  }
+  const std::string path = dir.file("ext.h5");
+  {
+    RawH5 f(path);
+    f.column<uint16_t>("events/x", {1, 2});
+    f.column<uint16_t>("events/y", {1, 2});
+    f.column<uint8_t>("events/p", {1, 0});
+    ASSERT_GE(H5Lcreate_external(other.c_str(), "t", f.id(), "events/t", H5P_DEFAULT, H5P_DEFAULT), 0);
+  }
+  DatasetOptions o;
+  o.h5.kind = H5Layout::Kind::kColumns;
+  expect_read_error(path, {"dataset 'events/t' (t) is an external link to another file", "a dataset inside this file"}, o);
+  // Reached through a soft link, the external link is not traversed either.
+  const std::string soft = dir.file("soft.h5");
+  {
+    RawH5 f(soft);
+    f.column<uint16_t>("events/x", {1, 2});
+    f.column<uint16_t>("events/y", {1, 2});
+    f.column<uint8_t>("events/p", {1, 0});
+    ASSERT_GE(H5Lcreate_external(other.c_str(), "t", f.id(), "ext", H5P_DEFAULT, H5P_DEFAULT), 0);
+    ASSERT_GE(H5Lcreate_soft("/ext", f.id(), "events/t", H5P_DEFAULT, H5P_DEFAULT), 0);
+  }
+  expect_read_error(soft, {"'events/t' (t) is not a dataset"}, o);
+}
+
 TEST(H5Malformed, TruncatedFile) {
   TempDir dir;
   const std::string path = dir.file("full.h5");
@@ -961,6 +1016,21 @@ TEST(H5Malformed, NotAnHdf5File) {
   expect_read_error(dir.path(), {"is a directory"});
   const std::string empty = dir.write("zero.h5", "");
   expect_read_error(empty, {"not an HDF5 file"});
+}
+
+TEST(H5Malformed, SuperblockWithAbsurdDriverBlockIsRejectedBeforeLibhdf5ReadsIt) {
+  // 49 bytes found by fuzzing: a version-0 superblock whose driver information block declares
+  // ~4 GiB, which libhdf5 1.10.8 allocates inside H5Fopen.
+  const unsigned char raw[49] = {0x89, 'H', 'D', 'F', '\r', '\n', 0x1a, '\n', 0, 0, 0, 0, 0, 8, 8, 0, 4, 0, 0x10,
+                                 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0xff, 0xff, 0xff, 0x1a, 0, 0, 0, 0,
+                                 0, 0, 0, 0, 0, 0, 0, 0, 0x1a};
+  std::string bytes(reinterpret_cast<const char*>(raw), sizeof(raw));
+  TempDir dir;
+  const std::string path = dir.write("sb.h5", bytes);
+  expect_read_error(path, {"HDF5 superblock at byte offset 0 points to a driver information block at 26",
+                           "of 4294901760 bytes beyond the end of the 49-byte file", "an intact HDF5 file"});
+  bytes[13] = 3;  // 3-byte addresses do not exist
+  expect_read_error(dir.write("sb3.h5", bytes), {"declares 3-byte addresses and 8-byte lengths"});
 }
 
 TEST(H5Malformed, IncompleteDatasetIsRejected) {

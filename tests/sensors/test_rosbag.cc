@@ -14,6 +14,7 @@
 
 #include "evio/calib/error.h"
 #include "evio/calib/log.h"
+#include "evio_test/fuzz_seed.h"
 #include "evio_test/real_data.h"
 #include "evio_test/temp_dir.h"
 
@@ -286,6 +287,7 @@ uint16_t ext_trigger(uint32_t id, bool rising) { return static_cast<uint16_t>(0x
 std::string write_file(const TempDir& dir, const std::string& name, const std::string& bytes) {
   const std::string path = dir.file(name);
   std::ofstream(path, std::ios::binary).write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  evio_test::export_fuzz_seed(path, "fuzz_rosbag");
   return path;
 }
 
