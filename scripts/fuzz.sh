@@ -4,30 +4,34 @@
 # EVIO_FUZZ_SEED_DIR is set), plus the first 64 KiB of each real sample in ../shared/data/real.
 # Prints executions and crashes per target; crash inputs are kept in build-fuzz/crashes.
 #   scripts/fuzz.sh [SECONDS] [TARGET ...]      (default: every fuzz_* target)
+# FUZZ_SKIP_BUILD=1 reuses the build and seeds of an earlier run (to run two target lists at once).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 [ "${EVIO_SKIP_DEPS:-0}" = 1 ] || bash scripts/setup_deps.sh
 seconds=${1:-300}
 shift || true
 build=${FUZZ_BUILD_DIR:-build-fuzz}
-CC=clang CXX=clang++ cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DEVIO_BUILD_FUZZ=ON \
+skip=${FUZZ_SKIP_BUILD:-0}
+[ "$skip" = 1 ] || CC=clang CXX=clang++ cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DEVIO_BUILD_FUZZ=ON \
   -DEVIO_BUILD_TESTS=OFF -DEVIO_BUILD_BENCH=OFF \
   -DCMAKE_CXX_FLAGS="-fsanitize=fuzzer-no-link,address,undefined -fno-omit-frame-pointer" >/dev/null
 targets=("$@")
 if [ ${#targets[@]} -eq 0 ]; then
   mapfile -t targets < <(grep -ohE 'evio_add_fuzzer\((fuzz_[a-z0-9_]+)' tests/fuzz/CMakeLists.txt | sed 's/.*(//')
 fi
-cmake --build "$build" -j"$(nproc)" --target "${targets[@]}"
+[ "$skip" = 1 ] || cmake --build "$build" -j"$(nproc)" --target "${targets[@]}"
 real=../shared/data/real
 mkdir -p "$build/crashes"
 # Seed files from the reader tests (Release build of the test binaries in BUILD_DIR).
 test_build=${BUILD_DIR:-build}
-cmake -S . -B "$test_build" -DCMAKE_BUILD_TYPE=Release >/dev/null
-cmake --build "$test_build" -j"$(nproc)" --target test_aedat2 test_aedat4 test_evt test_h5 test_rosbag >/dev/null
-rm -rf "$build/seeds"
-for t in test_aedat2 test_aedat4 test_evt test_h5 test_rosbag; do
-  EVIO_FUZZ_SEED_DIR="$build/seeds" "$test_build/tests/sensors/$t" --gtest_brief=1 >/dev/null 2>&1 || true
-done
+if [ "$skip" != 1 ]; then
+  cmake -S . -B "$test_build" -DCMAKE_BUILD_TYPE=Release >/dev/null
+  cmake --build "$test_build" -j"$(nproc)" --target test_aedat2 test_aedat4 test_evt test_h5 test_rosbag >/dev/null
+  rm -rf "$build/seeds"
+  for t in test_aedat2 test_aedat4 test_evt test_h5 test_rosbag; do
+    EVIO_FUZZ_SEED_DIR="$build/seeds" "$test_build/tests/sensors/$t" --gtest_brief=1 >/dev/null 2>&1 || true
+  done
+fi
 for t in "${targets[@]}"; do
   corpus="$build/corpus/$t"
   mkdir -p "$corpus"
@@ -47,7 +51,7 @@ for t in "${targets[@]}"; do
   echo "$t: corpus of $(ls "$corpus" | wc -l) files" >&2
   log="$build/$t.log"
   set +e
-  "$build/tests/fuzz/$t" "$corpus" -max_total_time="$seconds" -max_len=262144 -rss_limit_mb=4096 \
+  LSAN_OPTIONS="suppressions=$PWD/tests/fuzz/lsan_hdf5.supp" "$build/tests/fuzz/$t" "$corpus" -max_total_time="$seconds" -max_len=262144 -rss_limit_mb=4096 \
     -artifact_prefix="$build/crashes/$t-" -print_final_stats=1 >"$log" 2>&1
   rc=$?
   set -e

@@ -88,6 +88,17 @@ DatasetFormat detect_dataset_format(const std::string& path) {
   } else {
     throw InputError(path, 0, std::string("cannot open: ") + std::strerror(errno), "a readable dataset file");
   }
+  // HDF5 files with a user block carry the signature at 512, 1024, 2048, ... bytes.
+  if (std::FILE* f = std::fopen(path.c_str(), "rb")) {
+    bool hdf5 = false;
+    for (long off = 512; off <= (long{1} << 30) && !hdf5; off *= 2) {
+      char sig[8];
+      if (std::fseek(f, off, SEEK_SET) != 0 || std::fread(sig, 1, 8, f) != 8) break;
+      hdf5 = std::memcmp(sig, "\x89HDF\r\n\x1a\n", 8) == 0;
+    }
+    std::fclose(f);
+    if (hdf5) return DatasetFormat::kHdf5;
+  }
   const std::string ext = fs::path(path).extension().string();
   if (ext == ".h5" || ext == ".hdf5" || ext == ".hdf") return DatasetFormat::kHdf5;
   if (ext == ".txt" || ext == ".dat" || ext == ".csv") return DatasetFormat::kEcdEvents;

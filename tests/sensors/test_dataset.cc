@@ -20,12 +20,27 @@ TEST(Dataset, DetectsFormats) {
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("unknown file format"), std::string::npos);
   }
+  // Magic bytes decide over the extension; HDF5 may sit behind a 512-byte user block.
+  EXPECT_EQ(detect_dataset_format(dir.write("a.bin", "#!AER-DAT4.0\r\n")), DatasetFormat::kAedat4);
+  EXPECT_EQ(detect_dataset_format(dir.write("b.txt", "#!AER-DAT2.0\r\n")), DatasetFormat::kAedat2);
+  EXPECT_EQ(detect_dataset_format(dir.write("c.dat", "#ROSBAG V2.0\n")), DatasetFormat::kRosbag);
+  EXPECT_EQ(detect_dataset_format(dir.write("d", std::string("\x89HDF\r\n\x1a\n", 8) + "rest")), DatasetFormat::kHdf5);
+  EXPECT_EQ(detect_dataset_format(dir.write("e", std::string(512, '\0') + std::string("\x89HDF\r\n\x1a\n", 8))),
+            DatasetFormat::kHdf5);
+  EXPECT_EQ(detect_dataset_format(dir.write("f.raw", "% evt 3.0\n% end\n")), DatasetFormat::kEvt3);
+  EXPECT_EQ(detect_dataset_format(dir.write("g.raw", "% format EVT2;height=480;width=640\n% end\n")), DatasetFormat::kEvt2);
+  try {
+    detect_dataset_format(dir.write("h.raw", "% date 2020\n% end\n"));
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("names no EVT version"), std::string::npos) << e.what();
+  }
   dir.write("events.txt", "0.1 1 2 0\n");
   EXPECT_EQ(detect_dataset_format(dir.path()), DatasetFormat::kEcdFolder);
   EXPECT_EQ(detect_dataset_format(dir.file("events.txt")), DatasetFormat::kEcdEvents);
-  for (DatasetFormat f : {DatasetFormat::kAuto, DatasetFormat::kEcdFolder, DatasetFormat::kEcdEvents}) {
-    EXPECT_EQ(dataset_format_from_name(dataset_format_name(f)), f);
-  }
+  EXPECT_EQ(dataset_format_from_name("auto"), DatasetFormat::kAuto);
+  for (DatasetFormat f : all_dataset_formats()) EXPECT_EQ(dataset_format_from_name(dataset_format_name(f)), f);
+  EXPECT_EQ(all_dataset_formats().size(), 8u);
 }
 
 TEST(Dataset, SummaryOfAFolderWithoutSideFiles) {

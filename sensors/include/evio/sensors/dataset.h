@@ -42,7 +42,7 @@ struct H5Layout {
   enum class Kind {
     kAuto,     // DSEC if events/t exists, else event_utils if events/ts exists, else MVSEC matrix
     kColumns,  // one 1-D dataset per field (DSEC, event_utils, custom names)
-    kMatrix,   // one N x 4 dataset with columns t x y p (MVSEC: float64, polarity -1/+1)
+    kMatrix,   // one N x 4 dataset with columns x y t p (MVSEC: float64, t in s, polarity -1/+1)
   };
   Kind kind = Kind::kAuto;
   std::string x = "events/x", y = "events/y", t = "events/t", p = "events/p";  // kColumns datasets
