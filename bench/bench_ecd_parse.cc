@@ -13,6 +13,7 @@
 #include <string>
 
 #include "evio/sensors/ecd.h"
+#include "bench_reporter.h"
 #include "make_ecd_sequence.h"
 
 namespace {
@@ -69,19 +70,6 @@ void write_evio(benchmark::State& state) {
   state.SetItemsProcessed(state.iterations() * static_cast<int64_t>(events.size()));
 }
 
-class CollectingReporter : public benchmark::ConsoleReporter {
- public:
-  CollectingReporter() : ConsoleReporter(OO_Tabular) {}
-  std::map<std::string, double> rate;
-  void ReportRuns(const std::vector<Run>& runs) override {
-    ConsoleReporter::ReportRuns(runs);
-    for (const Run& r : runs) {
-      const auto it = r.counters.find("items_per_second");
-      if (it != r.counters.end()) rate[r.run_name.function_name] = it->second;
-    }
-  }
-};
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -108,7 +96,7 @@ int main(int argc, char** argv) {
       ->Unit(benchmark::kMillisecond)->Iterations(1)->UseRealTime();
   benchmark::RegisterBenchmark("ecd_write/evio", write_evio)->Unit(benchmark::kMillisecond)->Iterations(2)->UseRealTime();
   benchmark::Initialize(&argc, argv);
-  CollectingReporter reporter;  // plain output (no colour codes) so logs and JSON lines stay clean
+  evio::bench::CollectingReporter reporter;  // plain output (no colour codes) so logs and JSON lines stay clean
   benchmark::RunSpecifiedBenchmarks(&reporter);
   const double base = reporter.rate["ecd_parse/iostream_baseline"];
   for (const auto& [name, r] : reporter.rate) {

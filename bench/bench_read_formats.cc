@@ -16,6 +16,7 @@
 #include "evio/calib/log.h"
 #include "evio/sensors/dataset.h"
 #include "evio/sensors/h5.h"
+#include "bench_reporter.h"
 #include "make_ecd_sequence.h"
 
 namespace {
@@ -86,19 +87,6 @@ void read_all(benchmark::State& state, const Input& in) {
   state.counters["events"] = static_cast<double>(n);
 }
 
-class CollectingReporter : public benchmark::ConsoleReporter {
- public:
-  CollectingReporter() : ConsoleReporter(OO_Tabular) {}
-  std::map<std::string, double> rate;
-  void ReportRuns(const std::vector<Run>& runs) override {
-    ConsoleReporter::ReportRuns(runs);
-    for (const Run& r : runs) {
-      const auto it = r.counters.find("items_per_second");
-      if (it != r.counters.end()) rate[r.run_name.function_name] = it->second;
-    }
-  }
-};
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -153,7 +141,7 @@ int main(int argc, char** argv) {
         ->UseRealTime();
   }
   benchmark::Initialize(&argc, argv);
-  CollectingReporter reporter;
+  evio::bench::CollectingReporter reporter;
   benchmark::RunSpecifiedBenchmarks(&reporter);
   for (const auto& [name, r] : reporter.rate) {
     std::printf("{\"bench\": \"read/%s\", \"events\": %lld, \"events_per_s\": %.4g}\n", name.c_str(),

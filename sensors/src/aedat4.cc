@@ -18,6 +18,7 @@
 
 #include "evio/calib/error.h"
 #include "evio/calib/log.h"
+#include "binary_file.h"
 
 namespace evio {
 namespace {
@@ -96,52 +97,7 @@ inline bool us_to_ns(int64_t t_us, int64_t* t_ns) {
 // ---------------------------------------------------------------------------------------------
 // The file, read with pread (no stream position shared between the event stream and side reads)
 
-class File {
- public:
-  explicit File(const std::string& path) : path_(path) {
-    fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-    if (fd_ < 0)
-      throw InputError(path, 0, std::string("cannot open: ") + std::strerror(errno), "a readable AEDAT 4.0 file");
-    struct stat st;
-    if (::fstat(fd_, &st) != 0 || !S_ISREG(st.st_mode)) {
-      ::close(fd_);
-      fd_ = -1;
-      throw InputError(path, 0, "not a regular file", "a readable AEDAT 4.0 file");
-    }
-    size_ = static_cast<int64_t>(st.st_size);
-  }
-  ~File() {
-    if (fd_ >= 0) ::close(fd_);
-  }
-  File(const File&) = delete;
-  File& operator=(const File&) = delete;
-
-  int64_t size() const { return size_; }
-  const std::string& path() const { return path_; }
-
-  // Reads exactly n bytes at offset; the caller has checked offset + n <= size().
-  void read(int64_t offset, void* dst, size_t n, const char* what) const {
-    auto* d = static_cast<uint8_t*>(dst);
-    size_t done = 0;
-    while (done < n) {
-      const ssize_t r = ::pread(fd_, d + done, n - done, static_cast<off_t>(offset + static_cast<int64_t>(done)));
-      if (r < 0 && errno == EINTR) continue;
-      if (r <= 0) {
-        throw InputError(
-            path_, 0,
-            std::string("cannot read ") + what + " at byte offset " + num(offset + static_cast<int64_t>(done)) +
-                (r < 0 ? std::string(": ") + std::strerror(errno) : std::string(": unexpected end of file")),
-            kFileForm);
-      }
-      done += static_cast<size_t>(r);
-    }
-  }
-
- private:
-  std::string path_;
-  int fd_ = -1;
-  int64_t size_ = 0;
-};
+using File = detail::BinaryFile;
 
 // ---------------------------------------------------------------------------------------------
 // Bounds-checked flatbuffer access (FlatBuffers binary format: little-endian, root uoffset at 0,
@@ -560,7 +516,7 @@ class SideBadData {
 
 class Aedat4Reader final : public DatasetReader {
  public:
-  Aedat4Reader(const std::string& path, const DatasetOptions& options) : path_(path), options_(options), file_(path) {
+  Aedat4Reader(const std::string& path, const DatasetOptions& options) : path_(path), options_(options), file_(path, "a readable AEDAT 4.0 file") {
     std::string why;
     if (!options_.Validate(&why)) throw InputError(path, 0, "invalid dataset options: " + why);
     report_.path = path;
@@ -657,7 +613,7 @@ class Aedat4Reader final : public DatasetReader {
 // Header, infoNode and data table
 
 void Aedat4Reader::read_header() {
-  const int64_t fsize = file_.size();
+  const int64_t fsize = static_cast<int64_t>(file_.size());
   uint8_t magic[kMagicSize];
   if (fsize < static_cast<int64_t>(kMagicSize)) {
     throw InputError(path_, 0, "file of " + num(fsize) + " bytes is too short for the AEDAT 4.0 magic at byte offset 0",
@@ -795,7 +751,7 @@ std::string Aedat4Reader::stream_list() const {
 
 void Aedat4Reader::read_data_table() {
   const int64_t pos = data_end_;
-  const int64_t n = file_.size() - pos;
+  const int64_t n = static_cast<int64_t>(file_.size()) - pos;
   if (n > kMaxBlockBytes) {
     throw InputError(path_, 0,
                      "file data table at byte offset " + num(pos) + " is " + num(n) + " bytes, above the " +

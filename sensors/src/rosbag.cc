@@ -18,6 +18,7 @@
 #include "evio/calib/error.h"
 #include "evio/calib/log.h"
 #include "evio/sensors/evt.h"
+#include "binary_file.h"
 #include "text_common.h"
 
 #if !defined(__BYTE_ORDER__) || __BYTE_ORDER__ != __ORDER_LITTLE_ENDIAN__
@@ -204,54 +205,7 @@ class Header {
 // ---------------------------------------------------------------------------------------------
 // The file: positioned reads with explicit bounds.
 
-class BagFile {
- public:
-  explicit BagFile(const std::string& path) : path_(path) {
-    fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-    if (fd_ < 0) throw InputError(path, 0, std::string("cannot open: ") + std::strerror(errno), kBagForm);
-    struct stat st;
-    if (::fstat(fd_, &st) != 0 || !S_ISREG(st.st_mode)) {
-      ::close(fd_);
-      throw InputError(path, 0, "not a regular file", kBagForm);
-    }
-    size_ = static_cast<uint64_t>(st.st_size);
-  }
-  ~BagFile() { ::close(fd_); }
-  BagFile(const BagFile&) = delete;
-  BagFile& operator=(const BagFile&) = delete;
-
-  uint64_t size() const { return size_; }
-  const std::string& path() const { return path_; }
-
-  // Reads exactly n bytes at off; `what` names them in the error when the file ends first.
-  void read(uint64_t off, void* dst, size_t n, const char* what) const {
-    if (off > size_ || n > size_ - off) {
-      throw InputError(path_, 0,
-                       std::string("truncated file: ") + what + " of " + std::to_string(n) + " bytes at byte offset " +
-                           std::to_string(off) + " runs past the end of the file (" + std::to_string(size_) +
-                           " bytes)",
-                       kBagForm);
-    }
-    auto* d = static_cast<uint8_t*>(dst);
-    size_t done = 0;
-    while (done < n) {
-      const ssize_t got = ::pread(fd_, d + done, n - done, static_cast<off_t>(off + done));
-      if (got < 0 && errno == EINTR) continue;
-      if (got <= 0) {
-        throw InputError(path_, 0,
-                         std::string("read error (") + (got < 0 ? std::strerror(errno) : "unexpected end of file") +
-                             ") at byte offset " + std::to_string(off + done),
-                         kBagForm);
-      }
-      done += static_cast<size_t>(got);
-    }
-  }
-
- private:
-  std::string path_;
-  int fd_ = -1;
-  uint64_t size_ = 0;
-};
+using BagFile = detail::BinaryFile;
 
 // A record read from the file: header parsed, data located (and checked to lie inside the file).
 struct FileRecord {
@@ -539,7 +493,7 @@ struct ChunkInfo {
 };
 
 struct Bag {
-  explicit Bag(const std::string& p) : path(p), file(p) {}
+  explicit Bag(const std::string& p) : path(p), file(p, kBagForm) {}
 
   std::string path;
   BagFile file;
