@@ -222,7 +222,7 @@ DatasetSummary summarize_dataset(DatasetReader* reader, const std::function<void
   if (!frames.empty()) {
     s.frames_t_first_ns = frames.front().t_ns;
     s.frames_t_last_ns = frames.back().t_ns;
-    load_frame_image(&frames.front());
+    if (frames.front().image.empty()) load_frame_image(&frames.front());  // file-based formats (ECD)
     s.frame_width = frames.front().image.cols;
     s.frame_height = frames.front().image.rows;
   }

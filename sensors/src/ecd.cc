@@ -316,6 +316,10 @@ std::vector<Frame> read_ecd_image_list(const std::string& path, const TextReadOp
 }
 
 void load_frame_image(Frame* frame) {
+  if (frame->path.empty()) {
+    throw InputError("", 0, "frame at " + format_seconds(frame->t_ns) + " s has neither an image nor a path",
+                     "a frame read from a dataset");
+  }
   frame->image = cv::imread(frame->path, cv::IMREAD_UNCHANGED);
   if (frame->image.empty()) {
     throw InputError(frame->path, 0, "cannot decode image", "an image file OpenCV can read (PNG, JPEG, ...)");

@@ -56,5 +56,33 @@ TEST(InfoCommandRealData, SliderDepthHead) {
   EXPECT_NE(t.find("ground truth   339 poses"), std::string::npos) << t;
 }
 
+// Containers fill Frame::image themselves; the summary must not try to decode a path.
+TEST(InfoCommandRealData, Aedat4WithFramesImuAndTriggers) {
+  const auto dir = evio_test::real_data_dir("davis346_aedat4");
+  if (!dir) GTEST_SKIP() << "real data not found (../shared/data/real/davis346_aedat4)";
+  InfoArgs args;
+  args.path = *dir + "/davis.aedat4";
+  std::ostringstream out;
+  ASSERT_EQ(run_info(args, out), 0);
+  const std::string t = out.str();
+  EXPECT_NE(t.find("events         117667\n"), std::string::npos) << t;
+  EXPECT_NE(t.find("frames         3 (346 x 260)"), std::string::npos) << t;
+  EXPECT_NE(t.find("imu            130 samples"), std::string::npos) << t;
+  EXPECT_NE(t.find("triggers       15"), std::string::npos) << t;
+}
+
+TEST(InfoCommandRealData, RosbagListsTopics) {
+  const auto dir = evio_test::real_data_dir("rosbag_eventpacket");
+  if (!dir) GTEST_SKIP() << "real data not found (../shared/data/real/rosbag_eventpacket)";
+  InfoArgs args;
+  args.path = *dir + "/test_events_1.bag";
+  std::ostringstream out;
+  ASSERT_EQ(run_info(args, out), 0);
+  EXPECT_NE(out.str().find("stream         /event_camera/events [event_camera_msgs/EventPacket] 517 messages (read)"),
+            std::string::npos)
+      << out.str();
+  EXPECT_NE(out.str().find("events         343474\n"), std::string::npos) << out.str();
+}
+
 }  // namespace
 }  // namespace evio::apps

@@ -246,6 +246,8 @@ TEST(EcdImages, ListsFramesAndRejectsMissingFiles) {
   Frame bad;
   bad.path = dir.write("broken.png", "not a png");
   EXPECT_THROW(load_frame_image(&bad), InputError);
+  Frame no_path;
+  EXPECT_THROW(load_frame_image(&no_path), InputError);
 }
 
 TEST(EcdFolder, FindsFilesAndRequiresEvents) {
