@@ -76,7 +76,7 @@ void print_text(const DatasetSummary& s, std::ostream& out) {
   if (s.triggers > 0) out << "triggers       " << s.triggers << "\n";
   for (const StreamInfo& st : s.streams) {
     out << "stream         " << st.name << " [" << st.type << "]";
-    if (st.messages >= 0) out << " " << st.messages << " messages";
+    if (st.messages >= 0) out << " " << st.messages << " " << st.count_unit;
     out << (st.selected ? " (read)" : "") << "\n";
   }
   if (s.poses > 0) {
@@ -114,7 +114,7 @@ void print_json(const DatasetSummary& s, std::ostream& out) {
   o << ", \"triggers\": " << s.triggers << ", \"streams\": [";
   for (size_t i = 0; i < s.streams.size(); ++i) {
     o << (i ? ", " : "") << "{\"name\": \"" << json_escape(s.streams[i].name) << "\", \"type\": \""
-      << json_escape(s.streams[i].type) << "\", \"messages\": " << s.streams[i].messages
+      << json_escape(s.streams[i].type) << "\", \"count\": " << s.streams[i].messages << ", \"count_unit\": \"" << s.streams[i].count_unit << "\"
       << ", \"selected\": " << (s.streams[i].selected ? "true" : "false") << "}";
   }
   o << "]";

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs missing Debian packages, builds evio and runs it on its embedded default: a synthetic
 # Event Camera Dataset sequence written by the build (events, 1 kHz IMU, 100 Hz ground truth,
-# calib.txt), summarised by `evio info`. With ../shared/data/real present, also a real recording.
+# calib.txt), summarised by `evio info`, converted to HDF5 with `evio convert` and summarised again.
+# With ../shared/data/real present, also a real recording.
 #   scripts/demo.sh [OUT_DIR]      (default build/demo)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -15,6 +16,10 @@ rm -rf "$out/sequence"
 "$build_dir/bench/make_ecd_sequence" "$out/sequence" 500000 1e6 >/dev/null
 echo "== evio info $out/sequence"
 "$build_dir/apps/evio" info "$out/sequence" --sensor 240x180
+echo
+echo "== evio convert $out/sequence $out/sequence.h5 (lossless HDF5, DSEC layout), then evio info on it"
+"$build_dir/apps/evio" -q convert "$out/sequence" "$out/sequence.h5" --sensor 240x180
+"$build_dir/apps/evio" -q info "$out/sequence.h5"
 real=../shared/data/real/ecd_slider_depth_head
 if [ -d "$real" ]; then
   echo

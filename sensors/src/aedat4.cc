@@ -1343,6 +1343,7 @@ std::vector<StreamInfo> Aedat4Reader::streams() const {
   for (size_t k = 0; k < streams_.size(); ++k) {
     const Stream& s = streams_[k];
     StreamInfo i;
+    i.count_unit = "packets";
     i.name = s.name + " (id " + num(s.id) + ")";
     i.type = s.type;
     if (counts_known_) {

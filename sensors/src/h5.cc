@@ -1528,6 +1528,7 @@ struct H5EventReader::Impl {
     s.name = c.name;
     s.type = c.type.name + (unit.empty() ? "" : " " + unit);
     s.messages = static_cast<int64_t>(c.rows);
+    s.count_unit = "elements";
     s.selected = true;
     return s;
   }
@@ -1587,6 +1588,7 @@ std::vector<StreamInfo> H5EventReader::streams() const {
     o.name = m.t_offset_name;
     o.type = "scalar, " + std::to_string(m.t_offset_ns) + " ns";
     o.messages = 1;
+    o.count_unit = "elements";
     o.selected = true;
     s.push_back(o);
   }

@@ -80,7 +80,8 @@ DatasetFormat detect_dataset_format(const std::string& path);
 struct StreamInfo {
   std::string name;   // topic or stream name
   std::string type;   // message / stream type, e.g. "dvs_msgs/EventArray", "EVTS"
-  int64_t messages = 0;  // messages / packets in the file (-1 if unknown without a full pass)
+  int64_t messages = 0;  // messages / packets / elements in the file (-1 if unknown without a full pass)
+  std::string count_unit = "messages";  // what `messages` counts: "messages", "packets", "elements"
   bool selected = false;  // read by this reader
 };
 
