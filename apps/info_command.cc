@@ -114,8 +114,8 @@ void print_json(const DatasetSummary& s, std::ostream& out) {
   o << ", \"triggers\": " << s.triggers << ", \"streams\": [";
   for (size_t i = 0; i < s.streams.size(); ++i) {
     o << (i ? ", " : "") << "{\"name\": \"" << json_escape(s.streams[i].name) << "\", \"type\": \""
-      << json_escape(s.streams[i].type) << "\", \"count\": " << s.streams[i].messages << ", \"count_unit\": \"" << s.streams[i].count_unit << "\"
-      << ", \"selected\": " << (s.streams[i].selected ? "true" : "false") << "}";
+      << json_escape(s.streams[i].type) << "\", \"count\": " << s.streams[i].messages << ", \"count_unit\": \""
+      << s.streams[i].count_unit << "\", \"selected\": " << (s.streams[i].selected ? "true" : "false") << "}";
   }
   o << "]";
   o << ", \"ground_truth\": {\"count\": " << s.poses << ", \"t_first_s\": " << format_seconds(s.gt_t_first_ns)
