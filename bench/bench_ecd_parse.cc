@@ -73,14 +73,7 @@ void write_evio(benchmark::State& state) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  for (int i = 1; i + 1 < argc; ++i) {
-    if (std::strcmp(argv[i], "--events") == 0) {
-      g_events = std::atoll(argv[i + 1]);
-      for (int j = i; j + 2 < argc + 1; ++j) argv[j] = argv[j + 2];
-      argc -= 2;
-      break;
-    }
-  }
+  evio::bench::take_int_flag(&argc, argv, "--events", &g_events);
   const char* tmp = std::getenv("TMPDIR");
   const std::string dir = std::string(tmp != nullptr ? tmp : "/tmp") + "/evio_bench_ecd_" + std::to_string(g_events);
   g_path = dir + "/events.txt";

@@ -90,14 +90,7 @@ void read_all(benchmark::State& state, const Input& in) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  for (int i = 1; i + 1 < argc; ++i) {
-    if (std::strcmp(argv[i], "--events") == 0) {
-      g_events = std::atoll(argv[i + 1]);
-      for (int j = i; j + 2 < argc + 1; ++j) argv[j] = argv[j + 2];
-      argc -= 2;
-      break;
-    }
-  }
+  evio::bench::take_int_flag(&argc, argv, "--events", &g_events);
   evio::set_log_level(evio::LogLevel::kWarning);
   const char* tmp = std::getenv("TMPDIR");
   const fs::path dir = fs::path(tmp != nullptr ? tmp : "/tmp") / ("evio_bench_formats_" + std::to_string(g_events));

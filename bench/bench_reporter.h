@@ -2,6 +2,9 @@
 // items/s per benchmark family collected for the JSON lines each program prints at the end.
 #pragma once
 
+#include <cstdint>
+#include <cstdlib>
+#include <cstring>
 #include <map>
 #include <string>
 #include <vector>
@@ -22,5 +25,17 @@ class CollectingReporter : public benchmark::ConsoleReporter {
     }
   }
 };
+
+// Takes "NAME VALUE" out of argv (before benchmark::Initialize sees it) into *value.
+inline void take_int_flag(int* argc, char** argv, const char* name, int64_t* value) {
+  for (int i = 1; i + 1 < *argc; ++i) {
+    if (std::strcmp(argv[i], name) == 0) {
+      *value = std::atoll(argv[i + 1]);
+      for (int j = i; j + 2 <= *argc; ++j) argv[j] = argv[j + 2];
+      *argc -= 2;
+      return;
+    }
+  }
+}
 
 }  // namespace evio::bench

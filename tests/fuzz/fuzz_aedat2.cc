@@ -6,6 +6,7 @@
 #include "fuzz_support.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  evio_fuzz::silence_log();
   evio_fuzz::MemFile file(data, size);
   if (!file.ok()) return 0;
   try {

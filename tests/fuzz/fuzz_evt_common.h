@@ -15,15 +15,6 @@
 
 namespace evio_fuzz {
 
-// Readers log one line per file opened; keep libFuzzer's output readable and fast.
-inline void silence_log() {
-  static const bool quiet = [] {
-    evio::set_log_sink([](evio::LogLevel, const std::string&) {});
-    return true;
-  }();
-  (void)quiet;
-}
-
 inline void read_evt_file(const std::string& path, evio::DatasetFormat format, evio::BadLinePolicy policy) {
   evio::DatasetOptions opts;
   opts.format = format;

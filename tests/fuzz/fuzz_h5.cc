@@ -11,11 +11,7 @@
 #include "fuzz_support.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
-  static const bool quiet = [] {
-    evio::set_log_sink([](evio::LogLevel, const std::string&) {});
-    return true;
-  }();
-  (void)quiet;
+  evio_fuzz::silence_log();
   evio_fuzz::MemFile file(data, size);
   if (!file.ok()) return 0;
   for (const evio::BadLinePolicy policy : {evio::BadLinePolicy::kError, evio::BadLinePolicy::kWarnAndSkip}) {

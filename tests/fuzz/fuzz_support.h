@@ -6,10 +6,21 @@
 #include <cstdint>
 #include <string>
 
+#include "evio/calib/log.h"
+
 #include <sys/mman.h>
 #include <unistd.h>
 
 namespace evio_fuzz {
+
+// Readers log one line per file opened; drop the log to keep libFuzzer's output readable and fast.
+inline void silence_log() {
+  static const bool quiet = [] {
+    evio::set_log_sink([](evio::LogLevel, const std::string&) {});
+    return true;
+  }();
+  (void)quiet;
+}
 
 class MemFile {
  public:
