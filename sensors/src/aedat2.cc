@@ -55,13 +55,13 @@ class Aedat2Reader final : public DatasetReader {
       for (size_t i = 0; i < records; ++i, p += 8) {
         const uint32_t addr = be32(p);
         const int64_t t_ns = unwrap(be32(p + 4)) * 1000;
-        const uint64_t at = offset_ - (end_ - pos_) + i * 8;
+        const auto at = [&] { return offset_ - (end_ - pos_) + i * 8; };  // byte offset, for errors only
         if (addr & 0xffff0000u) {
-          bad("malformed", at, "address 0x" + hex(addr) + " has bits above 15 set (not a DVS128 address)");
+          bad("malformed", at(), "address 0x" + hex(addr) + " has bits above 15 set (not a DVS128 address)");
           continue;
         }
         if (t_ns < last_t_ns_) {
-          bad("time order", at, "timestamp " + format_seconds(t_ns) + " s is earlier than the previous " +
+          bad("time order", at(), "timestamp " + format_seconds(t_ns) + " s is earlier than the previous " +
                                     format_seconds(last_t_ns_) + " s");
           continue;
         }

@@ -1182,20 +1182,21 @@ std::vector<ImuSample> Aedat4Reader::read_imu() {
       const int64_t t_us = fb.scalar<int64_t>(t, 0, 0);
       float f[6];
       for (int k = 0; k < 6; ++k) f[k] = fb.scalar<float>(t, 2 + k, 0.0f);
-      const std::string at = "IMU sample " + num(j) + " of the packet at byte offset " + num(ref.offset);
+      // Where, for error messages only (built on the bad path, not per sample).
+      const auto at = [&] { return "IMU sample " + num(j) + " of the packet at byte offset " + num(ref.offset); };
       ImuSample s;
       if (!us_to_ns(t_us, &s.t_ns)) {
-        bad.bad(at + ": timestamp " + num(t_us) + " us does not fit in int64 nanoseconds", form);
+        bad.bad(at() + ": timestamp " + num(t_us) + " us does not fit in int64 nanoseconds", form);
         continue;
       }
       bool finite = true;
       for (float x : f) finite = finite && std::isfinite(x);
       if (!finite) {
-        bad.bad(at + ": NaN or infinite accelerometer/gyroscope value", form);
+        bad.bad(at() + ": NaN or infinite accelerometer/gyroscope value", form);
         continue;
       }
       if (s.t_ns <= last) {
-        bad.bad(at + ": timestamp " + format_seconds(s.t_ns) + " s is not after the previous sample's " +
+        bad.bad(at() + ": timestamp " + format_seconds(s.t_ns) + " s is not after the previous sample's " +
                     format_seconds(last) + " s",
                 form);
         continue;
@@ -1316,14 +1317,15 @@ std::vector<Trigger> Aedat4Reader::read_triggers() {
       const FbTable t = fb.vector_table(v, j, "Trigger table");
       const int64_t t_us = fb.scalar<int64_t>(t, 0, 0);
       const int8_t type = fb.scalar<int8_t>(t, 1, 0);
-      const std::string at = "trigger " + num(j) + " of the packet at byte offset " + num(ref.offset);
+      // Where, for error messages only (built on the bad path, not per trigger).
+      const auto at = [&] { return "trigger " + num(j) + " of the packet at byte offset " + num(ref.offset); };
       Trigger tr;
       if (!us_to_ns(t_us, &tr.t_ns)) {
-        bad.bad(at + ": timestamp " + num(t_us) + " us does not fit in int64 nanoseconds", form);
+        bad.bad(at() + ": timestamp " + num(t_us) + " us does not fit in int64 nanoseconds", form);
         continue;
       }
       if (tr.t_ns < last) {
-        bad.bad(at + ": timestamp " + format_seconds(tr.t_ns) + " s is earlier than the previous trigger's " +
+        bad.bad(at() + ": timestamp " + format_seconds(tr.t_ns) + " s is earlier than the previous trigger's " +
                     format_seconds(last) + " s",
                 form);
         continue;
