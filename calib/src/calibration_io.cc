@@ -387,6 +387,64 @@ ImuNoise load_kalibr_imu(const std::string& path) {
   return noise;
 }
 
+void write_kalibr_camchain(const std::string& path, const std::vector<CameraCalibration>& cameras,
+                           const ImuNoise* imu) {
+  if (cameras.empty()) throw std::invalid_argument("write_kalibr_camchain: no cameras");
+  // Shortest of %.15g, %.16g, %.17g that reads back to the same double (readable and exact).
+  auto num = [](double v) {
+    char buf[40];
+    for (int precision = 15; precision <= 17; ++precision) {
+      std::snprintf(buf, sizeof(buf), "%.*g", precision, v);
+      if (std::strtod(buf, nullptr) == v) break;
+    }
+    return std::string(buf);
+  };
+  auto list = [&](const std::vector<double>& v) {
+    std::string s = "[";
+    for (size_t i = 0; i < v.size(); ++i) s += (i ? ", " : "") + num(v[i]);
+    return s + "]";
+  };
+  std::ostringstream out;
+  out << "# Kalibr camchain (cam0, ...) and IMU noise (imu0), written by evio. Conventions: T_cam_imu maps\n"
+         "# IMU-frame points into the camera frame (p_c = T_cam_imu * p_imu); t_imu = t_cam + timeshift_cam_imu (s).\n";
+  for (size_t i = 0; i < cameras.size(); ++i) {
+    const CameraIntrinsics& intr = cameras[i].camera.intrinsics();
+    out << "cam" << i << ":\n";
+    out << "  camera_model: pinhole\n";
+    out << "  intrinsics: " << list({intr.fx, intr.fy, intr.cx, intr.cy}) << "\n";
+    out << "  distortion_model: " << distortion_model_name(intr.model) << "\n";
+    out << "  distortion_coeffs: " << list(intr.distortion) << "\n";
+    out << "  resolution: [" << intr.width << ", " << intr.height << "]\n";
+    if (cameras[i].has_T_c_b) {
+      const Mat3 R = cameras[i].T_c_b.rotation.toRotationMatrix();
+      const Vec3& t = cameras[i].T_c_b.translation;
+      out << "  T_cam_imu:\n";
+      for (int r = 0; r < 3; ++r) out << "  - " << list({R(r, 0), R(r, 1), R(r, 2), t(r)}) << "\n";
+      out << "  - [0.0, 0.0, 0.0, 1.0]\n";
+    }
+    out << "  timeshift_cam_imu: " << format_ns_as_seconds(cameras[i].time_shift_ns) << "\n";
+    out << "  cam_overlaps: []\n";
+    out << "  rostopic: /cam" << i << "/events\n";
+  }
+  if (imu != nullptr) {
+    out << "imu0:\n";
+    out << "  accelerometer_noise_density: " << num(imu->accelerometer_noise_density) << "  # m/s^2/sqrt(Hz)\n";
+    out << "  accelerometer_random_walk: " << num(imu->accelerometer_random_walk) << "  # m/s^3/sqrt(Hz)\n";
+    out << "  gyroscope_noise_density: " << num(imu->gyroscope_noise_density) << "  # rad/s/sqrt(Hz)\n";
+    out << "  gyroscope_random_walk: " << num(imu->gyroscope_random_walk) << "  # rad/s^2/sqrt(Hz)\n";
+    out << "  update_rate: " << num(imu->update_rate_hz) << "  # Hz\n";
+    out << "  T_i_b:\n";
+    out << "  - [1.0, 0.0, 0.0, 0.0]\n  - [0.0, 1.0, 0.0, 0.0]\n  - [0.0, 0.0, 1.0, 0.0]\n  - [0.0, 0.0, 0.0, 1.0]\n";
+    out << "  time_offset: 0.0\n";
+    out << "  rostopic: /imu0\n";
+  }
+  const std::string text = out.str();
+  std::FILE* f = std::fopen(path.c_str(), "wb");
+  if (f == nullptr) throw InputError(path, 0, "cannot open file for writing", "a writable path");
+  const bool write_failed = std::fwrite(text.data(), 1, text.size(), f) != text.size();
+  if (std::fclose(f) != 0 || write_failed) throw InputError(path, 0, "write failed", "a writable path");
+}
+
 std::string describe(const CameraCalibration& calib) {
   const CameraIntrinsics& intr = calib.camera.intrinsics();
   std::ostringstream s;

@@ -50,6 +50,18 @@ void write_ecd_calib(const std::string& path, const PinholeCamera& cam);
 // non-rigid T_cam_imu (rotation not orthonormal to 1e-6, or bottom row not [0 0 0 1]).
 std::vector<CameraCalibration> load_kalibr_camchain(const std::string& path);
 
+// Writes a Kalibr-style YAML that both load_kalibr_camchain and load_kalibr_imu read back: the
+// cameras as cam0, cam1, ... (camera_model pinhole, intrinsics, distortion_model,
+// distortion_coeffs, resolution, T_cam_imu when has_T_c_b, timeshift_cam_imu in s, rostopic,
+// cam_overlaps) and, when `imu` is given, imu0 with the Kalibr noise keys (accelerometer_noise_density,
+// accelerometer_random_walk, gyroscope_noise_density, gyroscope_random_walk, update_rate), an
+// identity T_i_b and rostopic. Doubles are written in the shortest form that reads back exactly
+// (at most 17 digits) and the time shift as exact decimal seconds, so intrinsics, distortion,
+// noise and the shift read back bit for bit and T_cam_imu to the last bit of its rotation matrix. Throws std::invalid_argument for an empty
+// camera list and evio::InputError when the file cannot be written.
+void write_kalibr_camchain(const std::string& path, const std::vector<CameraCalibration>& cameras,
+                           const ImuNoise* imu = nullptr);
+
 // Kalibr IMU YAML: the keys accelerometer_noise_density, accelerometer_random_walk,
 // gyroscope_noise_density, gyroscope_random_walk and update_rate, under imu0 or at top level.
 ImuNoise load_kalibr_imu(const std::string& path);
