@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <random>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -51,7 +52,8 @@ class EventGenerator {
 
   int width() const { return width_; }
   int height() const { return height_; }
-  // Per-pixel thresholds (CV_64F), fixed at construction from the seed.
+  // Per-pixel thresholds (CV_64F holding float-representable values, >= threshold_min), fixed at
+  // construction from the seed.
   const cv::Mat& threshold_pos() const { return c_pos_; }
   const cv::Mat& threshold_neg() const { return c_neg_; }
   // Current per-pixel log intensity (CV_64F) and reference level (CV_64F).
@@ -63,14 +65,44 @@ class EventGenerator {
   cv::Mat to_log(const cv::Mat& intensity) const;
 
  private:
+  // One emitted event before sorting: time, sort key, pixel index, 0 = ON / 1 = OFF, noise flag.
+  struct Pending {
+    int64_t t_ns;
+    uint64_t key;
+    uint32_t pixel;
+    uint8_t off;
+    uint8_t noise;
+  };
+  void compute_log(const cv::Mat& intensity, cv::Mat* out, int y0, int y1) const;  // rows [y0, y1)
+  void check_image(const cv::Mat& intensity, const char* what) const;
+  void process_pixel(int i, int64_t t0, int64_t t1, double leak_per_cp);
+  void sort_pending(int64_t dt);
+  void emit(int64_t t, int64_t t0, int64_t t1, int i, bool on, bool noise);
+  int64_t draw_next_noise(int i, int64_t t_from);
+  double uniform();  // [0, 1), 53 bits
+  double normal();   // N(0, 1), Box-Muller
+
   int width_, height_;
   EventSimOptions o_;
   cv::Mat c_pos_, c_neg_, log_, ref_;
-  cv::Mat last_event_ns_;  // CV_64F? implementation may change private members
+  cv::Mat log_next_;                      // scratch: log intensity of the sample being stepped to
+  std::vector<int64_t> refractory_end_;   // per pixel: end of the current reset (refractory), ns
+  std::vector<int64_t> next_noise_;       // per pixel: next shot/hot noise event time, ns
+  std::vector<float> cpf_, cnf_;          // the thresholds (float values) for the fast path
+  std::vector<uint8_t> hot_;              // per pixel: 1 for hot pixels
+  std::vector<uint8_t> visit_;            // scratch: pixels needing the general path this step
+  // Min-heap of (next noise time, pixel); entries whose time differs from next_noise_ are stale.
+  std::vector<std::pair<int64_t, uint32_t>> noise_heap_;
+  std::vector<uint32_t> in_reset_, in_reset_next_;  // pixels whose reset outlasts the last step
+  std::vector<Pending> pending_;          // scratch: this step's events before sorting
+  std::vector<Pending> sort_scratch_;     // scratch for the radix sort
+  bool any_noise_ = false;                // some pixel has a noise rate > 0
   int64_t t_ns_ = 0;
   bool initialised_ = false;
   double last_max_change_ = 0;
-  std::mt19937_64 rng_;
+  std::mt19937_64 rng_;                   // noise, leak phase and jitter; reseeded by reset()
+  bool has_spare_normal_ = false;
+  double spare_normal_ = 0;
 };
 
 }  // namespace evio::sim
