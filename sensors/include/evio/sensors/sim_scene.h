@@ -43,15 +43,41 @@ class PixelRays {
   const Eigen::Vector3d& centre(int x, int y) const { return centre_[index(x, y)]; }
   // k in [0, samples_per_pixel()).
   const Eigen::Vector3d& sub_ray(int x, int y, int k) const { return sub_[index(x, y) * samples_per_pixel() + k]; }
-  // Angle subtended by one sub-sample spacing at this pixel, rad.
+  // Angle subtended by one sub-sample spacing at this pixel, rad: the square root of the solid
+  // angle of a (1/supersample px)^2 cell at the pixel centre, from the projection Jacobian (an
+  // isotropic size; distortion and off-axis foreshortening included).
   double sample_angle_rad(int x, int y) const { return angle_[index(x, y)]; }
   size_t index(int x, int y) const { return static_cast<size_t>(y) * camera_.width() + x; }
+  // Offset of sub-sample k = ky * supersample + kx from the pixel centre, px:
+  // ((kx + 0.5) / supersample - 0.5, (ky + 0.5) / supersample - 0.5).
+  Eigen::Vector2d sub_offset(int k) const;
+  // The sub-sample at the pixel centre (odd supersample), else -1.
+  int centre_sample() const { return supersample_ % 2 == 1 ? (supersample_ / 2) * (supersample_ + 1) : -1; }
+
+  // Flat float copies for the renderers' inner loops: sub-rays at index(x, y) *
+  // samples_per_pixel() + k, centres and angles at index(x, y).
+  const Eigen::Vector3f* sub_rays_f() const { return sub_f_.data(); }
+  // The sub-rays' x, y, z components as separate arrays (same indexing), each padded with 4
+  // trailing (0, 0, 1) rays so loops may read groups of 4 past the last sample.
+  const float* sub_rays_x() const { return sub_x_.data(); }
+  const float* sub_rays_y() const { return sub_y_.data(); }
+  const float* sub_rays_z() const { return sub_z_.data(); }
+  // log2(sample_angle_rad), per pixel.
+  const float* log2_sample_angles_f() const { return log2_angle_f_.data(); }
+  const Eigen::Vector3f* centres_f() const { return centre_f_.data(); }
+  const float* sample_angles_f() const { return angle_f_.data(); }
+  // d(pixel)/d(p_c) of PinholeCamera::project at p_c = the centre bearing (so at range r the
+  // Jacobian is this / r); NaN where the centre bearing does not project.
+  const Eigen::Matrix<float, 2, 3>* centre_jacobians_f() const { return jac_f_.data(); }
 
  private:
   calib::PinholeCamera camera_;
   int supersample_ = 1;
   std::vector<Eigen::Vector3d> centre_, sub_;
   std::vector<double> angle_;
+  std::vector<Eigen::Vector3f> centre_f_, sub_f_;
+  std::vector<float> angle_f_, log2_angle_f_, sub_x_, sub_y_, sub_z_;
+  std::vector<Eigen::Matrix<float, 2, 3>> jac_f_;
 };
 
 struct RenderedView {
@@ -80,7 +106,9 @@ class Scene {
 // (a) Equirectangular panorama at infinity in the world frame. A world direction d = (dx, dy, dz)
 // has longitude atan2(dy, dx) in (-pi, pi] and latitude asin(dz) in [-pi/2, pi/2]; texel
 // coordinates u = (lon + pi) / (2 pi) * W, v = (pi/2 - lat) / pi * H (row 0 is up, +z).
-// Depth is +inf, flow from rotation only, label 0.
+// Depth is +inf, flow from rotation only, label 0. Mip footprint of a sample of angle a: a * H / pi
+// texels vertically and a * W / (2 pi cos(lat)) horizontally; the isotropic footprint used is
+// their geometric mean (same area; cos(lat) floored at 1e-3 near the poles).
 class PanoramaScene final : public Scene {
  public:
   // The texture should be about 2:1; u wraps (repeat), v clamps.
@@ -109,7 +137,10 @@ struct TexturedPlane {
 };
 
 // (b) Nearest-hit ray casting against the planes; label = plane index + 1, 0 and
-// background_intensity where no plane is hit (depth +inf, flow from rotation only).
+// background_intensity where no plane is hit (depth +inf, flow from rotation only). Mip
+// footprint of a sample of angle a hitting at range t with incidence cosine c: t a texels-per-metre
+// across, stretched by 1 / c along the tilt; the isotropic footprint is the geometric mean
+// t a sqrt(texels_per_m_u texels_per_m_v / c) (same area; c floored at 1e-3).
 class PlanarScene final : public Scene {
  public:
   // Throws std::invalid_argument for non-orthonormal axes, non-positive sizes or a missing texture.
@@ -162,7 +193,7 @@ class SpriteScene final : public Scene {
   void render(const CameraState& camera, const PixelRays& rays, const RenderRequest& request,
               RenderedView* out) const override;
   std::string describe() const override;
-  bool is_static() const override { return sprites_.empty(); }
+  bool is_static() const override { return sprites_.empty() && background_->is_static(); }
 
  private:
   std::shared_ptr<const Scene> background_;
