@@ -6,7 +6,8 @@
 //    are read as 0, +inf and values above FLT_MAX as FLT_MAX). Computed once per pixel per step in
 //    double (OpenCV's vectorised cv::log, |error| < 2e-15).
 //  * Thresholds C+_i, C-_i drawn once at construction from N(mean, threshold_mismatch_std),
-//    clamped below at threshold_min (own Box-Muller on std::mt19937_64 seeded from `seed`).
+//    clamped below at threshold_min and rounded to float values (own Box-Muller on
+//    std::mt19937_64 seeded from `seed`).
 //  * Between two samples L0 (t_prev) and L1 (t_ns) L is linear in time. The reference r_i moves
 //    by exactly one threshold per event: every time L - r reaches +C+ (ON) or -C- (OFF) one event
 //    is emitted at the linearly interpolated crossing time, t_prev + round(f * (t_ns - t_prev)),
@@ -48,10 +49,13 @@
 //    from a stream reseeded by every reset(), drawn in pixel order, so a given seed, first image
 //    and step sequence always give the same events.
 //
-// Speed: the log is one vectorised pass; the per-pixel loop has a fast path (no pending noise or
-// reset, and the drift-compensated end level within the two thresholds: nothing to emit) that
-// only updates the reference when there is a leak; allocations happen only when the output or the
-// internal event scratch vector has to grow.
+// Speed: pass 1 runs over chunks of rows that stay in cache: vectorised convertTo + log (OpenCV),
+// then a branch-free band test per pixel (no pending noise or reset, and the drift-compensated end
+// level inside (-C-, C+): nothing to emit, only the leak drift is applied), with thresholds read
+// as floats. Pending noise comes from a min-heap of next noise times, pixels in reset from a list,
+// so pass 2 visits only the flagged pixels (in pixel order, keeping the random draws
+// deterministic). The step's events are radix-sorted on a 64-bit (time offset, pixel, polarity)
+// key. Allocations happen only when the output or an internal scratch vector has to grow.
 #include "evio/sensors/sim_events.h"
 
 #include <algorithm>
@@ -181,6 +185,12 @@ EventGenerator::EventGenerator(int width, int height, const EventSimOptions& opt
     }
   }
   any_noise_ = o_.shot_noise_rate_hz > 0 || (n_hot > 0 && o_.hot_pixel_rate_hz > 0);
+  {
+    cv::Mat ends = (cv::Mat_<double>(1, 2) << o_.log_eps, static_cast<double>(FLT_MAX) + o_.log_eps);
+    cv::log(ends, ends);  // the same function as the per-pixel logs
+    log_lo_ = ends.at<double>(0, 0);
+    log_hi_ = ends.at<double>(0, 1);
+  }
   log_.create(height, width, CV_64F);
   log_next_.create(height, width, CV_64F);
   ref_.create(height, width, CV_64F);
@@ -218,33 +228,27 @@ void EventGenerator::check_image(const cv::Mat& intensity, const char* what) con
   }
 }
 
-void EventGenerator::compute_log(const cv::Mat& intensity, cv::Mat* out, int y0, int y1) const {
-  const double eps = o_.log_eps;
-  const double top = FLT_MAX;
+// L = log(max(0, min(I, FLT_MAX)) + eps) for rows [y0, y1), computed as
+// clamp(log(max(I + eps, eps)), log(eps), log(FLT_MAX + eps)) (log is monotone; NaN goes to the
+// lower end),
+// which lets OpenCV's vectorised convertTo and log do the work. With clamp = false the clamp is
+// left to the caller (step() fuses it into its band test).
+void EventGenerator::compute_log(const cv::Mat& intensity, cv::Mat* out, int y0, int y1, bool clamp) const {
+  cv::Mat rows = out->rowRange(y0, y1);
+  intensity.rowRange(y0, y1).convertTo(rows, CV_64F, 1.0, o_.log_eps);
+  cv::max(rows, o_.log_eps, rows);  // I < 0 reads as 0 (cv::log would take |I + eps|)
+  cv::log(rows, rows);
+  if (!clamp) return;
   for (int y = y0; y < y1; ++y) {
     double* o = out->ptr<double>(y);
-    if (intensity.depth() == CV_32F) {
-      const float* in = intensity.ptr<float>(y);
-      for (int x = 0; x < width_; ++x) {
-        const double v = in[x];
-        o[x] = (v > 0 ? std::min(v, top) : 0.0) + eps;  // NaN and negatives -> 0
-      }
-    } else {
-      const double* in = intensity.ptr<double>(y);
-      for (int x = 0; x < width_; ++x) {
-        const double v = in[x];
-        o[x] = (v > 0 ? std::min(v, top) : 0.0) + eps;
-      }
-    }
+    for (int x = 0; x < width_; ++x) o[x] = std::min(std::max(log_lo_, o[x]), log_hi_);
   }
-  cv::Mat rows = out->rowRange(y0, y1);
-  cv::log(rows, rows);
 }
 
 cv::Mat EventGenerator::to_log(const cv::Mat& intensity) const {
   check_image(intensity, "to_log");
   cv::Mat out(height_, width_, CV_64F);
-  compute_log(intensity, &out, 0, height_);
+  compute_log(intensity, &out, 0, height_, true);
   return out;
 }
 
@@ -260,7 +264,7 @@ int64_t EventGenerator::draw_next_noise(int i, int64_t t_from) {
 
 void EventGenerator::reset(const cv::Mat& intensity, int64_t t_ns) {
   check_image(intensity, "reset");
-  compute_log(intensity, &log_, 0, height_);
+  compute_log(intensity, &log_, 0, height_, true);
   rng_.seed(stream_seed(o_.seed, kNoiseStream));
   has_spare_normal_ = false;
   const int n = width_ * height_;
@@ -437,7 +441,8 @@ void EventGenerator::step(const cv::Mat& intensity, int64_t t_ns, std::vector<Ev
   const int n = width_ * height_;
   const double leak_per_cp = o_.leak_rate_hz * (static_cast<double>(t1 - t0) * 1e-9);
   const bool leak = leak_per_cp > 0;
-  const double* L1 = log_next_.ptr<double>();
+  double* L1 = log_next_.ptr<double>();
+  const double* L0 = log_.ptr<double>();
   const float* cp = cpf_.data();
   const float* cn = cnf_.data();
   double* ref = ref_.ptr<double>();
@@ -450,23 +455,33 @@ void EventGenerator::step(const cv::Mat& intensity, int64_t t_ns, std::vector<Ev
   double max_change = 0;
   for (int y0 = 0; y0 < height_; y0 += rows_per_chunk) {
     const int y1 = std::min(height_, y0 + rows_per_chunk);
-    compute_log(intensity, &log_next_, y0, y1);
-    max_change = std::max(max_change, cv::norm(log_next_.rowRange(y0, y1), log_.rowRange(y0, y1), cv::NORM_INF));
+    compute_log(intensity, &log_next_, y0, y1, false);
     const int i1 = y1 * width_;
+    const double lo = log_lo_, hi = log_hi_;
+    double mc0 = 0, mc1 = 0;  // largest |L1 - L0| (two chains, even and odd pixels)
     if (leak) {
       for (int i = y0 * width_; i < i1; ++i) {
-        const double D = cp[i] * leak_per_cp;
+        L1[i] = std::min(std::max(lo, L1[i]), hi);
+        const double change = std::abs(L1[i] - L0[i]);
+        if (i & 1) mc1 = std::max(mc1, change); else mc0 = std::max(mc0, change);
+        const double c_pos = cp[i], c_neg = cn[i];
+        const double D = c_pos * leak_per_cp;
         const double d_end = L1[i] + D - ref[i];
-        const bool inside = d_end < cp[i] && d_end > -cn[i];
-        visit[i] = static_cast<uint8_t>(!inside);
-        ref[i] -= inside ? D : 0.0;
+        const bool outside = (d_end >= c_pos) | (d_end <= -c_neg);
+        visit[i] = static_cast<uint8_t>(outside);
+        ref[i] -= outside ? 0.0 : D;
       }
     } else {
       for (int i = y0 * width_; i < i1; ++i) {
+        L1[i] = std::min(std::max(lo, L1[i]), hi);
+        const double change = std::abs(L1[i] - L0[i]);
+        if (i & 1) mc1 = std::max(mc1, change); else mc0 = std::max(mc0, change);
         const double d_end = L1[i] - ref[i];
-        visit[i] = static_cast<uint8_t>(!(d_end < cp[i] && d_end > -cn[i]));
+        const double c_pos = cp[i], c_neg = cn[i];
+        visit[i] = static_cast<uint8_t>((d_end >= c_pos) | (d_end <= -c_neg));
       }
     }
+    max_change = std::max(max_change, std::max(mc0, mc1));
   }
   // Pixels with a noise event due in (t0, t1] or still in reset also take the general path.
   while (!noise_heap_.empty() && noise_heap_.front().first <= t1) {

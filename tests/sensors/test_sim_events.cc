@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cfloat>
 #include <cmath>
 #include <cstdint>
 #include <map>
@@ -142,6 +143,22 @@ TEST(SimEvents, ToLogMatchesStdLog) {
   ASSERT_EQ(l.type(), CV_64F);
   for (int x = 0; x < 4; ++x) EXPECT_NEAR(l.at<double>(0, x), log_of(img.at<float>(0, x)), 1e-14);
   EXPECT_NEAR(l.at<double>(0, 4), std::log(1e-3), 1e-14);  // negative intensity reads as 0
+  // NaN and values in (-eps, 0) read as 0; +inf and values beyond FLT_MAX as FLT_MAX.
+  cv::Mat odd = (cv::Mat_<double>(1, 5) << std::nan(""), -5e-4, 1e300, HUGE_VAL, -HUGE_VAL);
+  const cv::Mat lo = g.to_log(odd);
+  const double l_max = std::log(static_cast<double>(FLT_MAX) + 1e-3);
+  EXPECT_NEAR(lo.at<double>(0, 0), std::log(1e-3), 1e-14);
+  EXPECT_NEAR(lo.at<double>(0, 1), std::log(1e-3), 1e-14);
+  EXPECT_NEAR(lo.at<double>(0, 2), l_max, 1e-12);
+  EXPECT_NEAR(lo.at<double>(0, 3), l_max, 1e-12);
+  EXPECT_NEAR(lo.at<double>(0, 4), std::log(1e-3), 1e-14);
+  // step() applies the same mapping: an image of such values gives finite levels and no crash.
+  g.reset(cv::Mat(1, 5, CV_64F, cv::Scalar(0.5)), 0);
+  std::vector<Event> ev;
+  g.step(odd, 1'000'000, &ev);
+  for (int x = 0; x < 5; ++x) EXPECT_NEAR(g.log_intensity().at<double>(0, x), lo.at<double>(0, x), 1e-12);
+  EXPECT_FALSE(ev.empty());
+  expect_sorted(ev, 5);
 }
 
 // Pixels whose log intensity is piecewise linear in time: events at the analytic crossing
