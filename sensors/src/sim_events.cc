@@ -112,6 +112,8 @@ double to_float_at_least(double v, double lo) {
   return f;
 }
 
+int64_t saturating_add(int64_t t, int64_t d) { return t > kNoNoise - d ? kNoNoise : t + d; }  // d >= 0
+
 bool finite_nonneg(double v) { return std::isfinite(v) && v >= 0; }
 
 }  // namespace
@@ -258,7 +260,8 @@ int64_t EventGenerator::draw_next_noise(int i, int64_t t_from) {
   const double u = 1.0 - uniform();  // (0, 1]
   const double wait_ns = -std::log(u) * (1e9 / rate);
   // Saturate instead of overflowing for tiny rates (a wait beyond the int64 range never comes).
-  if (!(wait_ns < static_cast<double>(kNoNoise - t_from) - 1.0)) return kNoNoise;
+  const double room = t_from >= 0 ? static_cast<double>(kNoNoise - t_from) : 9e18;
+  if (!(wait_ns < room - 4096.0)) return kNoNoise;
   return t_from + std::max<int64_t>(1, std::llround(wait_ns));
 }
 
@@ -352,7 +355,7 @@ void EventGenerator::process_pixel(int i, int64_t t0, int64_t t1, double leak_pe
       emit(t, t0, t1, i, on, on && dL <= 0);
       ref = target;
       if (R > 0) {
-        reset_end = t + R;
+        reset_end = saturating_add(t, R);
         in_reset = true;
         reset_now = true;
         break;
@@ -370,7 +373,7 @@ void EventGenerator::process_pixel(int i, int64_t t0, int64_t t1, double leak_pe
     t_min = tn;
     next_noise_[i] = draw_next_noise(i, tn);
     if (R > 0) {
-      reset_end = tn + R;
+      reset_end = saturating_add(tn, R);
       in_reset = true;
     }
   }
