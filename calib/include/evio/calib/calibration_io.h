@@ -57,8 +57,9 @@ std::vector<CameraCalibration> load_kalibr_camchain(const std::string& path);
 // accelerometer_random_walk, gyroscope_noise_density, gyroscope_random_walk, update_rate), an
 // identity T_i_b and rostopic. Doubles are written in the shortest form that reads back exactly
 // (at most 17 digits) and the time shift as exact decimal seconds, so intrinsics, distortion,
-// noise and the shift read back bit for bit and T_cam_imu to the last bit of its rotation matrix. Throws std::invalid_argument for an empty
-// camera list and evio::InputError when the file cannot be written.
+// noise and the shift read back bit for bit and T_cam_imu to the last bit of its rotation matrix.
+// Throws std::invalid_argument for an empty camera list and evio::InputError when the file
+// cannot be written.
 void write_kalibr_camchain(const std::string& path, const std::vector<CameraCalibration>& cameras,
                            const ImuNoise* imu = nullptr);
 
