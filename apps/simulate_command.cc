@@ -116,7 +116,11 @@ cv::Mat display_image(const cv::Mat& linear) {
 class FolderSink final : public sim::SimulationSink {
  public:
   FolderSink(const SimulationConfig& c, const fs::path& dir, int64_t bin_ns)
-      : c_(c), dir_(dir), events_((dir / "events.txt").string(), PolarityConvention::kZeroOne), bin_ns_(bin_ns) {
+      : c_(c),
+        dir_(dir),
+        events_((dir / "events.txt").string(), PolarityConvention::kZeroOne),
+        bin_ns_(bin_ns),
+        bins_(std::max<int64_t>(1, (c.simulator.t_end_ns - c.simulator.t_begin_ns + bin_ns - 1) / bin_ns), 0) {
     if (c.write_h5) {
       H5WriteOptions o;
       o.sensor = SensorSize{c.camera.camera.width(), c.camera.camera.height()};
@@ -151,11 +155,10 @@ class FolderSink final : public sim::SimulationSink {
     }
     for (const Event& e : events) {
       e.polarity > 0 ? ++on_ : ++off_;
-      const int64_t bin = (e.t_ns - c_.simulator.t_begin_ns + c_.simulator.time_shift_ns) / bin_ns_;
-      if (bin >= 0) {
-        if (static_cast<size_t>(bin) >= bins_.size()) bins_.resize(bin + 1, 0);
-        ++bins_[bin];
-      }
+      // Bins over the body-clock span; an event at exactly t_end counts in the last bin.
+      const int64_t bin = std::min<int64_t>((e.t_ns - c_.simulator.t_begin_ns + c_.simulator.time_shift_ns) / bin_ns_,
+                                            static_cast<int64_t>(bins_.size()) - 1);
+      if (bin >= 0) ++bins_[bin];
     }
   }
 
