@@ -1662,7 +1662,11 @@ struct H5EventWriter::Impl {
     const hsize_t dims[1] = {0}, maxdims[1] = {H5S_UNLIMITED}, cdims[1] = {chunk};
     Hid space(H5Screate_simple(1, dims, maxdims));
     Hid dcpl(H5Pcreate(H5P_DATASET_CREATE));
-    if (!space.valid() || !dcpl.valid() || H5Pset_chunk(dcpl.get(), 1, cdims) < 0) fail_h5(std::string("cannot set up dataset ") + name);
+    // No object modification times: the same events give a byte-identical file.
+    if (!space.valid() || !dcpl.valid() || H5Pset_chunk(dcpl.get(), 1, cdims) < 0 ||
+        H5Pset_obj_track_times(dcpl.get(), 0) < 0) {
+      fail_h5(std::string("cannot set up dataset ") + name);
+    }
     if (opt.compression == Options::Compression::kGzip) {
       if (H5Pset_shuffle(dcpl.get()) < 0 || H5Pset_deflate(dcpl.get(), static_cast<unsigned>(opt.gzip_level)) < 0) {
         fail_h5(std::string("cannot set gzip compression on ") + name);
@@ -1702,6 +1706,12 @@ struct H5EventWriter::Impl {
     file = Hid(H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT));
     if (!file.valid()) fail_h5("cannot create the HDF5 file");
     per_ms = opt.time_unit == TimeUnit::kMicroseconds ? 1000 : 1000000;
+    {
+      Hid gcpl(H5Pcreate(H5P_GROUP_CREATE));
+      if (!gcpl.valid() || H5Pset_obj_track_times(gcpl.get(), 0) < 0) fail_h5("cannot set up group events");
+      Hid group(H5Gcreate2(file.get(), "events", H5P_DEFAULT, gcpl.get(), H5P_DEFAULT));
+      if (!group.valid()) fail_h5("cannot create group events");
+    }
     const hsize_t chunk = static_cast<hsize_t>(opt.chunk_events);
     dx = make_dataset("events/x", H5T_STD_U16LE, chunk);
     dy = make_dataset("events/y", H5T_STD_U16LE, chunk);
@@ -1813,7 +1823,9 @@ struct H5EventWriter::Impl {
     try {
       write_string_attr(dt.get(), "unit", unit);
       Hid space(H5Screate(H5S_SCALAR));
-      Hid ds(H5Dcreate2(file.get(), "t_offset", H5T_STD_I64LE, space.get(), H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT));
+      Hid dcpl(H5Pcreate(H5P_DATASET_CREATE));
+      if (!dcpl.valid() || H5Pset_obj_track_times(dcpl.get(), 0) < 0) throw std::runtime_error(h5_error_text());
+      Hid ds(H5Dcreate2(file.get(), "t_offset", H5T_STD_I64LE, space.get(), H5P_DEFAULT, dcpl.get(), H5P_DEFAULT));
       if (!ds.valid() || H5Dwrite(ds.get(), H5T_NATIVE_INT64, H5S_ALL, H5S_ALL, H5P_DEFAULT, &t_offset) < 0) {
         throw std::runtime_error(h5_error_text());
       }
