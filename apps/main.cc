@@ -149,6 +149,10 @@ int main(int argc, char** argv) {
                       "index (e.g. --set camera.scale=0.25 --set events.contrast_threshold_pos=0.3); repeatable")
       ->expected(1)
       ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+  sim_cmd->add_option("--threads", simulate.threads,
+                      "Render threads (the image is split in row bands); the output is identical for any count")
+      ->check(CLI::Range(1, 64))
+      ->capture_default_str();
 
   try {
     app.parse(argc, argv);

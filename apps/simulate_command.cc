@@ -299,7 +299,8 @@ void write_npy_float32(const std::string& path, const cv::Mat& image) {
 
 int run_simulate(const SimulateArgs& args, std::ostream& out) {
   const auto wall_start = std::chrono::steady_clock::now();
-  const SimulationConfig c = load_simulation_config(args.scene, args.overrides);
+  SimulationConfig c = load_simulation_config(args.scene, args.overrides);
+  c.simulator.threads = args.threads;
   const fs::path dir(args.out);
   std::error_code ec;
   fs::create_directories(dir, ec);

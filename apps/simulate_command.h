@@ -20,6 +20,7 @@ struct SimulateArgs {
   std::string out;               // output folder (created)
   SimulateOverrides overrides;   // --seed, --duration, --set
   bool progress = true;          // progress lines on stderr (fraction, events, ETA)
+  int threads = 1;               // render threads, 1..64 (outputs do not depend on it)
 };
 
 // Returns the exit code (0); prints a short summary to out. Throws evio::InputError on bad input

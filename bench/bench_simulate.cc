@@ -3,7 +3,9 @@
 // events per second of wall time and the real-time factor (simulated s / wall s, > 1 = faster
 // than real time) on one core, with the share of rendering and event generation.
 //
-//   bench_simulate [--config datasets/poster_6dof_mocap.yaml] [--duration S] [--max-flow-px P]
+//   bench_simulate [--config datasets/poster_6dof_mocap.yaml] [--duration S] [--max-flow-px P] [--threads N]
+//
+// --threads N renders in N row bands (default 1: the one-core figure).
 //
 // Prints a human summary and one JSON line.
 #include <cstdio>
@@ -18,21 +20,25 @@ int main(int argc, char** argv) {
   std::string config = std::string(EVIO_SOURCE_DIR) + "/datasets/poster_6dof_mocap.yaml";
   evio::apps::SimulateOverrides overrides;
   double max_flow_px = -1;
+  int threads = 1;
   for (int i = 1; i + 1 < argc; i += 2) {
     if (!std::strcmp(argv[i], "--config")) {
       config = argv[i + 1];
     } else if (!std::strcmp(argv[i], "--duration")) {
       overrides.duration_s = std::atof(argv[i + 1]);
+    } else if (!std::strcmp(argv[i], "--threads")) {
+      threads = std::atoi(argv[i + 1]);
     } else if (!std::strcmp(argv[i], "--max-flow-px")) {
       max_flow_px = std::atof(argv[i + 1]);
     } else {
-      std::fprintf(stderr, "usage: %s [--config FILE] [--duration S] [--max-flow-px P]\n", argv[0]);
+      std::fprintf(stderr, "usage: %s [--config FILE] [--duration S] [--max-flow-px P] [--threads N]\n", argv[0]);
       return 2;
     }
   }
   try {
     evio::apps::SimulationConfig cfg = evio::apps::load_simulation_config(config, overrides);
     if (max_flow_px >= 0) cfg.simulator.stepping.max_flow_px = max_flow_px;
+    cfg.simulator.threads = threads;
     evio::sim::Simulator sim(cfg.scene, cfg.trajectory, cfg.simulator);
     const evio::sim::SimulationStats s = sim.run(nullptr);
     const double sim_s = s.simulated_ns * 1e-9;
@@ -44,10 +50,10 @@ int main(int argc, char** argv) {
                 sim_s / s.wall_s);
     std::printf("{\"benchmark\": \"simulate\", \"config\": \"%s\", \"simulated_s\": %.3f, \"events\": %llu, "
                 "\"steps\": %llu, \"wall_s\": %.3f, \"render_s\": %.3f, \"events_s\": %.3f, "
-                "\"events_per_wall_s\": %.0f, \"real_time_factor\": %.3f, \"max_flow_px\": %.3f}\n",
+                "\"events_per_wall_s\": %.0f, \"real_time_factor\": %.3f, \"max_flow_px\": %.3f, \"threads\": %d}\n",
                 config.c_str(), sim_s, static_cast<unsigned long long>(s.events),
                 static_cast<unsigned long long>(s.steps), s.wall_s, s.render_s, s.events_s, s.events / s.wall_s,
-                sim_s / s.wall_s, cfg.simulator.stepping.max_flow_px);
+                sim_s / s.wall_s, cfg.simulator.stepping.max_flow_px, threads);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_simulate: %s\n", e.what());
     return 1;

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# Installs missing Debian packages, builds evio and runs it on its embedded default: a synthetic
-# Event Camera Dataset sequence written by the build (events, 1 kHz IMU, 100 Hz ground truth,
-# calib.txt), summarised by `evio info`, converted to HDF5 with `evio convert` and summarised again.
-# With ../shared/data/real present, also a real recording.
+# Installs missing Debian packages, builds evio and runs it on its embedded default: `evio
+# simulate` renders 1 s of the poster_6dof scene of datasets/ (DAVIS240C, 6-DoF, sensor noise,
+# 1 kHz IMU, APS frames, ground truth) into an Event Camera Dataset folder, `evio info` summarises
+# it, `evio convert` writes it to HDF5 and `evio info` summarises that. With ../shared/data/real
+# present, also a real recording.
 #   scripts/demo.sh [OUT_DIR]      (default build/demo)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -10,10 +11,12 @@ cd "$(dirname "$0")/.."
 build_dir=${BUILD_DIR:-build}
 jobs=$(nproc 2>/dev/null || echo 2)
 cmake -S . -B "$build_dir" -DCMAKE_BUILD_TYPE="${BUILD_TYPE:-Release}" >/dev/null
-cmake --build "$build_dir" -j"$jobs" --target evio make_ecd_sequence
+cmake --build "$build_dir" -j"$jobs" --target evio
 out=${1:-$build_dir/demo}
 rm -rf "$out/sequence"
-"$build_dir/bench/make_ecd_sequence" "$out/sequence" 500000 1e6 >/dev/null
+echo "== evio simulate datasets/poster_6dof.yaml --duration 1 --out $out/sequence"
+"$build_dir/apps/evio" simulate datasets/poster_6dof.yaml --duration 1 --out "$out/sequence"
+echo
 echo "== evio info $out/sequence"
 "$build_dir/apps/evio" info "$out/sequence" --sensor 240x180
 echo

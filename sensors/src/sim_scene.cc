@@ -10,6 +10,7 @@
 #include <limits>
 #include <sstream>
 #include <stdexcept>
+#include <utility>
 
 namespace evio::sim {
 namespace {
@@ -89,10 +90,28 @@ inline void write_flow(float* f, const Eigen::Matrix<float, 2, 3>& J, const Eige
   f[1] = J.row(1).dot(d);
 }
 
+// The rows a request covers, clamped to the image.
+std::pair<int, int> row_band(const RenderRequest& request, int h) {
+  const int y0 = std::clamp(request.row_begin, 0, h);
+  const int y1 = request.row_end < 0 ? h : std::clamp(request.row_end, y0, h);
+  return {y0, y1};
+}
+
 void prepare_view(const CameraState& camera, const PixelRays& rays, const RenderRequest& request, RenderedView* out) {
   if (out == nullptr) throw std::invalid_argument("render: null output view");
-  out->t_ns = camera.t_ns;
   const int w = rays.width(), h = rays.height();
+  const auto [y0, y1] = row_band(request, h);
+  if (y0 != 0 || y1 != h) {
+    // A band of a view allocated by the caller: check, never reallocate (other bands may be
+    // rendering into the same images).
+    const auto ok = [&](const cv::Mat& m, int type) { return m.rows == h && m.cols == w && m.type() == type; };
+    if (!ok(out->intensity, CV_32F) || !ok(out->depth, CV_32F) || !ok(out->label, CV_16U) ||
+        (request.flow && !ok(out->flow, CV_32FC2))) {
+      throw std::invalid_argument("render: a row band needs the view's images allocated at full size");
+    }
+    return;
+  }
+  out->t_ns = camera.t_ns;
   out->intensity.create(h, w, CV_32F);
   out->depth.create(h, w, CV_32F);
   out->label.create(h, w, CV_16U);
@@ -253,7 +272,8 @@ void PanoramaScene::render(const CameraState& camera, const PixelRays& rays, con
   const float* log2_angle = rays.log2_sample_angles_f();
   const Eigen::Matrix<float, 2, 3>* jac = rays.centre_jacobians_f();
   const Eigen::Vector3f* centres = rays.centres_f();
-  for (int y = 0; y < h; ++y) {
+  const auto [y_begin, y_end] = row_band(request, h);
+  for (int y = y_begin; y < y_end; ++y) {
     // Pass 1, four samples at a time: world direction -> texel coordinates and the latitude term.
     const size_t base = rays.index(0, y) * spp;
     for (int j = 0; j < row_samples; j += 4) {
@@ -401,7 +421,8 @@ void PlanarScene::render(const CameraState& camera, const PixelRays& rays, const
   const Eigen::Vector3f* centres = rays.centres_f();
   const Eigen::Matrix<float, 2, 3>* jac = rays.centre_jacobians_f();
   const int num_planes = static_cast<int>(planes.size());
-  for (int y = 0; y < h; ++y) {
+  const auto [y_begin, y_end] = row_band(request, h);
+  for (int y = y_begin; y < y_end; ++y) {
     // Pass 1, four rays at a time against every plane: nearest hit, its texel and lod term.
     const size_t base = rays.index(0, y) * spp;
     for (int j = 0; j < row_samples; j += 4) {
@@ -549,8 +570,10 @@ void SpriteScene::render(const CameraState& camera, const PixelRays& rays, const
                          RenderedView* out) const {
   background_->render(camera, rays, request, out);
   if (sprites_.empty()) return;
-  out->label.setTo(0);  // labels name sprites only; the background (whatever its own labels) is 0
   const int w = rays.width(), h = rays.height(), spp = rays.samples_per_pixel(), kc = rays.centre_sample();
+  const auto [y_begin, y_end] = row_band(request, h);
+  // Labels name sprites only; the background (whatever its own labels) is 0.
+  out->label.rowRange(y_begin, y_end).setTo(0);
   const double t = static_cast<double>(camera.t_ns - t0_ns_) * 1e-9;
   std::vector<PosedSprite> posed(sprites_.size());
   int ux0 = w, ux1 = -1, uy0 = h, uy1 = -1;  // union of the bounding boxes
@@ -598,7 +621,7 @@ void SpriteScene::render(const CameraState& camera, const PixelRays& rays, const
   for (int k = 0; k < spp; ++k) offsets[k] = rays.sub_offset(k);
   std::vector<int> active;
   active.reserve(posed.size());
-  for (int y = uy0; y <= uy1; ++y) {
+  for (int y = std::max(uy0, y_begin); y <= std::min(uy1, y_end - 1); ++y) {
     float* I = out->intensity.ptr<float>(y);
     uint16_t* L = out->label.ptr<uint16_t>(y);
     float* F = request.flow ? out->flow.ptr<float>(y) : nullptr;

@@ -6,7 +6,9 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <exception>
 #include <stdexcept>
+#include <thread>
 #include <utility>
 
 #include <opencv2/core.hpp>
@@ -66,6 +68,7 @@ bool ApsOptions::Validate(std::string* why) const {
 bool SimulatorOptions::Validate(std::string* why) const {
   if (!camera.intrinsics().Validate(why)) return false;
   if (supersample < 1 || supersample > 8) return fail(why, "supersample must be in 1..8");
+  if (threads < 1 || threads > 64) return fail(why, "threads must be in 1..64");
   if (t_end_ns < t_begin_ns) return fail(why, "t_end_ns must be >= t_begin_ns");
   if (!stepping.Validate(why) || !events.Validate(why) || !frames.Validate(why)) return false;
   if (!std::is_sorted(ground_truth_times_ns.begin(), ground_truth_times_ns.end()))
@@ -112,7 +115,36 @@ RenderedView Simulator::render(int64_t t_ns, bool with_flow) const {
   RenderedView view;
   RenderRequest request;
   request.flow = with_flow;
-  scene_->render(camera_state(t_ns), rays_, request, &view);
+  const CameraState camera = camera_state(t_ns);
+  const int h = o_.camera.height(), w = o_.camera.width();
+  const int bands = std::min(o_.threads, h);
+  if (bands <= 1) {
+    scene_->render(camera, rays_, request, &view);
+  } else {
+    // Disjoint row bands of one view, rendered concurrently into images allocated here.
+    view.intensity.create(h, w, CV_32F);
+    view.depth.create(h, w, CV_32F);
+    view.label.create(h, w, CV_16U);
+    if (with_flow) view.flow.create(h, w, CV_32FC2);
+    std::vector<std::exception_ptr> errors(bands);
+    auto band = [&](int i) {
+      try {
+        RenderRequest r = request;
+        r.row_begin = h * i / bands;
+        r.row_end = h * (i + 1) / bands;
+        scene_->render(camera, rays_, r, &view);
+      } catch (...) {
+        errors[i] = std::current_exception();
+      }
+    };
+    std::vector<std::thread> workers;
+    workers.reserve(bands - 1);
+    for (int i = 1; i < bands; ++i) workers.emplace_back(band, i);
+    band(0);
+    for (std::thread& t : workers) t.join();
+    for (const std::exception_ptr& e : errors)
+      if (e) std::rethrow_exception(e);
+  }
   view.t_ns = t_ns;
   return view;
 }

@@ -90,6 +90,12 @@ struct RenderedView {
 
 struct RenderRequest {
   bool flow = false;  // compute the flow image (a little slower)
+  // Rows [row_begin, row_end) only (row_end < 0: to the last row). A partial band writes into
+  // images the caller has already allocated at full size (with flow when asked), so several
+  // threads can render disjoint bands of one view; every pixel depends only on its own ray,
+  // so a banded render is bit-identical to a whole one.
+  int row_begin = 0;
+  int row_end = -1;
 };
 
 class Scene {

@@ -55,6 +55,7 @@ struct SimulatorOptions {
   calib::SE3 T_c_b;                      // camera from body (Kalibr T_cam_imu)
   int64_t time_shift_ns = 0;             // Kalibr timeshift_cam_imu: t_imu = t_cam + shift, ns
   int supersample = 1;                   // sub-pixel rays per axis (antialiased geometric edges), >= 1
+  int threads = 1;                       // render threads (row bands), 1..64; any count gives identical output
   int64_t t_begin_ns = 0;                // simulated span on the body (IMU) clock, ns;
   int64_t t_end_ns = 0;                  //   both 0 = the trajectory's whole valid range
   SteppingOptions stepping;
