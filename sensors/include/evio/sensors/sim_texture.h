@@ -110,6 +110,14 @@ bool procedural_kind_from_name(const std::string& name, ProceduralKind* kind);
 // ---------------------------------------------------------------------------------------------
 // Inline sampling (hot path of the renderers).
 
+// The sampling helpers are small but GCC does not inline them into the renderers' loops on its
+// own at -O2 (a third of the render time went to the calls).
+#if defined(__GNUC__)
+#define EVIO_SIM_ALWAYS_INLINE inline __attribute__((always_inline))
+#else
+#define EVIO_SIM_ALWAYS_INLINE inline
+#endif
+
 namespace internal {
 
 // floor() for the sampling loops: the release build targets baseline x86-64 (no SSE4.1 round
@@ -134,7 +142,7 @@ inline T wrap_level0(T u, int n) {
 }  // namespace internal
 
 template <typename T>
-inline float Texture::bilinear(const LevelView& l, T u, T v) const {
+EVIO_SIM_ALWAYS_INLINE float Texture::bilinear(const LevelView& l, T u, T v) const {
   T x = u * static_cast<T>(l.scale_u) - static_cast<T>(0.5);
   T y = v * static_cast<T>(l.scale_v) - static_cast<T>(0.5);
   int x0, x1, y0, y1;
@@ -168,7 +176,7 @@ inline float Texture::bilinear(const LevelView& l, T u, T v) const {
 }
 
 template <typename T>
-inline float Texture::sample_impl(T u, T v, T lod) const {
+EVIO_SIM_ALWAYS_INLINE float Texture::sample_impl(T u, T v, T lod) const {
   if (wrap_u_ == TextureWrap::kRepeat) u = internal::wrap_level0(u, views_[0].w);
   if (wrap_v_ == TextureWrap::kRepeat) v = internal::wrap_level0(v, views_[0].h);
   const int n = static_cast<int>(views_.size());
