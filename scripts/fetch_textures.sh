@@ -10,21 +10,7 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 dest="${1:-$root/datasets/textures}"
 images=(camera astronaut brick grass gravel text moon coins)
 
-if ! dpkg-query -W -f='${Status}' python3-skimage 2>/dev/null | grep -q "install ok installed"; then
-  if [ "$(id -u)" -eq 0 ]; then
-    SUDO=()
-  elif command -v sudo >/dev/null 2>&1; then
-    SUDO=(sudo)
-  else
-    echo "fetch_textures: python3-skimage is missing and this is not root and there is no sudo; as root run:" >&2
-    echo "  apt-get install --no-install-recommends python3-skimage" >&2
-    exit 1
-  fi
-  echo "fetch_textures: installing python3-skimage"
-  export DEBIAN_FRONTEND=noninteractive
-  "${SUDO[@]}" apt-get update -qq
-  "${SUDO[@]}" apt-get install -y -qq --no-install-recommends python3-skimage >/dev/null
-fi
+bash "$root/scripts/setup_deps.sh" python3-skimage
 
 # The package's data folder (skimage/data/*.png), found from its file list (no Python import).
 src="$(dpkg -L python3-skimage | grep -E '/skimage/data/camera\.png$' | head -n 1 | xargs -r dirname)"

@@ -2,6 +2,7 @@
 # Installs the Debian 12 packages evio builds against. Idempotent: installs only what is
 # missing, runs `apt-get update` at most once, works as root or through sudo.
 #   scripts/setup_deps.sh            # build + test dependencies
+#   scripts/setup_deps.sh PKG...     # these Debian packages instead (e.g. python3-skimage)
 #   EVIO_SKIP_DEPS=1 scripts/...     # callers (demo.sh, test.sh) skip this step entirely
 set -euo pipefail
 
@@ -13,6 +14,9 @@ packages=(
   clang libclang-rt-14-dev
   python3-numpy python3-matplotlib
 )
+if [ $# -gt 0 ]; then
+  packages=("$@")
+fi
 
 missing=()
 for p in "${packages[@]}"; do

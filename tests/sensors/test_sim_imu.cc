@@ -5,30 +5,17 @@
 
 #include <gtest/gtest.h>
 
+#include "sim_test_trajectories.h"
+
 namespace evio::sim {
 namespace {
 
 using calib::Quat;
 using calib::Vec3;
 
-constexpr int64_t kLargeT0 = 1700000000000000000LL;
+using test::kLargeT0;
+using test::lively_sinusoid;
 
-SinusoidTrajectoryOptions lively_sinusoid(int64_t t0) {
-  SinusoidTrajectoryOptions o;
-  o.t_begin_ns = t0;
-  o.duration_s = 10.0;
-  o.position_m = Vec3(1.0, -2.0, 1.5);
-  o.q_w_b0 = Quat(Eigen::AngleAxisd(0.7, Vec3(1, 2, 3).normalized()));
-  o.velocity_mps = Vec3(0.1, -0.05, 0.02);
-  o.amplitude_m = Vec3(0.5, 0.3, 0.2);
-  o.frequency_hz = Vec3(0.5, 0.8, 1.3);
-  o.phase_rad = Vec3(0.1, 1.0, -0.4);
-  o.angle_rate_radps = Vec3(0.2, -0.1, 0.3);
-  o.angle_amplitude_rad = Vec3(0.6, 0.4, 0.8);
-  o.angle_frequency_hz = Vec3(0.7, 1.1, 0.4);
-  o.angle_phase_rad = Vec3(0.3, -0.2, 1.2);
-  return o;
-}
 
 SinusoidTrajectoryOptions still(int64_t t0, double duration_s) {
   SinusoidTrajectoryOptions o;

@@ -9,6 +9,8 @@
 
 #include <gtest/gtest.h>
 
+#include "sim_test_trajectories.h"
+
 #include "evio_test/real_data.h"
 
 namespace evio::sim {
@@ -17,7 +19,8 @@ namespace {
 using calib::Quat;
 using calib::Vec3;
 
-constexpr int64_t kLargeT0 = 1700000000000000000LL;  // 2023 in ns since the epoch
+using test::kLargeT0;
+using test::lively_sinusoid;
 
 // Tolerance that scales with the magnitude of the reference.
 void expect_vec_near(const Vec3& actual, const Vec3& expected, double rel_tol, const std::string& what) {
@@ -26,22 +29,6 @@ void expect_vec_near(const Vec3& actual, const Vec3& expected, double rel_tol, c
                                              << expected.transpose();
 }
 
-SinusoidTrajectoryOptions lively_sinusoid(int64_t t0) {
-  SinusoidTrajectoryOptions o;
-  o.t_begin_ns = t0;
-  o.duration_s = 10.0;
-  o.position_m = Vec3(1.0, -2.0, 1.5);
-  o.q_w_b0 = Quat(Eigen::AngleAxisd(0.7, Vec3(1, 2, 3).normalized()));
-  o.velocity_mps = Vec3(0.1, -0.05, 0.02);
-  o.amplitude_m = Vec3(0.5, 0.3, 0.2);
-  o.frequency_hz = Vec3(0.5, 0.8, 1.3);
-  o.phase_rad = Vec3(0.1, 1.0, -0.4);
-  o.angle_rate_radps = Vec3(0.2, -0.1, 0.3);
-  o.angle_amplitude_rad = Vec3(0.6, 0.4, 0.8);
-  o.angle_frequency_hz = Vec3(0.7, 1.1, 0.4);
-  o.angle_phase_rad = Vec3(0.3, -0.2, 1.2);
-  return o;
-}
 
 RandomSplineOptions agile_spline(int order, uint64_t seed, int64_t t0 = 0) {
   RandomSplineOptions o;
