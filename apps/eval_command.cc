@@ -1,0 +1,465 @@
+#include "eval_command.h"
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <ostream>
+#include <sstream>
+#include <stdexcept>
+
+#include <unistd.h>
+
+#include "evio/calib/error.h"
+#include "evio/calib/log.h"
+#include "evio/sensors/time.h"
+
+#ifndef EVIO_SCRIPTS_DIR
+#define EVIO_SCRIPTS_DIR ""
+#endif
+
+namespace evio::apps {
+namespace fs = std::filesystem;
+using evaluation::Stats;
+
+namespace {
+
+std::string fmt(const char* f, double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof(buf), f, v);
+  return buf;
+}
+
+// Round-trip precision for machine-read outputs; JSON has no NaN/inf, those become null.
+std::string num(double v) { return std::isfinite(v) ? fmt("%.17g", v) : std::string("null"); }
+
+std::string json_escape(const std::string& s) {
+  std::string o;
+  for (char c : s) {
+    if (c == '"' || c == '\\') {
+      o += '\\';
+      o += c;
+    } else if (static_cast<unsigned char>(c) < 0x20) {
+      char b[8];
+      std::snprintf(b, sizeof(b), "\\u%04x", c);
+      o += b;
+    } else {
+      o += c;
+    }
+  }
+  return o;
+}
+
+std::string quoted(const std::string& s) { return "\"" + json_escape(s) + "\""; }
+
+std::string stats_json(const Stats& s) {
+  return "{\"rmse\": " + num(s.rmse) + ", \"mean\": " + num(s.mean) + ", \"median\": " + num(s.median) +
+         ", \"std\": " + num(s.std) + ", \"min\": " + num(s.min) + ", \"max\": " + num(s.max) +
+         ", \"count\": " + std::to_string(s.count) + "}";
+}
+
+std::string lower(std::string s) {
+  for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+
+// csv: a .csv extension, or a first line that is not a `#` comment starting with a letter (a
+// header) or holding a comma. `#` lines are skipped (TUM comments; a `#timestamp,...` header is
+// followed by comma-separated rows anyway).
+bool looks_like_csv(const std::string& path) {
+  if (lower(fs::path(path).extension().string()) == ".csv") return true;
+  std::ifstream f(path);
+  std::string line;
+  while (std::getline(f, line)) {
+    const size_t k = line.find_first_not_of(" \t\r");
+    if (k == std::string::npos || line[k] == '#') continue;
+    return std::isalpha(static_cast<unsigned char>(line[k])) || line.find(',') != std::string::npos;
+  }
+  return false;
+}
+
+// File-name-safe prefix.
+std::string safe_name(const std::string& s) {
+  std::string o;
+  for (char c : s) o += std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '_' || c == '.' ? c : '_';
+  return o.empty() ? std::string("estimate") : o;
+}
+
+double median_of(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  const size_t n = v.size();
+  return n % 2 == 1 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+// Mean over the sub-trajectory lengths of the mean translation error in % (0 when none).
+double rpe_trans_percent_mean(const evaluation::EvaluationResult& r) {
+  double s = 0;
+  size_t n = 0;
+  for (const auto& e : r.rpe) {
+    if (e.count == 0) continue;
+    s += e.trans_percent.mean;
+    ++n;
+  }
+  return n == 0 ? std::nan("") : s / static_cast<double>(n);
+}
+
+void write_file(const fs::path& p, const std::string& text) {
+  std::ofstream f(p, std::ios::binary);
+  if (!f) throw InputError(p.string(), 0, "cannot create the output file", "a writable folder");
+  f << text;
+  if (!f.flush()) throw InputError(p.string(), 0, "write failed", "a writable folder with free space");
+}
+
+std::string shell_quote(const std::string& s) {
+  std::string o = "'";
+  for (char c : s) o += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return o + "'";
+}
+
+// The plot script: given, else next to the sources, else <prefix>/share/evio/scripts.
+std::string find_plot_script(const std::string& given) {
+  if (!given.empty()) return given;
+  std::vector<fs::path> candidates;
+  if (std::string(EVIO_SCRIPTS_DIR).size() > 0) candidates.push_back(fs::path(EVIO_SCRIPTS_DIR) / "plot_trajectory.py");
+  std::error_code ec;
+  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+  if (!ec) candidates.push_back(exe.parent_path().parent_path() / "share" / "evio" / "scripts" / "plot_trajectory.py");
+  for (const fs::path& c : candidates) {
+    if (fs::exists(c, ec)) return c.string();
+  }
+  return {};
+}
+
+const char* kPlotHint =
+    "install them with `sudo apt-get install python3-numpy python3-matplotlib` (or scripts/setup_deps.sh), "
+    "then run `/usr/bin/python3 scripts/plot_trajectory.py ";
+
+}  // namespace
+
+Trajectory load_trajectory(const std::string& path, const TextReadOptions& read) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) throw InputError(path, 0, "no such file", "a TUM or csv trajectory file");
+  const bool csv = looks_like_csv(path);
+  Trajectory t = csv ? read_euroc_csv(path, read) : read_tum(path, read);
+  const std::string form = csv ? "csv: a header line, then `timestamp[ns], x, y, z, qx, qy, qz, qw` rows"
+                               : "TUM: lines `t tx ty tz qx qy qz qw` (t in s)";
+  if (t.empty()) throw InputError(path, 0, "no poses in the file", "at least 2 poses; " + form);
+  if (t.size() < 2) throw InputError(path, 0, "only 1 pose: a trajectory needs at least 2", form);
+  return t;
+}
+
+std::vector<EstimateEvaluation> evaluate_all(const EvalArgs& args) {
+  std::string why;
+  if (!args.options.Validate(&why)) throw InputError("evio eval", 0, "invalid options: " + why);
+  if (args.estimates.empty()) throw InputError("evio eval", 0, "no estimate given", "evio eval GT EST [EST2 ...]");
+  if (!args.labels.empty() && args.labels.size() != args.estimates.size()) {
+    throw InputError("evio eval", 0,
+                     std::to_string(args.labels.size()) + " labels for " + std::to_string(args.estimates.size()) +
+                         " estimates",
+                     "no --label, or one --label per estimate (runs of one method share a label)");
+  }
+  const Trajectory gt = load_trajectory(args.groundtruth, args.read);
+  std::vector<EstimateEvaluation> out;
+  for (size_t i = 0; i < args.estimates.size(); ++i) {
+    EstimateEvaluation e;
+    e.file = args.estimates[i];
+    const std::string stem = fs::path(e.file).stem().string();
+    e.label = args.labels.empty() ? e.file : args.labels[i];
+    e.name = "est" + std::to_string(i) + "_" + safe_name(stem);
+    const Trajectory est = load_trajectory(e.file, args.read);
+    try {
+      e.result = evaluation::evaluate(gt, est, args.options);
+    } catch (const std::invalid_argument& ex) {
+      throw InputError(e.file, 0, ex.what());
+    }
+    for (size_t k = 1; k < e.result.aligned_estimate.size(); ++k) {
+      e.estimate_length_m +=
+          (e.result.aligned_estimate[k].translation - e.result.aligned_estimate[k - 1].translation).norm();
+    }
+    out.push_back(std::move(e));
+  }
+  return out;
+}
+
+std::string results_json(const EvalArgs& args, const std::vector<EstimateEvaluation>& results) {
+  const auto& o = args.options;
+  std::ostringstream j;
+  j << "{\n  \"groundtruth\": " << quoted(args.groundtruth) << ",\n";
+  j << "  \"protocol\": {\"association\": {\"max_dt_s\": " << num(o.association.max_dt_s)
+    << ", \"time_offset_s\": " << num(o.association.time_offset_s)
+    << ", \"interpolate_groundtruth\": " << (o.association.interpolate_groundtruth ? "true" : "false") << "}, "
+    << "\"alignment\": {\"method\": " << quoted(evaluation::alignment_name(o.alignment.method))
+    << ", \"first_s\": " << num(o.alignment.first_s) << ", \"first_poses\": " << o.alignment.first_poses << "}, "
+    << "\"rpe\": {\"lengths\": [";
+  for (size_t i = 0; i < o.rpe.lengths.size(); ++i) j << (i ? ", " : "") << num(o.rpe.lengths[i]);
+  j << "], \"lengths_unit\": " << quoted(o.rpe.lengths_in_percent ? "percent of ground-truth path length" : "m")
+    << ", \"method\": \"rpg_trajectory_evaluation (Zhang and Scaramuzza, IROS 2018)\"}},\n";
+  j << "  \"estimates\": [";
+  for (size_t n = 0; n < results.size(); ++n) {
+    const EstimateEvaluation& e = results[n];
+    const auto& r = e.result;
+    j << (n ? ",\n" : "\n") << "    {\"file\": " << quoted(e.file) << ", \"label\": " << quoted(e.label)
+      << ", \"name\": " << quoted(e.name) << ", \"align\": " << quoted(evaluation::alignment_name(r.alignment.method))
+      << ", \"matched_poses\": " << r.matched_poses << ",\n";
+    j << "     \"ate\": {\"trans_m\": " << stats_json(r.ate.trans_m) << ",\n             \"rot_deg\": "
+      << stats_json(r.ate.rot_deg) << "},\n";
+    j << "     \"mean_position_error_percent\": " << num(r.mean_position_error_percent) << ",\n";
+    j << "     \"rpe\": [";
+    for (size_t k = 0; k < r.rpe.size(); ++k) {
+      const auto& q = r.rpe[k];
+      j << (k ? ",\n" : "\n") << "       {\"length_m\": " << num(q.length_m) << ", \"count\": " << q.count
+        << ", \"trans_percent\": " << stats_json(q.trans_percent) << ", \"yaw_deg_per_m\": " << stats_json(q.yaw_deg_per_m)
+        << ", \"trans_m\": " << stats_json(q.trans_m) << ", \"rot_deg\": " << stats_json(q.rot_deg)
+        << ", \"yaw_deg\": " << stats_json(q.yaw_deg) << "}";
+    }
+    j << "],\n";
+    const auto& a = r.alignment;
+    j << "     \"alignment\": {\"rotation\": [";
+    for (int row = 0; row < 3; ++row) {
+      j << (row ? ", " : "") << "[" << num(a.rotation(row, 0)) << ", " << num(a.rotation(row, 1)) << ", "
+        << num(a.rotation(row, 2)) << "]";
+    }
+    j << "], \"translation\": [" << num(a.translation.x()) << ", " << num(a.translation.y()) << ", "
+      << num(a.translation.z()) << "], \"scale\": " << num(a.scale) << ", \"pairs_used\": " << a.pairs_used << "},\n";
+    j << "     \"groundtruth_length_m\": " << num(r.groundtruth_length_m)
+      << ", \"estimate_length_m\": " << num(e.estimate_length_m)
+      << ", \"final_yaw_error_deg\": " << num(r.final_yaw_error_deg)
+      << ", \"yaw_drift_deg_per_m\": " << num(r.yaw_drift_deg_per_m) << ",\n";
+    const auto& t = r.pairs.t_ns;
+    j << "     \"time_span_s\": [" << (t.empty() ? "null" : format_seconds(t.front())) << ", "
+      << (t.empty() ? "null" : format_seconds(t.back())) << "],\n";
+    j << "     \"outputs\": {\"aligned_estimate\": " << quoted(e.name + "_aligned.tum")
+      << ", \"matched_groundtruth\": " << quoted(e.name + "_groundtruth.tum")
+      << ", \"errors\": " << quoted(e.name + "_errors.csv") << "}}";
+  }
+  j << "\n  ]\n}\n";
+  return j.str();
+}
+
+std::vector<SummaryRow> summarize(const std::vector<EstimateEvaluation>& results) {
+  std::vector<std::string> labels;  // first-appearance order
+  for (const auto& e : results) {
+    if (std::find(labels.begin(), labels.end(), e.label) == labels.end()) labels.push_back(e.label);
+  }
+  using Getter = double (*)(const evaluation::EvaluationResult&);
+  const std::vector<std::pair<const char*, Getter>> metrics = {
+      {"ate_trans_rmse_m", [](const evaluation::EvaluationResult& r) { return r.ate.trans_m.rmse; }},
+      {"ate_rot_rmse_deg", [](const evaluation::EvaluationResult& r) { return r.ate.rot_deg.rmse; }},
+      {"mean_position_error_percent", [](const evaluation::EvaluationResult& r) { return r.mean_position_error_percent; }},
+      {"rpe_trans_percent_mean", [](const evaluation::EvaluationResult& r) { return rpe_trans_percent_mean(r); }},
+      {"yaw_drift_deg_per_m", [](const evaluation::EvaluationResult& r) { return r.yaw_drift_deg_per_m; }},
+  };
+  std::vector<SummaryRow> rows;
+  for (const std::string& label : labels) {
+    for (const auto& [name, get] : metrics) {
+      std::vector<double> v;
+      for (const auto& e : results) {
+        if (e.label != label) continue;
+        const double x = get(e.result);
+        if (std::isfinite(x)) v.push_back(x);
+      }
+      SummaryRow row;
+      row.label = label;
+      row.metric = name;
+      row.runs = v.size();
+      if (!v.empty()) {
+        double s = 0;
+        for (double x : v) s += x;
+        row.mean = s / static_cast<double>(v.size());
+        row.median = median_of(v);
+        row.min = *std::min_element(v.begin(), v.end());
+        row.max = *std::max_element(v.begin(), v.end());
+      }
+      rows.push_back(row);
+    }
+  }
+  return rows;
+}
+
+std::string summary_csv(const std::vector<SummaryRow>& rows) {
+  std::string o = "label,metric,runs,mean,median,min,max\n";
+  for (const auto& r : rows) {
+    std::string label = r.label;
+    if (label.find_first_of(",\"\n") != std::string::npos) {
+      std::string q = "\"";
+      for (char c : label) q += c == '"' ? std::string("\"\"") : std::string(1, c);
+      label = q + "\"";
+    }
+    o += label + "," + r.metric + "," + std::to_string(r.runs) + "," + num(r.mean) + "," + num(r.median) + "," +
+         num(r.min) + "," + num(r.max) + "\n";
+  }
+  return o;
+}
+
+std::string summary_yaml(const std::vector<SummaryRow>& rows) {
+  std::string o = "# evio eval summary over runs: per method label and metric\nmethods:\n";
+  std::string current;
+  bool first = true;
+  for (const auto& r : rows) {
+    if (first || r.label != current) {
+      o += "  " + quoted(r.label) + ":\n";  // a JSON string is a valid YAML double-quoted scalar
+      current = r.label;
+      first = false;
+    }
+    o += "    " + r.metric + ": {runs: " + std::to_string(r.runs) + ", mean: " + num(r.mean) +
+         ", median: " + num(r.median) + ", min: " + num(r.min) + ", max: " + num(r.max) + "}\n";
+  }
+  return o;
+}
+
+std::string summary_json(const std::vector<SummaryRow>& rows) {
+  std::string o = "{\"methods\": [";
+  std::string current;
+  bool first = true;
+  for (const auto& r : rows) {
+    if (first || r.label != current) {
+      o += std::string(first ? "\n" : "}},\n") + "  {\"label\": " + quoted(r.label) + ", \"metrics\": {";
+      current = r.label;
+      first = false;
+    } else {
+      o += ", ";
+    }
+    o += "\"" + r.metric + "\": {\"runs\": " + std::to_string(r.runs) + ", \"mean\": " + num(r.mean) +
+         ", \"median\": " + num(r.median) + ", \"min\": " + num(r.min) + ", \"max\": " + num(r.max) + "}";
+  }
+  if (!first) o += "}}\n";
+  return o + "]}\n";
+}
+
+std::string summary_latex(const std::vector<SummaryRow>& rows) {
+  std::string o =
+      "% evio eval: mean over runs. Method & ATE RMSE [m] & rot. RMSE [deg] & mean pos. error [%] & "
+      "RPE trans. [%] & yaw drift [deg/m] \\\\\n";
+  auto tex_escape = [](const std::string& s) {
+    std::string t;
+    for (char c : s) {
+      if (std::string("&%$#_{}").find(c) != std::string::npos) t += '\\';
+      t += c;
+    }
+    return t;
+  };
+  for (size_t i = 0; i < rows.size();) {
+    const std::string label = rows[i].label;
+    o += tex_escape(label);
+    for (; i < rows.size() && rows[i].label == label; ++i) {
+      o += " & " + (rows[i].runs == 0 ? std::string("--") : fmt("%.3f", rows[i].mean));
+    }
+    o += " \\\\\n";
+  }
+  return o;
+}
+
+std::string results_table(const EvalArgs& args, const std::vector<EstimateEvaluation>& results) {
+  std::ostringstream t;
+  const auto& o = args.options;
+  t << "ground truth  " << args.groundtruth << "\n";
+  t << "protocol      align " << evaluation::alignment_name(o.alignment.method);
+  if (o.alignment.first_s > 0) t << " on the first " << fmt("%g", o.alignment.first_s) << " s";
+  if (o.alignment.first_poses > 0) t << " on the first " << o.alignment.first_poses << " poses";
+  t << ", max dt " << fmt("%g", o.association.max_dt_s) << " s, offset " << fmt("%g", o.association.time_offset_s)
+    << " s" << (o.association.interpolate_groundtruth ? ", ground truth interpolated" : "")
+    << ", RPE lengths rpg_trajectory_evaluation\n";
+  size_t width = 8;
+  for (const auto& e : results) width = std::max(width, e.label.size());
+  char buf[256];
+  std::snprintf(buf, sizeof(buf), "%-*s %7s %9s %9s %9s %9s %7s", static_cast<int>(width), "estimate", "matched",
+                "ATE rmse", "ATE mean", "ATE max", "rot rmse", "MPE");
+  t << buf;
+  // RPE columns from the first estimate (lengths in % differ in metres per ground-truth segment).
+  if (!results.empty()) {
+    for (const auto& q : results.front().result.rpe) {
+      std::snprintf(buf, sizeof(buf), " %9s", ("RPE@" + fmt("%.3g", q.length_m) + "m").c_str());
+      t << buf;
+    }
+  }
+  t << " " << "yaw drift" << "\n";
+  std::snprintf(buf, sizeof(buf), "%-*s %7s %9s %9s %9s %9s %7s", static_cast<int>(width), "", "poses", "m", "m",
+                "m", "deg", "%");
+  t << buf;
+  if (!results.empty()) {
+    for (size_t k = 0; k < results.front().result.rpe.size(); ++k) t << "         %";
+  }
+  t << "     deg/m\n";
+  for (const auto& e : results) {
+    const auto& r = e.result;
+    std::snprintf(buf, sizeof(buf), "%-*s %7zu %9.4f %9.4f %9.4f %9.3f %7.3f", static_cast<int>(width),
+                  e.label.c_str(), r.matched_poses, r.ate.trans_m.rmse, r.ate.trans_m.mean, r.ate.trans_m.max,
+                  r.ate.rot_deg.rmse, r.mean_position_error_percent);
+    t << buf;
+    for (const auto& q : r.rpe) {
+      if (q.count == 0) {
+        std::snprintf(buf, sizeof(buf), " %9s", "-");
+      } else {
+        std::snprintf(buf, sizeof(buf), " %9.3f", q.trans_percent.mean);
+      }
+      t << buf;
+    }
+    std::snprintf(buf, sizeof(buf), " %9.5f\n", r.yaw_drift_deg_per_m);
+    t << buf;
+  }
+  return t.str();
+}
+
+int run_eval(const EvalArgs& args, std::ostream& out) {
+  const std::vector<EstimateEvaluation> results = evaluate_all(args);
+  out << results_table(args, results);
+  const std::string dir = !args.out.empty() ? args.out : args.plot;
+  if (dir.empty()) return 0;
+  std::error_code ec;
+  fs::create_directories(dir, ec);
+  if (ec) throw InputError(dir, 0, "cannot create the output folder: " + ec.message(), "a writable path");
+  const fs::path d(dir);
+  write_file(d / "results.json", results_json(args, results));
+  for (const auto& e : results) {
+    const auto& r = e.result;
+    std::vector<StampedPose> aligned, matched;
+    std::string csv = "# t [s], trans_error [m], rot_error [deg]\n";
+    for (size_t k = 0; k < r.pairs.size(); ++k) {
+      aligned.push_back({r.pairs.t_ns[k], r.aligned_estimate[k]});
+      matched.push_back({r.pairs.t_ns[k], r.pairs.groundtruth[k]});
+      csv += format_seconds(r.pairs.t_ns[k]) + "," + num(r.ate.trans_errors_m[k]) + "," +
+             num(r.ate.rot_errors_deg[k]) + "\n";
+    }
+    write_tum((d / (e.name + "_aligned.tum")).string(), Trajectory(std::move(aligned)));
+    write_tum((d / (e.name + "_groundtruth.tum")).string(), Trajectory(std::move(matched)));
+    write_file(d / (e.name + "_errors.csv"), csv);
+  }
+  const std::vector<SummaryRow> rows = summarize(results);
+  write_file(d / "summary.csv", summary_csv(rows));
+  write_file(d / "summary.yaml", summary_yaml(rows));
+  write_file(d / "summary.json", summary_json(rows));
+  write_file(d / "summary.tex", summary_latex(rows));
+  out << "wrote " << (d / "results.json").string() << ", summary.{csv,yaml,json,tex} and per-estimate "
+      << "*_aligned.tum, *_groundtruth.tum, *_errors.csv\n";
+  if (args.plot.empty()) return 0;
+
+  const std::string script = find_plot_script(args.plot_script);
+  if (script.empty()) {
+    log_warning("evio eval --plot: scripts/plot_trajectory.py not found (give it with --plot-script); numeric "
+                "outputs are in " + dir);
+    return 0;
+  }
+  const std::string py = args.python;
+  const bool have_python = access(py.c_str(), X_OK) == 0;
+  const std::string check = shell_quote(py) + " -c 'import numpy, matplotlib' >/dev/null 2>&1";
+  if (!have_python || std::system(check.c_str()) != 0) {
+    log_warning(std::string("evio eval --plot: ") + (have_python ? py + " cannot import numpy and matplotlib"
+                                                                  : py + " not found") +
+                "; " + kPlotHint + dir + " --out " + args.plot + "`. Numeric outputs are in " + dir);
+    return 0;
+  }
+  const std::string cmd = shell_quote(py) + " " + shell_quote(script) + " " + shell_quote(dir) + " --out " +
+                          shell_quote(args.plot);
+  out.flush();
+  const int rc = std::system(cmd.c_str());
+  if (rc != 0) throw std::runtime_error("plot script failed (" + cmd + ")");
+  out << "plots in " << args.plot << "\n";
+  return 0;
+}
+
+}  // namespace evio::apps
