@@ -163,7 +163,9 @@ std::vector<EstimateEvaluation> evaluate_all(const EvalArgs& args) {
                          " estimates",
                      "no --label, or one --label per estimate (runs of one method share a label)");
   }
-  const Trajectory gt = load_trajectory(args.groundtruth, args.read);
+  TextReadOptions gt_read = args.read;
+  gt_read.time_unit = args.groundtruth_time_unit;
+  const Trajectory gt = load_trajectory(args.groundtruth, gt_read);
   std::vector<EstimateEvaluation> out;
   for (size_t i = 0; i < args.estimates.size(); ++i) {
     EstimateEvaluation e;

@@ -19,7 +19,8 @@ struct EvalArgs {
   std::vector<std::string> estimates;    // same formats, one or more
   std::vector<std::string> labels;       // empty, or one method label per estimate (runs of a method share it)
   evaluation::EvaluationOptions options;
-  TextReadOptions read;                  // time unit and bad-line policy of both readers
+  TextReadOptions read;                  // time unit, unit check and bad-line policy of the estimates' reader
+  TimeUnit groundtruth_time_unit = TimeUnit::kAuto;  // the ground truth's unit (other settings as `read`)
   std::string out;                       // output folder; empty: only the table (unless plot is set)
   std::string plot;                      // plot folder; empty: no plots. Numeric outputs go to `out`,
                                          // or to `plot` when `out` is empty

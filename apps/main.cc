@@ -2,6 +2,7 @@
 // each subcommand's work is in its own <name>_command.cc. Exit codes: 0 success, 1 bad input
 // (file, line and expected form on one line of stderr), 2 usage error, 3 internal error.
 #include <cstdio>
+#include <cstdlib>
 #include <iostream>
 #include <string>
 
@@ -10,6 +11,7 @@
 #include "evio/calib/error.h"
 #include "evio/calib/log.h"
 #include "convert_command.h"
+#include "eval_command.h"
 #include "evio/sensors/time.h"
 #include "info_command.h"
 #include "simulate_command.h"
@@ -76,6 +78,29 @@ void apply_dataset_strings(const std::string& format, const std::string& time_un
   opts->format = *evio::dataset_format_from_name(format);
   opts->text.time_unit = *evio::time_unit_from_name(time_unit);
   opts->text.on_bad_line = on_bad_line == "warn" ? evio::BadLinePolicy::kWarnAndSkip : evio::BadLinePolicy::kError;
+}
+
+// "10,20,30,40,50%" or "5,10m" -> lengths and unit.
+void parse_rpe_lengths(const std::string& s, evio::evaluation::RelativeErrorOptions* rpe) {
+  const std::string form = "comma-separated lengths ending in % (of the ground-truth path length) or m, e.g. "
+                           "10,20,30,40,50% or 5,10,20m; got '" + s + "'";
+  if (s.empty() || (s.back() != '%' && s.back() != 'm')) throw CLI::ValidationError("--rpe-lengths", form);
+  rpe->lengths_in_percent = s.back() == '%';
+  rpe->lengths.clear();
+  std::string body = s.substr(0, s.size() - 1);
+  size_t start = 0;
+  for (;;) {
+    const size_t comma = body.find(',', start);
+    const std::string item = body.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+    char* end = nullptr;
+    const double v = std::strtod(item.c_str(), &end);
+    if (item.empty() || end == item.c_str() || *end != '\0' || !(v > 0)) {
+      throw CLI::ValidationError("--rpe-lengths", form);
+    }
+    rpe->lengths.push_back(v);
+    if (comma == std::string::npos) break;
+    start = comma + 1;
+  }
 }
 
 }  // namespace
@@ -154,6 +179,73 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 64))
       ->capture_default_str();
 
+  evio::apps::EvalArgs eval;
+  std::string eval_align = "se3";
+  CLI::App* eval_cmd = app.add_subcommand(
+      "eval", "Evaluate estimated trajectories against ground truth (rpg_trajectory_evaluation protocol): "
+              "association by time, alignment, ATE, RPE, mean position error %, yaw drift; results.json, "
+              "summaries over runs (csv, yaml, json, LaTeX) and plots");
+  eval_cmd->add_option("GT", eval.groundtruth,
+                       "Ground truth: TUM `t x y z qx qy qz qw` (t in s) or csv with a header (EuRoC/mocap, t in ns)")
+      ->required();
+  eval_cmd->add_option("EST", eval.estimates, "Estimated trajectories (same formats), one or more")->required();
+  eval_cmd->add_option("--align", eval_align,
+                       "Alignment of each estimate to the ground truth: none, se3 (Umeyama), sim3 (Umeyama with "
+                       "scale), posyaw (translation + yaw, the 4 unobservable DoF of VIO)")
+      ->check(CLI::IsMember({"none", "se3", "sim3", "posyaw"}))
+      ->capture_default_str();
+  eval_cmd->add_option("--align-first-s", eval.options.alignment.first_s,
+                       "Fit the alignment on the pairs of the first S seconds only (0: all pairs), s")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  eval_cmd->add_option("--align-first-n", eval.options.alignment.first_poses,
+                       "Fit the alignment on the first N pairs only (0: all pairs)")
+      ->capture_default_str();
+  eval_cmd->add_option("--max-dt", eval.options.association.max_dt_s,
+                       "Largest time difference of an estimate/ground-truth pair, s")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  eval_cmd->add_option("--time-offset", eval.options.association.time_offset_s,
+                       "Added to the estimate's stamps before matching, s")
+      ->capture_default_str();
+  eval_cmd->add_flag("--interpolate", eval.options.association.interpolate_groundtruth,
+                     "Interpolate the ground truth at each estimate stamp instead of taking the nearest pose");
+  eval_cmd->add_option_function<std::string>(
+      "--rpe-lengths", [&eval](const std::string& s) { parse_rpe_lengths(s, &eval.options.rpe); },
+      "Sub-trajectory lengths of the relative error: 10,20,30,40,50% (of the ground-truth path length, the "
+      "default) or metres, e.g. 5,10,20m");
+  eval_cmd->add_option("-o,--out", eval.out,
+                       "Output folder: results.json, summary.{csv,yaml,json,tex}, per-estimate aligned TUM and "
+                       "error csv");
+  eval_cmd->add_option("--plot", eval.plot,
+                       "Plot folder: runs scripts/plot_trajectory.py (/usr/bin/python3 with numpy and matplotlib) "
+                       "on the outputs (written to --out, or here without --out); PNG and PDF");
+  eval_cmd->add_option("--label", eval.labels,
+                       "Method label per estimate, in order (runs of one method share a label); summaries group by "
+                       "label (default: each file is its own method)")
+      ->expected(1)
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+  std::string eval_bad = "error";
+  eval_cmd->add_option("--on-bad-line", eval_bad,
+                       "What to do with a malformed, non-finite, out-of-order or non-unit-quaternion line: error = stop "
+                       "with file, line and expected form; warn = skip it and report counts")
+      ->check(CLI::IsMember({"error", "warn"}))
+      ->capture_default_str();
+  std::string eval_unit = "auto", eval_gt_unit = "auto";
+  eval_cmd->add_option("--time-unit", eval_unit,
+                       "Unit of the estimates' time column: s, ms, us, ns; auto = a unit tag in a header comment, "
+                       "else a decimal point means s, integers "
+                       "mean us (ns above 1e17 or when all are multiples of 1000)")
+      ->check(CLI::IsMember({"auto", "s", "ms", "us", "ns"}))
+      ->capture_default_str();
+  eval_cmd->add_option("--gt-time-unit", eval_gt_unit, "Unit of the ground truth's time column (as --time-unit)")
+      ->check(CLI::IsMember({"auto", "s", "ms", "us", "ns"}))
+      ->capture_default_str();
+  eval_cmd->add_flag_callback(
+      "--no-time-unit-check", [&eval] { eval.read.check_time_unit = false; },
+      "Accept a time unit even when the first poses imply a rate outside 0.1 Hz..100 kHz");
+  eval_cmd->add_option("--python", eval.python, "Python interpreter for --plot")->capture_default_str();
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -179,6 +271,13 @@ int main(int argc, char** argv) {
       conv.h5_time_unit = conv_h5_unit == "us" ? evio::TimeUnit::kMicroseconds : evio::TimeUnit::kNanoseconds;
       conv.progress = !quiet;
       return evio::apps::run_convert(conv, std::cout);
+    }
+    if (eval_cmd->parsed()) {
+      eval.options.alignment.method = *evio::evaluation::alignment_from_name(eval_align);
+      eval.read.time_unit = *evio::time_unit_from_name(eval_unit);
+      eval.groundtruth_time_unit = *evio::time_unit_from_name(eval_gt_unit);
+      eval.read.on_bad_line = eval_bad == "warn" ? evio::BadLinePolicy::kWarnAndSkip : evio::BadLinePolicy::kError;
+      return evio::apps::run_eval(eval, std::cout);
     }
     if (sim_cmd->parsed()) {
       simulate.progress = !quiet;

@@ -211,25 +211,31 @@ def comparison_pairs(dist, length, max_diff):
     return pairs
 
 
-def relative_errors(p_gt, R_gt, p_est, R_est, length, max_diff):
-    """Per-segment errors of one length: dict of arrays trans_m, rot_deg, yaw_deg."""
+def relative_errors(p_gt, R_gt, p_est, R_est, length, max_diff, scale=1.0):
+    """Per-segment errors of one length: dict of arrays trans_m, rot_deg, yaw_deg.
+
+    E = (T_gt_i^-1 T_gt_j)^-1 (T_est_i^-1 T_est_j) with the estimate's relative translation times
+    `scale`; the yaw is taken of E expressed in the world frame, R_est_j E R_est_j^T (rpg's
+    T_error_in_w). A rigid alignment of the estimate changes none of these, so the aligned or the
+    unaligned estimate may be passed (with the Sim3 scale when unaligned)."""
     pairs = comparison_pairs(accumulated_distances(p_gt), length, max_diff)
-    out = dict(trans_m=[], rot_deg=[], yaw_deg=[])
-    if len(pairs) < 2:  # rpg: too few samples
-        return {k: np.array(v) for k, v in out.items()}
+    out = dict(trans_m=np.zeros(0), rot_deg=np.zeros(0), yaw_deg=np.zeros(0))
+    if not pairs:
+        return out
     i = np.array([a for a, _ in pairs])
     j = np.array([b for _, b in pairs])
     # relative motions T_i^-1 T_j
     Rg = np.einsum('nki,nkj->nij', R_gt[i], R_gt[j])
     tg = np.einsum('nki,nk->ni', R_gt[i], p_gt[j] - p_gt[i])
     Re = np.einsum('nki,nkj->nij', R_est[i], R_est[j])
-    te = np.einsum('nki,nk->ni', R_est[i], p_est[j] - p_est[i])
+    te = scale * np.einsum('nki,nk->ni', R_est[i], p_est[j] - p_est[i])
     # E = (Tg)^-1 Te: rotation Rg^T Re, translation Rg^T (te - tg)
     RE = np.einsum('nki,nkj->nij', Rg, Re)
     tE = np.einsum('nki,nk->ni', Rg, te - tg)
+    RE_w = np.einsum('nij,njk,nlk->nil', R_est[j], RE, R_est[j])
     out['trans_m'] = np.linalg.norm(tE, axis=1)
     out['rot_deg'] = np.degrees(rot_angle(RE))
-    out['yaw_deg'] = np.abs(np.degrees(yaw_of(RE)))
+    out['yaw_deg'] = np.abs(np.degrees(yaw_of(RE_w)))
     return out
 
 
@@ -254,19 +260,24 @@ def evaluate(gt, est, protocol):
                mean_position_error_percent=100.0 * float(np.mean(e_t)) / L if L > 0 else 0.0,
                alignment=dict(rotation=R.tolist(), translation=tr.tolist(), scale=s, pairs_used=used),
                rpe=[], trans_errors=e_t, rot_errors=e_r)
-    y_end = float(np.degrees(yaw_of((R_g[-1].T @ R_a[-1])[None])[0]))
+    # world-frame yaw error of the last pair, R_est_aligned R_gt^T (rpg's abs_e_ypr)
+    y_end = float(np.degrees(yaw_of((R_a[-1] @ R_g[-1].T)[None])[0]))
     res['final_yaw_error_deg'] = y_end
     res['yaw_drift_deg_per_m'] = abs(y_end) / L if L > 0 else 0.0
     rp = protocol['rpe']
     in_percent = rp['lengths_unit'].startswith('percent')
+    # Percentages are of the whole ground-truth file's path length (not only the matched part),
+    # truncated to centimetres, as rpg's compute_boxplot_distances; 0 m lengths are left out.
+    L_all = float(accumulated_distances(gt[1])[-1])
     for length in rp['lengths']:
-        d = np.floor(length / 100.0 * L) if in_percent else float(length)
-        res['rpe'].append(rpe_entry(p_g, R_g, p_a, R_a, d))
+        d = np.trunc(length / 100.0 * L_all * 100.0) / 100.0 if in_percent else float(length)
+        if d > 0:
+            res['rpe'].append(rpe_entry(p_g, R_g, p_e, R_e, d, s))
     return res
 
 
-def rpe_entry(p_g, R_g, p_a, R_a, d):
-    r = relative_errors(p_g, R_g, p_a, R_a, d, 0.2 * d)
+def rpe_entry(p_g, R_g, p_e, R_e, d, scale):
+    r = relative_errors(p_g, R_g, p_e, R_e, d, 0.2 * d, scale)
     return dict(length_m=d, count=len(r['trans_m']), trans_m=stats(r['trans_m']),
                 trans_percent=stats(100.0 * r['trans_m'] / d if d > 0 else r['trans_m']),
                 rot_deg=stats(r['rot_deg']), yaw_deg=stats(r['yaw_deg']),
