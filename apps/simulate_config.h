@@ -5,6 +5,8 @@
 // overrides edit the YAML tree before parsing; one top-level seed derives every component seed.
 #pragma once
 
+#include "yaml_config.h"
+
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -78,9 +80,7 @@ SimulationConfig load_simulation_config(const std::string& path, const SimulateO
 SimulationConfig parse_simulation_config(const std::string& yaml_text, const std::string& path,
                                          const SimulateOverrides& overrides = {});
 
-// Seed of one component ("events", "imu", "scene.planes.0.texture", ...) from the top-level
-// seed: SplitMix64 over the seed and an FNV-1a hash of the name. Stable across versions.
-uint64_t derive_seed(uint64_t seed, const std::string& component);
+// derive_seed(): see yaml_config.h.
 
 // Camera presets: "davis240c", "davis346", "prophesee" (Gen3 VGA) and "prophesee_hd" (Gen4 HD).
 std::vector<std::string> camera_preset_names();
