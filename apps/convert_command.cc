@@ -1,4 +1,5 @@
 #include "convert_command.h"
+#include "progress.h"
 
 #include <chrono>
 #include <cstdio>
@@ -20,26 +21,6 @@ namespace fs = std::filesystem;
 bool in_window(int64_t t, const ConvertArgs& a) {
   return (!a.t_start_ns || t >= *a.t_start_ns) && (!a.t_end_ns || t < *a.t_end_ns);
 }
-
-// Throttled progress line on stderr: at most one every 2 s, only for runs longer than that.
-class Progress {
- public:
-  explicit Progress(bool enabled) : enabled_(enabled), start_(clock::now()), last_(start_) {}
-  void update(double fraction, int64_t events) {
-    if (!enabled_) return;
-    const auto now = clock::now();
-    if (now - last_ < std::chrono::seconds(2)) return;
-    last_ = now;
-    const double s = std::chrono::duration<double>(now - start_).count();
-    std::fprintf(stderr, "evio convert: %5.1f%% of input, %lld events written, %.1f s\n", 100.0 * fraction,
-                 static_cast<long long>(events), s);
-  }
-
- private:
-  using clock = std::chrono::steady_clock;
-  bool enabled_;
-  clock::time_point start_, last_;
-};
 
 void write_triggers_txt(const std::string& path, const std::vector<Trigger>& triggers) {
   std::FILE* f = std::fopen(path.c_str(), "wb");
@@ -99,7 +80,7 @@ int run_convert(const ConvertArgs& args, std::ostream& out) {
   };
   EventBuffer chunk;
   EventStatistics written;
-  Progress progress(args.progress);
+  Progress progress("evio convert", args.progress, "events written", 2.0);
   bool past_end = false;
   bool opened = false;
   while (!past_end) {

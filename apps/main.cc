@@ -1,6 +1,7 @@
 // The `evio` command-line tool. All flag parsing lives here (CLI11 is included in this file only);
 // each subcommand's work is in its own <name>_command.cc. Exit codes: 0 success, 1 bad input
 // (file, line and expected form on one line of stderr), 2 usage error, 3 internal error.
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <iostream>
@@ -11,6 +12,7 @@
 #include "evio/calib/error.h"
 #include "evio/calib/log.h"
 #include "convert_command.h"
+#include "corners_command.h"
 #include "eval_command.h"
 #include "evio/sensors/time.h"
 #include "info_command.h"
@@ -246,6 +248,28 @@ int main(int argc, char** argv) {
       "Accept a time unit even when the first poses imply a rate outside 0.1 Hz..100 kHz");
   eval_cmd->add_option("--python", eval.python, "Python interpreter for --plot")->capture_default_str();
 
+  evio::apps::CornersArgs corners;
+  std::string corners_format = "auto", corners_unit = "auto", corners_bad = "error";
+  double corners_frames_ms = -1;
+  CLI::App* corners_cmd = app.add_subcommand(
+      "corners", "eFAST corner events and corner tracks of a recording (Mueggler et al. BMVC 2017): corners.txt, "
+                 "tracks.txt, stats.json (events, corners, reduction rate, ns per event) and optional PNG overlays");
+  corners_cmd->add_option("DATASET", corners.dataset, "Dataset (any format evio reads)")->required();
+  corners_cmd->add_option("-o,--out", corners.out, "Output folder (created)")->required();
+  corners_cmd->add_option("--config", corners.config,
+                          "YAML with refractory, background_activity, efast, tracker and frames sections (README.md)");
+  corners_cmd->add_option("--calib", corners.calib,
+                          "Calibration (Kalibr camchain .yaml or ECD calib.txt); default: the dataset's own. Gives the "
+                          "sensor size and the undistortion of track positions");
+  corners_cmd->add_flag("--filter-sae", corners.filter_sae,
+                        "Filtered SAE: an event updates the SAE (and is tested) only when the pixel's latest event of "
+                        "its polarity is older than 50 ms (efast.filter_window_ms) or had the other polarity");
+  corners_cmd->add_option("--frames-every-ms", corners_frames_ms,
+                          "Write a PNG overlay (events, corners, tracks) every N ms of sensor time to DIR/frames/; "
+                          "0: none (default: the config's frames.every_ms, else none), ms")
+      ->check(CLI::NonNegativeNumber);
+  add_dataset_options(corners_cmd, &corners.dataset_options, &corners_format, &corners_unit, &corners_bad);
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -271,6 +295,12 @@ int main(int argc, char** argv) {
       conv.h5_time_unit = conv_h5_unit == "us" ? evio::TimeUnit::kMicroseconds : evio::TimeUnit::kNanoseconds;
       conv.progress = !quiet;
       return evio::apps::run_convert(conv, std::cout);
+    }
+    if (corners_cmd->parsed()) {
+      apply_dataset_strings(corners_format, corners_unit, corners_bad, &corners.dataset_options);
+      if (corners_frames_ms >= 0) corners.frames_every_ns = static_cast<int64_t>(std::llround(corners_frames_ms * 1e6));
+      corners.progress = !quiet;
+      return evio::apps::run_corners(corners, std::cout);
     }
     if (eval_cmd->parsed()) {
       eval.options.alignment.method = *evio::evaluation::alignment_from_name(eval_align);

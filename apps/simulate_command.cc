@@ -4,6 +4,7 @@
 // Wall-clock figures go to simulation.json only, so every other file is byte-identical for the
 // same config and seed.
 #include "simulate_command.h"
+#include "progress.h"
 
 #include <algorithm>
 #include <chrono>
@@ -252,27 +253,6 @@ size_t write_imu(const SimulationConfig& c, const fs::path& dir) {
   return imu.size();
 }
 
-// Throttled progress on stderr: fraction, events, ETA.
-class Progress {
- public:
-  explicit Progress(bool enabled) : enabled_(enabled), start_(clock::now()), last_(start_) {}
-  void update(double fraction, uint64_t events) {
-    if (!enabled_) return;
-    const auto now = clock::now();
-    if (now - last_ < std::chrono::seconds(1)) return;
-    last_ = now;
-    const double s = std::chrono::duration<double>(now - start_).count();
-    const double eta = fraction > 1e-6 ? s * (1.0 - fraction) / fraction : 0.0;
-    std::fprintf(stderr, "evio simulate: %5.1f%%, %llu events, %.0f s elapsed, ETA %.0f s\n", 100.0 * fraction,
-                 static_cast<unsigned long long>(events), s, eta);
-  }
-
- private:
-  using clock = std::chrono::steady_clock;
-  bool enabled_;
-  clock::time_point start_, last_;
-};
-
 }  // namespace
 
 void write_npy_float32(const std::string& path, const cv::Mat& image) {
@@ -332,7 +312,7 @@ int run_simulate(const SimulateArgs& args, std::ostream& out) {
   const int64_t span_ns = c.simulator.t_end_ns - c.simulator.t_begin_ns;
   const int64_t bin_ns = span_ns >= 1'000'000'000 ? 100'000'000 : std::max<int64_t>(1'000'000, span_ns / 10);
   FolderSink sink(c, dir, bin_ns);
-  Progress progress(args.progress);
+  Progress progress("evio simulate", args.progress, "events", 1.0);
   if (args.progress) {
     std::fprintf(stderr, "evio simulate: %s, %dx%d, %.3f s (%s)\n", c.scene->describe().c_str(), intr.width,
                  intr.height, c.duration_s, c.trajectory->describe().c_str());

@@ -78,6 +78,10 @@ class CornerTracker {
   std::vector<CornerTrack> finish();
 
   size_t active_tracks() const { return active_.size(); }
+  // Calls f on every active (not yet ended) track, e.g. to draw them.
+  void visit_active(const std::function<void(const CornerTrack&)>& f) const {
+    for (const Active& a : active_) f(a.track);
+  }
   const CornerTrackerStats& stats() const { return stats_; }
 
  private:

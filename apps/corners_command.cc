@@ -1,0 +1,402 @@
+#include "corners_command.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <ostream>
+#include <sstream>
+#include <vector>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <yaml-cpp/yaml.h>
+
+#include "evio/calib/calibration_io.h"
+#include "evio/calib/error.h"
+#include "evio/sensors/time.h"
+#include "progress.h"
+#include "yaml_config.h"
+
+namespace evio::apps {
+namespace {
+namespace fs = std::filesystem;
+using namespace yaml_config;  // NOLINT
+
+int64_t ms_to_ns(double ms) { return static_cast<int64_t>(std::llround(ms * 1e6)); }
+
+// Writes with a check at close: a full disk is an error naming the file, not a short file.
+class TextOut {
+ public:
+  explicit TextOut(const std::string& path) : path_(path), f_(std::fopen(path.c_str(), "wb")) {
+    if (!f_) throw InputError(path, 0, "cannot create the file", "a writable output folder");
+  }
+  ~TextOut() {
+    if (f_) std::fclose(f_);
+  }
+  std::FILE* get() { return f_; }
+  void close() {
+    const bool ok = std::ferror(f_) == 0;
+    const bool closed = std::fclose(f_) == 0;
+    f_ = nullptr;
+    if (!ok || !closed) throw InputError(path_, 0, "write failed (disk full?)", "a writable output folder");
+  }
+
+ private:
+  std::string path_;
+  std::FILE* f_;
+};
+
+struct TrackLengths {
+  size_t count = 0;
+  double mean = 0, median = 0, max = 0;  // corner events per track
+  double mean_duration_s = 0;
+};
+
+TrackLengths summarise(const std::vector<frontend::CornerTrack>& tracks) {
+  TrackLengths r;
+  r.count = tracks.size();
+  if (tracks.empty()) return r;
+  std::vector<double> len;
+  double dur = 0;
+  for (const auto& t : tracks) {
+    len.push_back(static_cast<double>(t.points.size()));
+    dur += static_cast<double>(t.t_end_ns() - t.t_begin_ns()) * 1e-9;
+  }
+  std::sort(len.begin(), len.end());
+  for (double l : len) r.mean += l;
+  r.mean /= static_cast<double>(len.size());
+  const size_t n = len.size();
+  r.median = n % 2 ? len[n / 2] : 0.5 * (len[n / 2 - 1] + len[n / 2]);
+  r.max = len.back();
+  r.mean_duration_s = dur / static_cast<double>(n);
+  return r;
+}
+
+std::string json_number(double v) {
+  if (!std::isfinite(v)) return "null";
+  char b[40];
+  std::snprintf(b, sizeof(b), "%.17g", v);
+  return b;
+}
+
+}  // namespace
+
+CornersConfig load_corners_config(const std::string& path) {
+  const std::string expected = "a corners config YAML (see README.md, `evio corners`)";
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError(path, 0, "cannot open the config file", expected);
+  std::stringstream text;
+  text << in.rdbuf();
+  CornersConfig c;
+  YAML::Node root;
+  try {
+    root = YAML::Load(text.str());
+  } catch (const YAML::Exception& e) {
+    throw InputError(path, static_cast<int64_t>(e.mark.line) + 1, "YAML error: " + e.msg, expected);
+  }
+  if (root.IsNull()) return c;
+  const Parser parser(path, {});
+  if (!root.IsMap()) parser.fail(root, "", "is not a map", expected);
+  try {
+    const Section top(&parser, root, "");
+    top.allow({"refractory", "background_activity", "efast", "tracker", "frames"});
+    if (top.has("refractory")) {
+      const Section s = top.child("refractory", false, "a map");
+      s.allow({"enabled", "period_ms", "per_polarity"});
+      c.refractory_enabled = s.boolean("enabled", true);
+      c.refractory.period_ns = ms_to_ns(s.number("period_ms", c.refractory.period_ns * 1e-6, Range::kNonNegative, "ms"));
+      c.refractory.per_polarity = s.boolean("per_polarity", c.refractory.per_polarity);
+    }
+    if (top.has("background_activity")) {
+      const Section s = top.child("background_activity", false, "a map");
+      s.allow({"enabled", "window_ms", "radius", "min_support"});
+      c.background_activity_enabled = s.boolean("enabled", true);
+      c.background_activity.window_ns =
+          ms_to_ns(s.number("window_ms", c.background_activity.window_ns * 1e-6, Range::kPositive, "ms"));
+      c.background_activity.radius = s.integer("radius", c.background_activity.radius, 1, 3);
+      const int r = c.background_activity.radius;
+      c.background_activity.min_support =
+          s.integer("min_support", c.background_activity.min_support, 1, (2 * r + 1) * (2 * r + 1) - 1);
+    }
+    if (top.has("efast")) {
+      const Section s = top.child("efast", false, "a map");
+      s.allow({"filter_sae", "filter_window_ms"});
+      c.efast.filter_sae = s.boolean("filter_sae", c.efast.filter_sae);
+      c.efast.filter_window_ns = ms_to_ns(s.number("filter_window_ms", c.efast.filter_window_ns * 1e-6, Range::kNonNegative, "ms"));
+    }
+    if (top.has("tracker")) {
+      const Section s = top.child("tracker", false, "a map");
+      s.allow({"enabled", "max_distance_px", "max_gap_ms", "position_gain", "velocity_window_ms",
+               "min_velocity_span_ms", "min_length"});
+      auto& t = c.tracker;
+      c.tracks = s.boolean("enabled", true);
+      t.max_distance_px = s.number("max_distance_px", t.max_distance_px, Range::kPositive, "px");
+      t.max_gap_ns = ms_to_ns(s.number("max_gap_ms", t.max_gap_ns * 1e-6, Range::kPositive, "ms"));
+      t.position_gain = s.number("position_gain", t.position_gain, Range::kUnit, "");
+      t.velocity_window_ns = ms_to_ns(s.number("velocity_window_ms", t.velocity_window_ns * 1e-6, Range::kPositive, "ms"));
+      t.min_velocity_span_ns =
+          ms_to_ns(s.number("min_velocity_span_ms", t.min_velocity_span_ns * 1e-6, Range::kPositive, "ms"));
+      t.min_length = static_cast<size_t>(s.integer("min_length", static_cast<int>(t.min_length), 1, 1000000));
+      std::string why;
+      if (!t.Validate(&why)) s.fail("invalid tracker settings: " + why, "consistent tracker settings");
+    }
+    if (top.has("frames")) {
+      const Section s = top.child("frames", false, "a map");
+      s.allow({"every_ms", "window_ms", "scale", "track_history_ms"});
+      c.frames_every_ns = ms_to_ns(s.number("every_ms", 0.0, Range::kNonNegative, "ms"));
+      c.frame_window_ns = ms_to_ns(s.number("window_ms", c.frame_window_ns * 1e-6, Range::kPositive, "ms"));
+      c.frame_scale = s.integer("scale", c.frame_scale, 1, 8);
+      c.frame_track_history_ns =
+          ms_to_ns(s.number("track_history_ms", c.frame_track_history_ns * 1e-6, Range::kNonNegative, "ms"));
+    }
+  } catch (const YAML::Exception& e) {
+    throw InputError(path, static_cast<int64_t>(e.mark.line) + 1, "YAML error: " + e.msg, expected);
+  }
+  return c;
+}
+
+namespace {
+
+// Overlay of one window: events (ON white, OFF black on grey), corner events of the window
+// (green circles) and the recent part of every track (yellow polylines, red head).
+class OverlayWriter {
+ public:
+  OverlayWriter(std::string dir, int w, int h, const CornersConfig& c) : dir_(std::move(dir)), w_(w), h_(h), c_(c) {
+    fs::create_directories(dir_);
+    reset_image();
+  }
+  int64_t next_frame_ns = 0;
+  int written = 0;
+
+  void add_event(const Event& e) {
+    if (e.t_ns < next_frame_ns - c_.frame_window_ns) return;
+    img_.at<uint8_t>(e.y, e.x) = e.polarity > 0 ? 255 : 0;
+  }
+  void add_corner(const Event& e) {
+    if (e.t_ns >= next_frame_ns - c_.frame_window_ns) corners_.push_back(e);
+  }
+  // Writes the overlay for time next_frame_ns; tracks are the tracker's active ones.
+  void write(const frontend::CornerTracker* tracker) {
+    cv::Mat big;
+    cv::resize(img_, big, cv::Size(w_ * c_.frame_scale, h_ * c_.frame_scale), 0, 0, cv::INTER_NEAREST);
+    cv::Mat color;
+    cv::cvtColor(big, color, cv::COLOR_GRAY2BGR);
+    const double s = c_.frame_scale;
+    auto P = [s](double x, double y) { return cv::Point(static_cast<int>(std::lround((x + 0.5) * s)), static_cast<int>(std::lround((y + 0.5) * s))); };
+    for (const Event& e : corners_) cv::circle(color, P(e.x, e.y), static_cast<int>(2 * s), cv::Scalar(0, 200, 0), 1, cv::LINE_AA);
+    if (tracker) {
+      tracker->visit_active([&](const frontend::CornerTrack& t) {
+        std::vector<cv::Point> pts;
+        for (auto it = t.points.rbegin(); it != t.points.rend() && next_frame_ns - it->t_ns <= c_.frame_track_history_ns; ++it) {
+          pts.push_back(P(it->x, it->y));
+        }
+        if (pts.size() < 2) return;
+        cv::polylines(color, pts, false, cv::Scalar(0, 220, 255), 1, cv::LINE_AA);
+        cv::circle(color, pts.front(), 2, cv::Scalar(0, 0, 255), cv::FILLED);
+      });
+    }
+    char name[64];
+    std::snprintf(name, sizeof(name), "frame_%06d.png", written);
+    const std::string path = (fs::path(dir_) / name).string();
+    if (!cv::imwrite(path, color)) throw InputError(path, 0, "cannot write the PNG", "a writable output folder");
+    ++written;
+    reset_image();
+  }
+
+ private:
+  void reset_image() {
+    img_ = cv::Mat(h_, w_, CV_8UC1, cv::Scalar(128));
+    corners_.clear();
+  }
+  std::string dir_;
+  int w_, h_;
+  const CornersConfig& c_;
+  cv::Mat img_;
+  std::vector<Event> corners_;
+};
+
+}  // namespace
+
+int run_corners(const CornersArgs& args, std::ostream& out) {
+  CornersConfig cfg = args.config.empty() ? CornersConfig{} : load_corners_config(args.config);
+  if (args.filter_sae) cfg.efast.filter_sae = true;
+  if (args.frames_every_ns >= 0) cfg.frames_every_ns = args.frames_every_ns;
+
+  auto reader = open_dataset(args.dataset, args.dataset_options);
+  // Sensor size and camera from the calibration (--calib, else the dataset's own), never assumed.
+  std::optional<calib::CameraCalibration> cal;
+  if (!args.calib.empty()) {
+    const bool yaml = fs::path(args.calib).extension() == ".yaml" || fs::path(args.calib).extension() == ".yml";
+    if (yaml) {
+      const auto cams = calib::load_kalibr_camchain(args.calib);
+      cal = cams.front();
+    } else {
+      const SensorSize s = reader->sensor_size();
+      cal = calib::load_ecd_calib(args.calib, s.known() ? s.width : 240, s.known() ? s.height : 180);
+    }
+  } else {
+    cal = reader->read_calibration();
+  }
+  SensorSize sensor = reader->sensor_size();
+  if (cal) sensor = {cal->camera.width(), cal->camera.height()};
+  if (!sensor.known()) {
+    throw InputError(args.dataset, 0, "the sensor size is unknown (no calibration in the dataset)",
+                     "--calib FILE (Kalibr camchain YAML or ECD calib.txt) or --sensor WxH");
+  }
+  std::unique_ptr<frontend::EventUndistorter> undistorter;
+  if (cal) undistorter = std::make_unique<frontend::EventUndistorter>(cal->camera);
+
+  fs::create_directories(args.out);
+  frontend::RefractoryFilter refractory(sensor.width, sensor.height, cfg.refractory);
+  frontend::BackgroundActivityFilter background(sensor.width, sensor.height, cfg.background_activity);
+  frontend::EfastDetector detector(sensor.width, sensor.height, cfg.efast);
+  std::unique_ptr<frontend::CornerTracker> tracker;
+  if (cfg.tracks) tracker = std::make_unique<frontend::CornerTracker>(sensor.width, sensor.height, cfg.tracker);
+  std::unique_ptr<OverlayWriter> overlay;
+  if (cfg.frames_every_ns > 0) {
+    overlay = std::make_unique<OverlayWriter>((fs::path(args.out) / "frames").string(), sensor.width, sensor.height, cfg);
+  }
+
+  TextOut corners_file((fs::path(args.out) / "corners.txt").string());
+  bool zero_one = true;  // polarity convention of the input, known after the first chunk
+  std::fputs("# t[s] x y p   (eFAST corner events, polarity as in the input)\n", corners_file.get());
+
+  std::vector<frontend::CornerTrack> tracks;
+  Progress progress("evio corners", args.progress, "events");
+  EventBuffer chunk;
+  int64_t events = 0, outside = 0, corners = 0;
+  int64_t t_first = 0, t_last = 0;
+  double processing_s = 0, overlay_s = 0;  // overlay drawing/PNG time is not processing time
+  bool first_chunk = true;
+  char line[96];
+  for (;;) {
+    chunk.clear();
+    const size_t got = reader->read_events(&chunk, size_t{1} << 20);
+    if (got == 0) break;
+    if (first_chunk) {
+      zero_one = reader->event_report().polarity != PolarityConvention::kMinusPlusOne;
+      t_first = chunk.front().t_ns;
+      if (overlay) overlay->next_frame_ns = t_first + cfg.frames_every_ns;
+      first_chunk = false;
+    }
+    t_last = chunk.back().t_ns;
+    const auto t0 = std::chrono::steady_clock::now();
+    for (const Event& e : chunk.span()) {
+      ++events;
+      if (e.x >= sensor.width || e.y >= sensor.height) {
+        ++outside;
+        continue;
+      }
+      if (overlay) {
+        while (e.t_ns >= overlay->next_frame_ns) {
+          const auto w0 = std::chrono::steady_clock::now();
+          overlay->write(tracker.get());
+          overlay->next_frame_ns += cfg.frames_every_ns;
+          overlay_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - w0).count();
+        }
+        overlay->add_event(e);
+      }
+      if (undistorter && !undistorter->valid(e.x, e.y)) continue;
+      if (cfg.refractory_enabled && !refractory.accept(e)) continue;
+      if (cfg.background_activity_enabled && !background.accept(e)) continue;
+      if (!detector.process(e)) continue;
+      ++corners;
+      char* end = format_seconds(e.t_ns, line);
+      *end = '\0';
+      std::fprintf(corners_file.get(), "%s %d %d %d\n", line, e.x, e.y, e.polarity > 0 ? 1 : (zero_one ? 0 : -1));
+      if (overlay) overlay->add_corner(e);
+      if (tracker) {
+        tracker->add(e);
+        for (auto& t : tracker->take_finished()) tracks.push_back(std::move(t));
+      }
+    }
+    processing_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    progress.update(reader->progress(), events, std::to_string(corners) + " corners");
+  }
+  corners_file.close();
+  if (tracker) {
+    for (auto& t : tracker->finish()) tracks.push_back(std::move(t));
+    std::sort(tracks.begin(), tracks.end(), [](const auto& a, const auto& b) { return a.id < b.id; });
+  }
+  if (overlay && events > 0) overlay->write(nullptr);
+
+  // tracks.txt: one line per track point.
+  if (tracker) {
+    TextOut f((fs::path(args.out) / "tracks.txt").string());
+    std::fputs(cal ? "# track_id t[s] x y x_undistorted y_undistorted   (px; smoothed track positions)\n"
+                   : "# track_id t[s] x y   (px; smoothed track positions)\n",
+               f.get());
+    for (const auto& t : tracks) {
+      for (const auto& p : t.points) {
+        *format_seconds(p.t_ns, line) = '\0';
+        std::fprintf(f.get(), "%lld %s %.3f %.3f", static_cast<long long>(t.id), line, p.x, p.y);
+        if (cal) {
+          const auto& k = cal->camera.intrinsics();
+          Eigen::Vector2d n;
+          if (cal->camera.undistort(Eigen::Vector2d((p.x - k.cx) / k.fx, (p.y - k.cy) / k.fy), &n)) {
+            std::fprintf(f.get(), " %.3f %.3f", k.fx * n.x() + k.cx, k.fy * n.y() + k.cy);
+          } else {
+            std::fputs(" nan nan", f.get());
+          }
+        }
+        std::fputc('\n', f.get());
+      }
+    }
+    f.close();
+  }
+
+  const double duration_s = events > 1 ? static_cast<double>(t_last - t_first) * 1e-9 : 0.0;
+  const TrackLengths tl = summarise(tracks);
+  const frontend::EfastStats& es = detector.stats();
+  const double reduction = corners > 0 ? static_cast<double>(events) / static_cast<double>(corners) : 0.0;
+  const double ns_per_event = events > 0 ? (processing_s - overlay_s) * 1e9 / static_cast<double>(events) : 0.0;
+  const double corner_rate = duration_s > 0 ? static_cast<double>(corners) / duration_s : 0.0;
+  {
+    TextOut f((fs::path(args.out) / "stats.json").string());
+    std::ostringstream j;
+    j << "{\n  \"dataset\": \"" << args.dataset << "\",\n  \"sensor\": [" << sensor.width << ", " << sensor.height
+      << "],\n  \"events\": " << events << ",\n  \"events_outside_sensor\": " << outside
+      << ",\n  \"corners\": " << corners << ",\n  \"reduction_rate\": " << json_number(reduction)
+      << ",\n  \"ns_per_event\": " << json_number(ns_per_event) << ",\n  \"duration_s\": " << json_number(duration_s)
+      << ",\n  \"corners_per_second\": " << json_number(corner_rate) << ",\n  \"filters\": {\"refractory\": "
+      << (cfg.refractory_enabled ? std::to_string(refractory.stats().passed) : "null")
+      << ", \"background_activity\": "
+      << (cfg.background_activity_enabled ? std::to_string(background.stats().passed) : "null")
+      << "},\n  \"efast\": {\"filter_sae\": " << (cfg.efast.filter_sae ? "true" : "false") << ", \"tested\": " << es.tested
+      << ", \"inner_passed\": " << es.inner_passed << ", \"outer_share\": "
+      << json_number(es.tested > 0 ? static_cast<double>(es.inner_passed) / static_cast<double>(es.tested) : 0.0)
+      << "},\n  \"tracks\": {\"count\": " << tl.count << ", \"mean_length\": " << json_number(tl.mean)
+      << ", \"median_length\": " << json_number(tl.median) << ", \"max_length\": " << json_number(tl.max)
+      << ", \"mean_duration_s\": " << json_number(tl.mean_duration_s) << "},\n  \"frames_written\": "
+      << (overlay ? overlay->written : 0) << "\n}\n";
+    std::fputs(j.str().c_str(), f.get());
+    f.close();
+  }
+
+  char buf[512];
+  std::snprintf(buf, sizeof(buf),
+                "events        %lld over %.3f s (sensor %dx%d%s)\n"
+                "corners       %lld (reduction %.1fx, %.0f corners/s, outer circle reached by %.1f%% of tested events)\n"
+                "speed         %.1f ns/event (filters + eFAST + tracker + corner output, one core; reading excluded)\n",
+                static_cast<long long>(events), duration_s, sensor.width, sensor.height,
+                cal ? ", calibrated" : ", no calibration", static_cast<long long>(corners), reduction, corner_rate,
+                es.tested > 0 ? 100.0 * static_cast<double>(es.inner_passed) / static_cast<double>(es.tested) : 0.0,
+                ns_per_event);
+  out << buf;
+  if (tracker) {
+    std::snprintf(buf, sizeof(buf), "tracks        %zu (>= %zu corner events): length mean %.1f, median %.0f, max %.0f; mean duration %.3f s\n",
+                  tl.count, cfg.tracker.min_length, tl.mean, tl.median, tl.max, tl.mean_duration_s);
+    out << buf;
+  }
+  if (outside > 0) out << "warning       " << outside << " events outside the " << sensor.width << "x" << sensor.height << " sensor were skipped\n";
+  out << "wrote " << args.out << "/corners.txt" << (tracker ? ", tracks.txt" : "") << ", stats.json";
+  if (overlay) out << ", frames/ (" << overlay->written << " PNG)";
+  out << "\n";
+  return 0;
+}
+
+}  // namespace evio::apps
