@@ -103,7 +103,7 @@ CornersConfig load_corners_config(const std::string& path) {
   if (!root.IsMap()) parser.fail(root, "", "is not a map", expected);
   try {
     const Section top(&parser, root, "");
-    top.allow({"refractory", "background_activity", "efast", "tracker", "frames"});
+    top.allow({"refractory", "background_activity", "efast", "tracker", "dart", "frames"});
     if (top.has("refractory")) {
       const Section s = top.child("refractory", false, "a map");
       s.allow({"enabled", "period_ms", "per_polarity"});
@@ -131,7 +131,7 @@ CornersConfig load_corners_config(const std::string& path) {
     if (top.has("tracker")) {
       const Section s = top.child("tracker", false, "a map");
       s.allow({"enabled", "max_distance_px", "max_gap_ms", "position_gain", "velocity_window_ms",
-               "min_velocity_span_ms", "min_length"});
+               "min_velocity_span_ms", "min_length", "descriptors", "descriptor_ratio", "max_descriptor_distance"});
       auto& t = c.tracker;
       c.tracks = s.boolean("enabled", true);
       t.max_distance_px = s.number("max_distance_px", t.max_distance_px, Range::kPositive, "px");
@@ -141,8 +141,27 @@ CornersConfig load_corners_config(const std::string& path) {
       t.min_velocity_span_ns =
           ms_to_ns(s.number("min_velocity_span_ms", t.min_velocity_span_ns * 1e-6, Range::kPositive, "ms"));
       t.min_length = static_cast<size_t>(s.integer("min_length", static_cast<int>(t.min_length), 1, 1000000));
+      c.descriptors = s.boolean("descriptors", c.descriptors);
+      t.descriptor_ratio = s.number("descriptor_ratio", t.descriptor_ratio, Range::kUnit, "");
+      if (s.has("max_descriptor_distance")) {
+        t.max_descriptor_distance = s.number("max_descriptor_distance", 0.0, Range::kNonNegative, "DART distance, 0..1.414");
+      }
       std::string why;
       if (!t.Validate(&why)) s.fail("invalid tracker settings: " + why, "consistent tracker settings");
+    }
+    if (top.has("dart")) {
+      const Section s = top.child("dart", false, "a map");
+      s.allow({"window_ms", "rings", "wedges", "inner_radius_px", "outer_radius_px", "polarity"});
+      auto& d = c.dart;
+      d.window_ns = ms_to_ns(s.number("window_ms", d.window_ns * 1e-6, Range::kNonNegative, "ms"));
+      d.rings = s.integer("rings", d.rings, 1, frontend::kDartMaxRings);
+      d.wedges = s.integer("wedges", d.wedges, 1, frontend::kDartMaxWedges);
+      d.inner_radius_px = s.number("inner_radius_px", d.inner_radius_px, Range::kPositive, "px");
+      d.outer_radius_px = s.number("outer_radius_px", d.outer_radius_px, Range::kPositive, "px");
+      d.polarity = s.string("polarity", "both", {"both", "same"}) == "same" ? frontend::DartPolarity::kSame
+                                                                          : frontend::DartPolarity::kBoth;
+      std::string why;
+      if (!d.Validate(&why)) s.fail("invalid DART settings: " + why, "consistent DART settings");
     }
     if (top.has("frames")) {
       const Section s = top.child("frames", false, "a map");
@@ -256,6 +275,10 @@ int run_corners(const CornersArgs& args, std::ostream& out) {
   frontend::EfastDetector detector(sensor.width, sensor.height, cfg.efast);
   std::unique_ptr<frontend::CornerTracker> tracker;
   if (cfg.tracks) tracker = std::make_unique<frontend::CornerTracker>(sensor.width, sensor.height, cfg.tracker);
+  std::unique_ptr<frontend::DartExtractor> dart;
+  if (cfg.tracks && cfg.descriptors) dart = std::make_unique<frontend::DartExtractor>(cfg.dart);
+  frontend::DartDescriptor descriptor;
+  int64_t descriptors = 0;
   std::unique_ptr<OverlayWriter> overlay;
   if (cfg.frames_every_ns > 0) {
     overlay = std::make_unique<OverlayWriter>((fs::path(args.out) / "frames").string(), sensor.width, sensor.height, cfg);
@@ -310,7 +333,9 @@ int run_corners(const CornersArgs& args, std::ostream& out) {
       std::fprintf(corners_file.get(), "%s %d %d %d\n", line, e.x, e.y, e.polarity > 0 ? 1 : (zero_one ? 0 : -1));
       if (overlay) overlay->add_corner(e);
       if (tracker) {
-        tracker->add(e);
+        const bool has = dart && dart->compute(detector.sae(), e.x, e.y, e.t_ns, e.polarity, &descriptor);
+        descriptors += has;
+        tracker->add(e, has ? &descriptor : nullptr);
         for (auto& t : tracker->take_finished()) tracks.push_back(std::move(t));
       }
     }
@@ -369,7 +394,8 @@ int run_corners(const CornersArgs& args, std::ostream& out) {
       << "},\n  \"efast\": {\"filter_sae\": " << (cfg.efast.filter_sae ? "true" : "false") << ", \"tested\": " << es.tested
       << ", \"inner_passed\": " << es.inner_passed << ", \"outer_share\": "
       << json_number(es.tested > 0 ? static_cast<double>(es.inner_passed) / static_cast<double>(es.tested) : 0.0)
-      << "},\n  \"tracks\": {\"count\": " << tl.count << ", \"mean_length\": " << json_number(tl.mean)
+      << "},\n  \"descriptors\": " << descriptors << ",\n  \"descriptor_decisions\": "
+      << (tracker ? tracker->stats().descriptor_decisions : 0) << ",\n  \"tracks\": {\"count\": " << tl.count << ", \"mean_length\": " << json_number(tl.mean)
       << ", \"median_length\": " << json_number(tl.median) << ", \"max_length\": " << json_number(tl.max)
       << ", \"mean_duration_s\": " << json_number(tl.mean_duration_s) << "},\n  \"frames_written\": "
       << (overlay ? overlay->written : 0) << "\n}\n";
@@ -381,11 +407,11 @@ int run_corners(const CornersArgs& args, std::ostream& out) {
   std::snprintf(buf, sizeof(buf),
                 "events        %lld over %.3f s (sensor %dx%d%s)\n"
                 "corners       %lld (reduction %.1fx, %.0f corners/s, outer circle reached by %.1f%% of tested events)\n"
-                "speed         %.1f ns/event (filters + eFAST + tracker + corner output, one core; reading excluded)\n",
+                "speed         %.1f ns/event (filters + eFAST%s + corner output, one core; reading excluded)\n",
                 static_cast<long long>(events), duration_s, sensor.width, sensor.height,
                 cal ? ", calibrated" : ", no calibration", static_cast<long long>(corners), reduction, corner_rate,
                 es.tested > 0 ? 100.0 * static_cast<double>(es.inner_passed) / static_cast<double>(es.tested) : 0.0,
-                ns_per_event);
+                ns_per_event, tracker ? (dart ? " + DART + tracker" : " + tracker") : "");
   out << buf;
   if (tracker) {
     std::snprintf(buf, sizeof(buf), "tracks        %zu (>= %zu corner events): length mean %.1f, median %.0f, max %.0f; mean duration %.3f s\n",

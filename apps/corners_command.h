@@ -8,6 +8,7 @@
 #include <string>
 
 #include "evio/frontend/corner_tracker.h"
+#include "evio/frontend/dart.h"
 #include "evio/frontend/efast.h"
 #include "evio/frontend/event_filters.h"
 #include "evio/sensors/dataset.h"
@@ -22,7 +23,9 @@ struct CornersConfig {
   frontend::BackgroundActivityFilterOptions background_activity;  // background_activity.{window_ms, radius, min_support}
   frontend::EfastOptions efast;                   // efast.{filter_sae, filter_window_ms}
   bool tracks = true;                             // tracker.enabled
-  frontend::CornerTrackerOptions tracker;         // tracker.{max_distance_px, max_gap_ms, position_gain, velocity_window_ms, min_velocity_span_ms, min_length}
+  frontend::CornerTrackerOptions tracker;         // tracker.{max_distance_px, max_gap_ms, position_gain, velocity_window_ms, min_velocity_span_ms, min_length, descriptor_ratio, max_descriptor_distance}
+  bool descriptors = true;                        // tracker.descriptors: DART per corner event for the tracker
+  frontend::DartOptions dart;                     // dart.{window_ms, rings, wedges, inner_radius_px, outer_radius_px, polarity}
   int64_t frames_every_ns = 0;                    // frames.every_ms: overlay period (0: none)
   int64_t frame_window_ns = 10'000'000;           // frames.window_ms: events shown per overlay
   int frame_scale = 2;                            // frames.scale: pixel magnification of overlays

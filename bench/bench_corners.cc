@@ -16,6 +16,8 @@
 #include <benchmark/benchmark.h>
 
 #include "evio/calib/calibration_io.h"
+#include "evio/frontend/corner_tracker.h"
+#include "evio/frontend/dart.h"
 #include "evio/frontend/efast.h"
 #include "evio/frontend/event_filters.h"
 #include "evio/sensors/ecd.h"
@@ -199,11 +201,36 @@ void BM_Chain(benchmark::State& state) {
   finish(state, in.events.size());
 }
 
+// The chain of `evio corners`: lookup, both filters, eFAST, and per corner event a DART
+// descriptor (state.range(0) = 1) and the tracker.
+void BM_ChainWithTracks(benchmark::State& state) {
+  const Input& in = input();
+  const evio::frontend::EventUndistorter und{evio::calib::PinholeCamera(in.intrinsics)};
+  const evio::frontend::DartExtractor dart{evio::frontend::DartOptions{}};
+  evio::frontend::DartDescriptor d;
+  int64_t tracks = 0;
+  for (auto _ : state) {
+    evio::frontend::RefractoryFilter refr(in.width, in.height);
+    evio::frontend::BackgroundActivityFilter ba(in.width, in.height);
+    evio::frontend::EfastDetector det(in.width, in.height);
+    evio::frontend::CornerTracker tracker(in.width, in.height);
+    for (const Event& e : in.events) {
+      if (!und.valid(e.x, e.y) || !refr.accept(e) || !ba.accept(e) || !det.process(e)) continue;
+      const bool has = state.range(0) != 0 && dart.compute(det.sae(), e.x, e.y, e.t_ns, e.polarity, &d);
+      tracker.add(e, has ? &d : nullptr);
+    }
+    tracks = static_cast<int64_t>(tracker.finish().size());
+  }
+  state.counters["tracks"] = static_cast<double>(tracks);
+  finish(state, in.events.size());
+}
+
 BENCHMARK(BM_UndistortAndFilters)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_SaeUpdate)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Efast)->Arg(0)->Arg(1)->ArgName("filter_sae")->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_EfastExhaustiveScan)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Chain)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_ChainWithTracks)->Arg(0)->Arg(1)->ArgName("dart")->Unit(benchmark::kMillisecond);
 
 }  // namespace
 

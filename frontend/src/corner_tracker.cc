@@ -107,7 +107,7 @@ void CornerTracker::expire(int64_t t_ns) {
   last_expire_ns_ = t_ns;
 }
 
-int64_t CornerTracker::add(const Event& corner, int64_t descriptor) {
+int64_t CornerTracker::add(const Event& corner, const DartDescriptor* descriptor) {
   ++stats_.corners;
   const int64_t t = corner.t_ns;
   if (last_expire_ns_ == std::numeric_limits<int64_t>::min() || t - last_expire_ns_ > options_.max_gap_ns / 4) expire(t);
@@ -141,16 +141,17 @@ int64_t CornerTracker::add(const Event& corner, int64_t descriptor) {
       }
     }
   }
-  if (distance_ && descriptor >= 0 && n > 0) {
+  if (descriptor != nullptr && n > 0) {
     // Descriptor gate, then the ratio test among what remains (nearest first otherwise).
     float dist[8];
     int m = 0;
     for (int i = 0; i < n; ++i) {
       const Active& a = active_[cand[i].slot];
-      const float d = a.descriptor >= 0 ? distance_(descriptor, a.descriptor) : 0.f;
-      if (a.descriptor >= 0 && !(d <= options_.max_descriptor_distance)) continue;
+      const float d = a.has_descriptor ? dart_distance_aligned(*descriptor, a.descriptor)
+                                       : std::numeric_limits<float>::infinity();
+      if (a.has_descriptor && !(d <= options_.max_descriptor_distance)) continue;
       cand[m] = cand[i];
-      dist[m++] = a.descriptor >= 0 ? d : std::numeric_limits<float>::infinity();
+      dist[m++] = d;
     }
     n = m;
     if (n > 1) {
@@ -173,7 +174,10 @@ int64_t CornerTracker::add(const Event& corner, int64_t descriptor) {
     Active a;
     a.track.id = next_id_++;
     a.position = z;
-    a.descriptor = descriptor;
+    if (descriptor != nullptr) {
+      a.descriptor = *descriptor;
+      a.has_descriptor = true;
+    }
     p.x = static_cast<float>(z.x());
     p.y = static_cast<float>(z.y());
     a.track.points.push_back(p);
@@ -185,7 +189,10 @@ int64_t CornerTracker::add(const Event& corner, int64_t descriptor) {
   Active& a = active_[chosen];
   const Eigen::Vector2d pred = predict(a, t);
   a.position = pred + options_.position_gain * (z - pred);
-  if (descriptor >= 0) a.descriptor = descriptor;
+  if (descriptor != nullptr) {
+    a.descriptor = *descriptor;
+    a.has_descriptor = true;
+  }
   p.x = static_cast<float>(a.position.x());
   p.y = static_cast<float>(a.position.y());
   a.track.points.push_back(p);

@@ -189,6 +189,21 @@ bool DartExtractor::compute(const SurfaceOfActiveEvents& sae, int x, int y, int6
   return true;
 }
 
+float dart_distance_aligned(const DartDescriptor& a, const DartDescriptor& b) {
+  if (a.rings != b.rings || a.wedges != b.wedges || a.rings <= 0 || a.wedges <= 0) {
+    return std::numeric_limits<float>::infinity();
+  }
+  const int n = a.rings * a.wedges;
+  float dot = 0.0f, sa = 0.0f, sb = 0.0f;
+  for (int i = 0; i < n; ++i) {
+    dot += a.bins[static_cast<size_t>(i)] * b.bins[static_cast<size_t>(i)];
+    sa += a.bins[static_cast<size_t>(i)] * a.bins[static_cast<size_t>(i)];
+    sb += b.bins[static_cast<size_t>(i)] * b.bins[static_cast<size_t>(i)];
+  }
+  if (!(sa > 0.0f) || !(sb > 0.0f)) return std::sqrt(2.0f);
+  return std::sqrt(std::max(0.0f, 2.0f - 2.0f * dot / std::sqrt(sa * sb)));
+}
+
 float dart_distance(const DartDescriptor& a, const DartDescriptor& b, DartShift* best) {
   const float inf = std::numeric_limits<float>::infinity();
   if (a.rings != b.rings || a.wedges != b.wedges || a.rings <= 0 || a.wedges <= 0) {

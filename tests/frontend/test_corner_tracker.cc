@@ -78,21 +78,27 @@ TEST(CornerTracker, GapEndsATrackAndShortTracksAreNotReported) {
 
 // Two corners crossing head-on at 400 px/s each, firing every 0.5 ms with +-1 px jitter. Track
 // identity through the crossing: the fraction of each track's events that belong to its corner.
+// Two distinct DART-shaped descriptors: corner k's pattern fills wedges 6k..6k+3 of every ring.
+DartDescriptor pattern(int k) {
+  DartDescriptor d;
+  d.rings = 7;
+  d.wedges = 12;
+  for (int r = 0; r < 7; ++r)
+    for (int w = 6 * k; w < 6 * k + 4; ++w) d.bins[static_cast<size_t>(r * 12 + w)] = 1.0f;
+  return d;
+}
+
 double crossing_purity(bool with_descriptors, int64_t* decisions) {
   const std::vector<Truth> truths = {{{40, 80}, {400, 0}}, {{200, 80}, {-400, 0}}};
   const auto stream = corner_stream(truths, 400'000'000, 500'000, 1.0, 5);
   CornerTrackerOptions o;
   o.min_length = 1;
   CornerTracker t(240, 180, o);
-  std::vector<int> truth_of(stream.size());
-  if (with_descriptors) {
-    // A descriptor that tells the two corners apart (distance 0.1 same, 0.4 other).
-    t.set_descriptor_distance([&](int64_t a, int64_t b) { return truth_of[a] == truth_of[b] ? 0.1f : 0.4f; });
-  }
+  const DartDescriptor looks[2] = {pattern(0), pattern(1)};  // aligned distance: 0 same, sqrt(2) other
   std::map<int64_t, std::map<int, int>> votes;
   for (size_t i = 0; i < stream.size(); ++i) {
-    truth_of[i] = stream[i].second;
-    votes[t.add(stream[i].first, with_descriptors ? static_cast<int64_t>(i) : -1)][stream[i].second]++;
+    const int k = stream[i].second;
+    votes[t.add(stream[i].first, with_descriptors ? &looks[k] : nullptr)][k]++;
   }
   int majority = 0, total = 0;
   for (const auto& [id, v] : votes) {
@@ -125,10 +131,11 @@ TEST(CornerTracker, DescriptorGateStartsATrackForADifferentLookingCorner) {
   o.min_length = 1;
   o.max_descriptor_distance = 0.5;
   CornerTracker t(240, 180, o);
-  t.set_descriptor_distance([](int64_t a, int64_t b) { return (a % 2) == (b % 2) ? 0.1f : 1.0f; });
-  const int64_t a = t.add({0, 100, 80, 1}, 0);
-  EXPECT_EQ(t.add({100'000, 101, 80, 1}, 2), a);  // looks the same: joins
-  EXPECT_NE(t.add({200'000, 102, 80, 1}, 1), a);  // looks different, 2 px away: its own track
+  const DartDescriptor p0 = pattern(0), p1 = pattern(1);
+  EXPECT_NEAR(dart_distance_aligned(p0, p1), std::sqrt(2.0f), 1e-6);
+  const int64_t a = t.add({0, 100, 80, 1}, &p0);
+  EXPECT_EQ(t.add({100'000, 101, 80, 1}, &p0), a);  // looks the same: joins
+  EXPECT_NE(t.add({200'000, 102, 80, 1}, &p1), a);  // looks different, 2 px away: its own track
   EXPECT_EQ(t.stats().tracks_started, 2);
 }
 

@@ -10,6 +10,7 @@
 
 #include "corner_ground_truth.h"
 #include "evio/frontend/corner_tracker.h"
+#include "evio/frontend/dart.h"
 #include "evio/frontend/efast.h"
 
 namespace evio::frontend {
@@ -73,18 +74,42 @@ TrackScore score_tracks(const CornerGroundTruthSequence& seq, const std::vector<
   return s;
 }
 
-TEST(CornerTracksSimulated, AccuracyAndLengthAgainstProjectedCorners) {
-  const CornerGroundTruthSequence seq;
+struct TrackRun {
+  TrackScore score;
+  CornerTrackerStats stats;
+};
+
+TrackRun run_tracker(const CornerGroundTruthSequence& seq, bool dart) {
   EfastDetector det(seq.width(), seq.height());
   CornerTracker tracker(seq.width(), seq.height());
+  const DartExtractor extractor{DartOptions{}};
+  DartDescriptor d;
   for (const Event& e : seq.events()) {
-    if (det.process(e)) tracker.add(e);
+    if (!det.process(e)) continue;
+    const bool has = dart && extractor.compute(det.sae(), e.x, e.y, e.t_ns, e.polarity, &d);
+    tracker.add(e, has ? &d : nullptr);
   }
   const std::vector<CornerTrack> tracks = tracker.finish();
-  const TrackScore s = score_tracks(seq, tracks);
+  return {score_tracks(seq, tracks), tracker.stats()};
+}
+
+TEST(CornerTracksSimulated, AccuracyAndLengthAgainstProjectedCorners) {
+  const CornerGroundTruthSequence seq;
+  const TrackRun plain = run_tracker(seq, false);
+  const TrackRun with_dart = run_tracker(seq, true);
+  std::printf("with DART: tracks %zu, purity %.3f, error %.3f px, mean duration %.3f s, %lld descriptor decisions\n",
+              with_dart.score.tracks,
+              static_cast<double>(with_dart.score.correct_points) / std::max<size_t>(1, with_dart.score.assigned_points),
+              with_dart.score.mean_error_px, with_dart.score.mean_duration_s,
+              static_cast<long long>(with_dart.stats.descriptor_decisions));
+  EXPECT_GT(with_dart.stats.descriptor_decisions, 0);
+  EXPECT_GE(static_cast<double>(with_dart.score.correct_points) / with_dart.score.assigned_points,
+            static_cast<double>(plain.score.correct_points) / plain.score.assigned_points - 0.01);
+  const TrackScore& s = plain.score;
+  const CornerTrackerStats& st = plain.stats;
   std::printf("%s\n", seq.describe().c_str());
   std::printf("tracks %zu (of %lld started), points %zu, assigned %zu, purity %.3f\n", s.tracks,
-              static_cast<long long>(tracker.stats().tracks_started), s.points, s.assigned_points,
+              static_cast<long long>(st.tracks_started), s.points, s.assigned_points,
               static_cast<double>(s.correct_points) / std::max<size_t>(1, s.assigned_points));
   std::printf("track error %.3f px (raw corner events %.3f px), mean length %.1f corner events, mean duration %.3f s\n",
               s.mean_error_px, s.raw_mean_error_px, s.mean_length, s.mean_duration_s);

@@ -18,6 +18,7 @@
 
 #include <Eigen/Core>
 
+#include "evio/frontend/dart.h"
 #include "evio/sensors/measurements.h"
 
 namespace evio::frontend {
@@ -35,7 +36,8 @@ struct CornerTrackerOptions {
   size_t min_length = 10;              // tracks with fewer corner events are not reported
   double descriptor_ratio = 0.8;       // ratio test between the two best tracks' descriptor distances
   // With descriptors: tracks whose descriptor is farther than this are not candidates (a corner
-  // that looks different starts its own track). In the descriptor's distance unit; infinity: off.
+  // that looks different starts its own track). dart_distance_aligned units, [0, sqrt(2)];
+  // infinity: off.
   double max_descriptor_distance = std::numeric_limits<double>::infinity();
   bool Validate(std::string* why) const;
 };
@@ -62,17 +64,14 @@ struct CornerTrackerStats {
 
 class CornerTracker {
  public:
-  // Distance between the descriptor of a new corner event (by its index in the caller's store)
-  // and the descriptor a track holds (the index given when that track was last updated).
-  using DescriptorDistance = std::function<float(int64_t corner_descriptor, int64_t track_descriptor)>;
 
   CornerTracker(int width, int height, const CornerTrackerOptions& options = {});
 
-  // Adds a corner event; returns the id of the track it joined or started. `descriptor` is an
-  // opaque index (>= 0) for the distance function, or -1 when there is none.
-  int64_t add(const Event& corner, int64_t descriptor = -1);
-  // Enables descriptor decisions among several candidate tracks.
-  void set_descriptor_distance(DescriptorDistance d) { distance_ = std::move(d); }
+  // Adds a corner event; returns the id of the track it joined or started. `descriptor` (may be
+  // null) is the corner event's DART; a track keeps the latest one it was given, and descriptor
+  // decisions compare them with dart_distance_aligned (patterns do not turn or scale between
+  // consecutive corner events).
+  int64_t add(const Event& corner, const DartDescriptor* descriptor = nullptr);
 
   // Ends every track idle for longer than max_gap_ns at time t_ns (add() does this lazily).
   void expire(int64_t t_ns);
@@ -93,7 +92,8 @@ class CornerTracker {
     CornerTrack track;
     Eigen::Vector2d position;
     Eigen::Vector2d velocity = Eigen::Vector2d::Zero();
-    int64_t descriptor = -1;
+    DartDescriptor descriptor;
+    bool has_descriptor = false;
     int cell = -1;
   };
   Eigen::Vector2d predict(const Active& a, int64_t t_ns) const;
@@ -108,7 +108,6 @@ class CornerTracker {
   std::vector<std::vector<size_t>> cells_;  // slot indices of active tracks per grid cell
   std::vector<Active> active_;              // slots; swap-removed
   std::vector<CornerTrack> finished_;
-  DescriptorDistance distance_;
   int64_t next_id_ = 0;
   int64_t last_expire_ns_;
   CornerTrackerStats stats_;
