@@ -1,0 +1,35 @@
+// Reprojection residual of a world landmark in a keyframe, on the undistorted normalised image
+// plane scaled to pixels: r = (f / sigma) (pi(p_c) - pi(b)), pi(x) = (x/z, y/z), with
+//   p_c = R_c_b R_w_b^T (p_w - p_w_b) + t_c_b
+// the landmark in the camera, b the observed unit bearing (z > 0) and f the focal length (px), so a
+// residual of 1 is one pixel-sigma of undistorted image error. Parameter blocks: pose T_w_b
+// (7, PoseManifold, ambient columns = J_tangent * PoseManifold::minus_jacobian) and landmark p_w
+// (3, m). Evaluate returns false for a landmark at depth <= 1e-6 m (Ceres then shortens the step).
+#pragma once
+
+#include <Eigen/Core>
+
+#include "ceres/sized_cost_function.h"
+#include "evio/calib/geometry.h"
+
+namespace evio::backend {
+
+class ReprojectionError final : public ceres::SizedCostFunction<2, 7, 3> {
+ public:
+  // bearing_c: observed unit bearing (z > 0); focal_px > 0; sigma_px > 0. Throws
+  // std::invalid_argument otherwise.
+  ReprojectionError(const Eigen::Vector3d& bearing_c, const calib::SE3& T_c_b, double focal_px, double sigma_px);
+
+  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override;
+
+  // Landmark in the camera frame for a pose block and a landmark block.
+  Eigen::Vector3d point_in_camera(const double* pose, const double* landmark) const;
+
+ private:
+  Eigen::Vector2d measurement_;  // pi(b)
+  Eigen::Matrix3d R_c_b_;
+  Eigen::Vector3d t_c_b_;
+  double scale_;                 // f / sigma
+};
+
+}  // namespace evio::backend

@@ -1,0 +1,472 @@
+#include "evio/backend/sliding_window_estimator.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+
+#include <ceres/ceres.h>
+#include <Eigen/Geometry>
+
+#include "evio/backend/imu_error.h"
+#include "evio/backend/imu_preintegration.h"
+#include "evio/backend/marginalization.h"
+#include "evio/backend/pose_manifold.h"
+#include "evio/backend/reprojection_error.h"
+
+namespace evio::backend {
+
+struct SlidingWindowEstimator::Keyframe {
+  int64_t t_ns = 0;
+  int64_t frame_id = 0;
+  std::array<double, 7> pose{};  // [qx qy qz qw px py pz] of T_w_b
+  std::array<double, 9> sb{};    // [v_w, b_g, b_a]
+  std::unique_ptr<ImuPreintegration> pre;  // from the previous keyframe
+  std::unique_ptr<ImuError> imu_error;
+  std::unordered_map<int64_t, Eigen::Vector3d> obs;                          // track -> bearing
+  std::unordered_map<int64_t, std::unique_ptr<ReprojectionError>> reproj;   // track -> residual
+};
+
+struct SlidingWindowEstimator::Landmark {
+  std::array<double, 3> p{};
+  bool triangulated = false;
+};
+
+namespace {
+
+constexpr double kDegToRad = M_PI / 180.0;
+
+Eigen::Quaterniond quat_of(const std::array<double, 7>& pose) {
+  return Eigen::Quaterniond(pose[3], pose[0], pose[1], pose[2]).normalized();
+}
+Eigen::Vector3d pos_of(const std::array<double, 7>& pose) { return Eigen::Vector3d(pose[4], pose[5], pose[6]); }
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  const size_t n = v.size() / 2;
+  std::nth_element(v.begin(), v.begin() + static_cast<long>(n), v.end());
+  return v[n];
+}
+
+}  // namespace
+
+bool SlidingWindowOptions::Validate(std::string* why) const {
+  auto fail = [why](const std::string& m) {
+    if (why) *why = m;
+    return false;
+  };
+  if (window_size < 2) return fail("window_size " + std::to_string(window_size) + " (expected >= 2 keyframes)");
+  if (max_iterations < 1) return fail("max_iterations must be >= 1");
+  if (!(max_solver_time_s >= 0)) return fail("max_solver_time_s must be >= 0 s");
+  if (!(loss_scale > 0)) return fail("loss_scale must be > 0 (pixel sigmas)");
+  if (!(pixel_sigma > 0)) return fail("pixel_sigma must be > 0 px");
+  if (!(keyframe_min_parallax_px > 0)) return fail("keyframe_min_parallax_px must be > 0 px");
+  if (!(keyframe_min_tracked_ratio >= 0 && keyframe_min_tracked_ratio <= 1)) return fail("keyframe_min_tracked_ratio must be in [0, 1]");
+  if (!(keyframe_max_interval_s > 0)) return fail("keyframe_max_interval_s must be > 0 s");
+  if (!(min_triangulation_angle_deg >= 0 && min_triangulation_angle_deg < 90)) return fail("min_triangulation_angle_deg must be in [0, 90) deg");
+  if (!(max_reprojection_px > 0)) return fail("max_reprojection_px must be > 0 px");
+  if (!(min_depth_m > 0)) return fail("min_depth_m must be > 0 m");
+  if (!gravity_w.allFinite()) return fail("gravity_w must be finite");
+  for (double s : {init_sigma_roll_pitch_rad, init_sigma_yaw_rad, init_sigma_position_m, init_sigma_velocity_mps,
+                   init_sigma_bias_gyro_radps, init_sigma_bias_accel_mps2}) {
+    if (!(s > 0) || !std::isfinite(s)) return fail("initial sigmas must be finite and > 0");
+  }
+  return true;
+}
+
+SlidingWindowEstimator::SlidingWindowEstimator(const SlidingWindowOptions& options, const calib::CameraCalibration& camera,
+                                               const calib::ImuNoise& noise)
+    : options_(options), camera_(camera), noise_(noise), focal_px_(camera.camera.intrinsics().fx) {
+  std::string why;
+  if (!options.Validate(&why)) throw std::invalid_argument("sliding window options: " + why);
+  if (!noise.Validate(&why)) throw std::invalid_argument("IMU noise: " + why);
+  if (!(focal_px_ > 0)) throw std::invalid_argument("sliding window: camera focal length must be > 0 px");
+}
+
+SlidingWindowEstimator::~SlidingWindowEstimator() = default;
+
+void SlidingWindowEstimator::initialize(const VioState& state) {
+  initial_ = state;
+  latest_ = state;
+}
+
+void SlidingWindowEstimator::add_imu(const ImuSample& sample) {
+  if (!imu_.empty() && sample.t_ns <= imu_.back().t_ns) return;  // duplicates / out of order: ignored
+  imu_.push_back(sample);
+}
+
+VioState SlidingWindowEstimator::state_of(const Keyframe& k) const {
+  VioState s;
+  s.t_ns = k.t_ns;
+  s.T_w_b = calib::SE3(quat_of(k.pose), pos_of(k.pose));
+  s.v_w = Eigen::Vector3d(k.sb[0], k.sb[1], k.sb[2]);
+  s.bias_gyro = Eigen::Vector3d(k.sb[3], k.sb[4], k.sb[5]);
+  s.bias_accel = Eigen::Vector3d(k.sb[6], k.sb[7], k.sb[8]);
+  return s;
+}
+
+VioState SlidingWindowEstimator::propagate(const Keyframe& from, int64_t t_ns) const {
+  const VioState s = state_of(from);
+  const ImuPreintegration pre = ImuPreintegration::between(imu_, from.t_ns, t_ns, s.bias_gyro, s.bias_accel, noise_);
+  const double dt = pre.dt_s();
+  const Eigen::Quaterniond q = s.T_w_b.rotation;
+  VioState out = s;
+  out.t_ns = t_ns;
+  out.T_w_b = calib::SE3((q * pre.delta_q()).normalized(),
+                         s.T_w_b.translation + s.v_w * dt + 0.5 * options_.gravity_w * dt * dt + q * pre.delta_p());
+  out.v_w = s.v_w + options_.gravity_w * dt + q * pre.delta_v();
+  return out;
+}
+
+std::vector<VioState> SlidingWindowEstimator::keyframe_states() const {
+  std::vector<VioState> out;
+  for (const auto& k : window_) out.push_back(state_of(*k));
+  return out;
+}
+
+std::unordered_map<int64_t, Eigen::Vector3d> SlidingWindowEstimator::landmarks() const {
+  std::unordered_map<int64_t, Eigen::Vector3d> out;
+  for (const auto& [id, lm] : landmarks_) {
+    if (lm.triangulated) out[id] = Eigen::Vector3d(lm.p[0], lm.p[1], lm.p[2]);
+  }
+  return out;
+}
+
+bool SlidingWindowEstimator::is_keyframe(const FeatureObservations& frame, const VioState& predicted) const {
+  const Keyframe& last = *window_.back();
+  if (static_cast<double>(frame.t_ns - last.t_ns) * 1e-9 >= options_.keyframe_max_interval_s) return true;
+  const Eigen::Matrix3d R_c_b = camera_.T_c_b.rotation.toRotationMatrix();
+  // Rotation taking a bearing of the last keyframe's camera into the current camera.
+  const Eigen::Matrix3d R_cj_ci = R_c_b * predicted.T_w_b.rotation.toRotationMatrix().transpose() *
+                                  quat_of(last.pose).toRotationMatrix() * R_c_b.transpose();
+  std::vector<double> disp;
+  for (const FeatureObservation& o : frame.observations) {
+    const auto it = last.obs.find(o.track_id);
+    if (it == last.obs.end()) continue;
+    const Eigen::Vector3d b = R_cj_ci * it->second;
+    if (b.z() <= 1e-6 || o.bearing_c.z() <= 1e-6) continue;
+    disp.push_back(focal_px_ * (b.head<2>() / b.z() - o.bearing_c.head<2>() / o.bearing_c.z()).norm());
+  }
+  if (!last.obs.empty() && static_cast<double>(disp.size()) < options_.keyframe_min_tracked_ratio * static_cast<double>(last.obs.size())) {
+    return true;
+  }
+  return median(disp) >= options_.keyframe_min_parallax_px;
+}
+
+void SlidingWindowEstimator::triangulate(int64_t track, Landmark* lm) {
+  const Eigen::Matrix3d R_b_c = camera_.T_c_b.rotation.toRotationMatrix().transpose();
+  const Eigen::Vector3d t_b_c = -(R_b_c * camera_.T_c_b.translation);
+  std::vector<Eigen::Vector3d> centres, dirs;
+  for (const auto& k : window_) {
+    const auto it = k->obs.find(track);
+    if (it == k->obs.end()) continue;
+    const Eigen::Matrix3d R_w_b = quat_of(k->pose).toRotationMatrix();
+    centres.push_back(R_w_b * t_b_c + pos_of(k->pose));
+    dirs.push_back((R_w_b * R_b_c * it->second).normalized());
+  }
+  if (centres.size() < 2) return;
+  double max_angle = 0;
+  for (size_t i = 0; i < dirs.size(); ++i)
+    for (size_t j = i + 1; j < dirs.size(); ++j) max_angle = std::max(max_angle, std::acos(std::clamp(dirs[i].dot(dirs[j]), -1.0, 1.0)));
+  if (max_angle < options_.min_triangulation_angle_deg * kDegToRad) return;
+  Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d rhs = Eigen::Vector3d::Zero();
+  for (size_t i = 0; i < dirs.size(); ++i) {
+    const Eigen::Matrix3d P = Eigen::Matrix3d::Identity() - dirs[i] * dirs[i].transpose();
+    A += P;
+    rhs += P * centres[i];
+  }
+  const Eigen::Vector3d X = A.ldlt().solve(rhs);
+  if (!X.allFinite()) return;
+  // Depth and reprojection checks in every observing keyframe.
+  for (const auto& k : window_) {
+    const auto it = k->obs.find(track);
+    if (it == k->obs.end()) continue;
+    const Eigen::Vector3d p_c = camera_.T_c_b.rotation * (quat_of(k->pose).conjugate() * (X - pos_of(k->pose))) +
+                                camera_.T_c_b.translation;
+    if (p_c.z() < options_.min_depth_m) return;
+    const Eigen::Vector3d& b = it->second;
+    const double err = focal_px_ * (p_c.head<2>() / p_c.z() - b.head<2>() / b.z()).norm();
+    if (err > 3.0 * options_.max_reprojection_px) return;
+  }
+  lm->p = {X.x(), X.y(), X.z()};
+  lm->triangulated = true;
+  ++stats_.landmarks_triangulated;
+}
+
+bool SlidingWindowEstimator::add_frame(const FeatureObservations& frame) {
+  if (!initial_ || frame.t_ns < initial_->t_ns) return false;
+  if (imu_.empty() || imu_.back().t_ns < frame.t_ns || imu_.front().t_ns > frame.t_ns) return false;
+  ++stats_.frames;
+  VioState predicted;
+  if (window_.empty()) {
+    // First keyframe: the initial state propagated to the frame, anchored by a prior.
+    predicted = *initial_;
+    if (frame.t_ns > initial_->t_ns) {
+      Keyframe tmp;
+      tmp.t_ns = initial_->t_ns;
+      const Eigen::Quaterniond q = initial_->T_w_b.rotation;
+      tmp.pose = {q.x(), q.y(), q.z(), q.w(), initial_->T_w_b.translation.x(), initial_->T_w_b.translation.y(),
+                  initial_->T_w_b.translation.z()};
+      for (int i = 0; i < 3; ++i) {
+        tmp.sb[static_cast<size_t>(i)] = initial_->v_w(i);
+        tmp.sb[static_cast<size_t>(3 + i)] = initial_->bias_gyro(i);
+        tmp.sb[static_cast<size_t>(6 + i)] = initial_->bias_accel(i);
+      }
+      predicted = propagate(tmp, frame.t_ns);
+    }
+  } else {
+    predicted = propagate(*window_.back(), frame.t_ns);
+    latest_ = predicted;
+    if (!is_keyframe(frame, predicted)) return false;
+  }
+
+  auto kf = std::make_unique<Keyframe>();
+  kf->t_ns = frame.t_ns;
+  kf->frame_id = frame.frame_id;
+  const Eigen::Quaterniond q = predicted.T_w_b.rotation;
+  kf->pose = {q.x(), q.y(), q.z(), q.w(), predicted.T_w_b.translation.x(), predicted.T_w_b.translation.y(),
+              predicted.T_w_b.translation.z()};
+  for (int i = 0; i < 3; ++i) {
+    kf->sb[static_cast<size_t>(i)] = predicted.v_w(i);
+    kf->sb[static_cast<size_t>(3 + i)] = predicted.bias_gyro(i);
+    kf->sb[static_cast<size_t>(6 + i)] = predicted.bias_accel(i);
+  }
+  if (!window_.empty()) {
+    const Keyframe& prev = *window_.back();
+    const VioState ps = state_of(prev);
+    kf->pre = std::make_unique<ImuPreintegration>(
+        ImuPreintegration::between(imu_, prev.t_ns, kf->t_ns, ps.bias_gyro, ps.bias_accel, noise_));
+    kf->imu_error = std::make_unique<ImuError>(*kf->pre, options_.gravity_w);
+  }
+  for (const FeatureObservation& o : frame.observations) {
+    if (closed_tracks_.count(o.track_id) || !(o.bearing_c.z() > 1e-6)) continue;
+    kf->obs[o.track_id] = o.bearing_c;
+    kf->reproj[o.track_id] = std::make_unique<ReprojectionError>(o.bearing_c, camera_.T_c_b, focal_px_, options_.pixel_sigma);
+  }
+  const bool first = window_.empty();
+  window_.push_back(std::move(kf));
+  ++stats_.keyframes;
+  if (first) {
+    // Anchor: yaw and position tight (unobservable), roll/pitch, velocity and biases loose.
+    Keyframe& k = *window_.front();
+    PriorBlock pose_block{k.pose.data(), 7, true, std::vector<double>(k.pose.begin(), k.pose.end())};
+    PriorBlock sb_block{k.sb.data(), 9, false, std::vector<double>(k.sb.begin(), k.sb.end())};
+    // Rotation tangent is body-frame; express the tight yaw about the world z in body axes.
+    const Eigen::Matrix3d R = quat_of(k.pose).toRotationMatrix();
+    const Eigen::Vector3d z_b = R.transpose() * Eigen::Vector3d::UnitZ();
+    const Eigen::Matrix3d info_rot = z_b * z_b.transpose() / std::pow(options_.init_sigma_yaw_rad, 2) +
+                                     (Eigen::Matrix3d::Identity() - z_b * z_b.transpose()) / std::pow(options_.init_sigma_roll_pitch_rad, 2);
+    Eigen::MatrixXd S_pose = Eigen::MatrixXd::Zero(6, 6);
+    S_pose.topLeftCorner(3, 3) = Eigen::LLT<Eigen::Matrix3d>(info_rot).matrixU();
+    S_pose.bottomRightCorner(3, 3) = Eigen::Matrix3d::Identity() / options_.init_sigma_position_m;
+    Eigen::MatrixXd S_sb = Eigen::MatrixXd::Zero(9, 9);
+    S_sb.diagonal() << Eigen::Vector3d::Constant(1.0 / options_.init_sigma_velocity_mps),
+        Eigen::Vector3d::Constant(1.0 / options_.init_sigma_bias_gyro_radps),
+        Eigen::Vector3d::Constant(1.0 / options_.init_sigma_bias_accel_mps2);
+    prior_ = LinearPrior::anchor({pose_block, sb_block}, {S_pose, S_sb});
+  }
+  // Landmarks: triangulate tracks seen from two or more keyframes.
+  for (const auto& [track, b] : window_.back()->obs) {
+    (void)b;
+    Landmark& lm = landmarks_[track];
+    if (!lm.triangulated) triangulate(track, &lm);
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  solve();
+  remove_outliers();
+  if (static_cast<int>(window_.size()) > options_.window_size) marginalize_oldest();
+  stats_.solve_time_s.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+  latest_ = state_of(*window_.back());
+  // Keep IMU samples from just before the oldest keyframe.
+  const int64_t keep = window_.front()->t_ns;
+  auto it = std::lower_bound(imu_.begin(), imu_.end(), keep, [](const ImuSample& s, int64_t t) { return s.t_ns < t; });
+  if (it != imu_.begin()) --it;
+  imu_.erase(imu_.begin(), it);
+  return true;
+}
+
+namespace {
+
+struct ProblemParts {
+  std::unique_ptr<ceres::Problem> problem;
+  std::unique_ptr<PoseManifold> manifold;
+  std::unique_ptr<ceres::LossFunction> loss;
+};
+
+ceres::Problem::Options problem_options() {
+  ceres::Problem::Options o;
+  o.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  o.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  o.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  o.enable_fast_removal = false;
+  return o;
+}
+
+std::unique_ptr<ceres::LossFunction> make_loss(RobustLoss l, double scale) {
+  switch (l) {
+    case RobustLoss::kHuber:
+      return std::make_unique<ceres::HuberLoss>(scale);
+    case RobustLoss::kCauchy:
+      return std::make_unique<ceres::CauchyLoss>(scale);
+    default:
+      return nullptr;
+  }
+}
+
+}  // namespace
+
+void SlidingWindowEstimator::solve() {
+  PoseManifold manifold;
+  const auto loss = make_loss(options_.loss, options_.loss_scale);
+  ceres::Problem problem(problem_options());
+  for (auto& k : window_) {
+    problem.AddParameterBlock(k->pose.data(), 7, &manifold);
+    problem.AddParameterBlock(k->sb.data(), 9);
+  }
+  for (size_t i = 1; i < window_.size(); ++i) {
+    Keyframe& a = *window_[i - 1];
+    Keyframe& b = *window_[i];
+    problem.AddResidualBlock(b.imu_error.get(), nullptr, {a.pose.data(), a.sb.data(), b.pose.data(), b.sb.data()});
+  }
+  if (prior_) {
+    std::vector<double*> blocks;
+    for (const PriorBlock& pb : prior_->blocks()) blocks.push_back(const_cast<double*>(pb.parameters));
+    problem.AddResidualBlock(prior_.get(), nullptr, blocks);
+  }
+  int used = 0;
+  for (auto& [track, lm] : landmarks_) {
+    if (!lm.triangulated) continue;
+    int n = 0;
+    for (auto& k : window_) n += k->obs.count(track) ? 1 : 0;
+    if (n < 2) continue;
+    ++used;
+    for (auto& k : window_) {
+      const auto it = k->reproj.find(track);
+      if (it == k->reproj.end()) continue;
+      problem.AddResidualBlock(it->second.get(), loss.get(), k->pose.data(), lm.p.data());
+    }
+  }
+  stats_.solve_landmarks.push_back(used);
+  ceres::Solver::Options so;
+  so.linear_solver_type = ceres::DENSE_SCHUR;
+  so.max_num_iterations = options_.max_iterations;
+  so.num_threads = 1;
+  so.logging_type = ceres::SILENT;
+  so.minimizer_progress_to_stdout = false;
+  if (options_.max_solver_time_s > 0) so.max_solver_time_in_seconds = options_.max_solver_time_s;
+  ceres::Solver::Summary summary;
+  ceres::Solve(so, &problem, &summary);
+}
+
+void SlidingWindowEstimator::remove_outliers() {
+  for (auto& k : window_) {
+    for (auto it = k->obs.begin(); it != k->obs.end();) {
+      const int64_t track = it->first;
+      const auto lit = landmarks_.find(track);
+      if (lit == landmarks_.end() || !lit->second.triangulated) {
+        ++it;
+        continue;
+      }
+      double r[2];
+      const double* params[2] = {k->pose.data(), lit->second.p.data()};
+      const bool ok = k->reproj[track]->Evaluate(params, r, nullptr);
+      const double err_px = ok ? std::hypot(r[0], r[1]) * options_.pixel_sigma : 1e9;
+      if (err_px > options_.max_reprojection_px) {
+        k->reproj.erase(track);
+        it = k->obs.erase(it);
+        ++stats_.outliers_removed;
+      } else {
+        ++it;
+      }
+    }
+  }
+  for (auto& [track, lm] : landmarks_) {
+    if (!lm.triangulated) continue;
+    int n = 0;
+    for (auto& k : window_) n += k->obs.count(track) ? 1 : 0;
+    if (n < 2) lm.triangulated = false;
+  }
+}
+
+void SlidingWindowEstimator::marginalize_oldest() {
+  Keyframe& k0 = *window_.front();
+  Keyframe& k1 = *window_[1];
+  const Keyframe& newest = *window_.back();
+  PoseManifold manifold;
+  const auto loss = make_loss(options_.loss, options_.loss_scale);
+  ceres::Problem problem(problem_options());
+  std::vector<ceres::ResidualBlockId> ids;
+  std::vector<const double*> removed = {k0.pose.data(), k0.sb.data()};
+  auto add_kf_blocks = [&](Keyframe& k) {
+    if (!problem.HasParameterBlock(k.pose.data())) problem.AddParameterBlock(k.pose.data(), 7, &manifold);
+    if (!problem.HasParameterBlock(k.sb.data())) problem.AddParameterBlock(k.sb.data(), 9);
+  };
+  add_kf_blocks(k0);
+  add_kf_blocks(k1);
+  ids.push_back(problem.AddResidualBlock(k1.imu_error.get(), nullptr, {k0.pose.data(), k0.sb.data(), k1.pose.data(), k1.sb.data()}));
+  if (prior_) {
+    std::vector<double*> blocks;
+    for (const PriorBlock& pb : prior_->blocks()) {
+      double* p = const_cast<double*>(pb.parameters);
+      if (!problem.HasParameterBlock(p)) {
+        if (pb.is_pose) {
+          problem.AddParameterBlock(p, 7, &manifold);
+        } else {
+          problem.AddParameterBlock(p, pb.size);
+        }
+      }
+      blocks.push_back(p);
+    }
+    ids.push_back(problem.AddResidualBlock(prior_.get(), nullptr, blocks));
+  }
+  std::vector<int64_t> marginalised_tracks;
+  for (const auto& [track, b] : k0.obs) {
+    (void)b;
+    auto lit = landmarks_.find(track);
+    if (lit == landmarks_.end() || !lit->second.triangulated) continue;
+    if (newest.obs.count(track)) continue;  // still tracked: k0's observation is dropped below
+    // A finished track: marginalise the landmark with all its observations.
+    Landmark& lm = lit->second;
+    problem.AddParameterBlock(lm.p.data(), 3);
+    removed.push_back(lm.p.data());
+    for (auto& k : window_) {
+      const auto it = k->reproj.find(track);
+      if (it == k->reproj.end()) continue;
+      add_kf_blocks(*k);
+      ids.push_back(problem.AddResidualBlock(it->second.get(), loss.get(), k->pose.data(), lm.p.data()));
+    }
+    marginalised_tracks.push_back(track);
+  }
+  std::unordered_set<const double*> poses;
+  for (auto& k : window_) poses.insert(k->pose.data());
+  prior_ = marginalize(&problem, ids, removed, [&poses](const double* p) { return poses.count(p) > 0; });
+  // Forget the marginalised landmarks and close their tracks.
+  for (int64_t track : marginalised_tracks) {
+    for (auto& k : window_) {
+      k->obs.erase(track);
+      k->reproj.erase(track);
+    }
+    landmarks_.erase(track);
+    closed_tracks_.insert(track);
+    ++stats_.landmarks_marginalised;
+  }
+  // Still-tracked landmarks lose k0's observation; forgotten when fewer than two remain.
+  for (const auto& [track, b] : k0.obs) {
+    (void)b;
+    ++stats_.observations_dropped;
+  }
+  window_.pop_front();
+  for (auto it = landmarks_.begin(); it != landmarks_.end();) {
+    int n = 0;
+    for (auto& k : window_) n += k->obs.count(it->first) ? 1 : 0;
+    if (n == 0) {
+      it = landmarks_.erase(it);
+    } else {
+      if (n < 2) it->second.triangulated = false;
+      ++it;
+    }
+  }
+}
+
+}  // namespace evio::backend

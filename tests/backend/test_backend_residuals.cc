@@ -1,0 +1,203 @@
+// ReprojectionError and LinearPrior: analytic Jacobians vs ceres::GradientChecker (with the
+// PoseManifold), known residual values, and marginalisation: on a linear-Gaussian problem the
+// prior from the Schur complement reproduces the full problem's solution and covariance of the
+// kept variables.
+#include <cmath>
+#include <random>
+
+#include <ceres/ceres.h>
+#include <ceres/gradient_checker.h>
+#include <gtest/gtest.h>
+
+#include "evio/backend/marginalization.h"
+#include "evio/backend/pose_manifold.h"
+#include "evio/backend/reprojection_error.h"
+#include "evio/calib/geometry.h"
+
+namespace evio::backend {
+namespace {
+
+std::array<double, 7> random_pose(std::mt19937& rng, double angle = 1.0) {
+  std::normal_distribution<double> n(0.0, 1.0);
+  const Eigen::Quaterniond q = calib::so3_exp_quat(Eigen::Vector3d(n(rng), n(rng), n(rng)) * angle);
+  return {q.x(), q.y(), q.z(), q.w(), n(rng), n(rng), n(rng)};
+}
+
+// Worst |analytic - numeric| relative to max(1, |numeric|) over all tangent Jacobian entries.
+double worst_error(const ceres::GradientChecker::ProbeResults& r) {
+  double worst = 0;
+  for (size_t i = 0; i < r.local_jacobians.size(); ++i) {
+    const Eigen::MatrixXd d = r.local_jacobians[i] - r.local_numeric_jacobians[i];
+    for (int a = 0; a < d.rows(); ++a)
+      for (int b = 0; b < d.cols(); ++b)
+        worst = std::max(worst, std::abs(d(a, b)) / std::max(1.0, std::abs(r.local_numeric_jacobians[i](a, b))));
+  }
+  return worst;
+}
+
+TEST(ReprojectionError, GradientCheckerAtRandomPosesAndPoints) {
+  std::mt19937 rng(3);
+  std::normal_distribution<double> n(0.0, 1.0);
+  const PoseManifold pm;
+  const ceres::EuclideanManifold<3> e3;
+  const std::vector<const ceres::Manifold*> manifolds = {&pm, &e3};
+  const calib::SE3 T_c_b(calib::so3_exp_quat(Eigen::Vector3d(0.1, -0.2, 0.05)), Eigen::Vector3d(0.02, -0.01, 0.03));
+  double worst = 0;
+  for (int trial = 0; trial < 50; ++trial) {
+    auto pose = random_pose(rng);
+    // A landmark 2-6 m in front of the camera.
+    const calib::SE3 T_w_b(Eigen::Quaterniond(pose[3], pose[0], pose[1], pose[2]), Eigen::Vector3d(pose[4], pose[5], pose[6]));
+    const calib::SE3 T_w_c = T_w_b * T_c_b.inverse();
+    const Eigen::Vector3d p_c(0.5 * n(rng), 0.5 * n(rng), 2.0 + 4.0 * std::abs(n(rng)) / 3.0);
+    const Eigen::Vector3d p_w = T_w_c.rotation * p_c + T_w_c.translation;
+    std::array<double, 3> l = {p_w.x(), p_w.y(), p_w.z()};
+    const Eigen::Vector3d bearing = (p_c + Eigen::Vector3d(0.01 * n(rng), 0.01 * n(rng), 0)).normalized();
+    const ReprojectionError err(bearing, T_c_b, 200.0, 0.5);
+    const double* params[2] = {pose.data(), l.data()};
+    ceres::NumericDiffOptions nd;
+    const ceres::GradientChecker checker(&err, &manifolds, nd);
+    ceres::GradientChecker::ProbeResults res;
+    checker.Probe(params, 1e-5, &res);
+    ASSERT_TRUE(res.return_value);
+    worst = std::max(worst, worst_error(res));
+  }
+  std::printf("ReprojectionError: worst Jacobian error %.2e\n", worst);
+  EXPECT_LT(worst, 1e-5);
+}
+
+TEST(ReprojectionError, ResidualIsThePixelErrorInSigmas) {
+  const calib::SE3 T_c_b;  // identity
+  std::array<double, 7> pose = {0, 0, 0, 1, 0, 0, 0};
+  std::array<double, 3> l = {0.1, -0.2, 2.0};
+  // Observed 1 px (f = 200) to the right of the true projection, sigma 0.5 px: r = (2, 0).
+  const Eigen::Vector3d b = Eigen::Vector3d(0.05 + 1.0 / 200.0, -0.1, 1.0).normalized();
+  const ReprojectionError err(b, T_c_b, 200.0, 0.5);
+  double r[2];
+  const double* params[2] = {pose.data(), l.data()};
+  ASSERT_TRUE(err.Evaluate(params, r, nullptr));
+  EXPECT_NEAR(r[0], -2.0, 1e-9);
+  EXPECT_NEAR(r[1], 0.0, 1e-9);
+  // Behind the camera: the evaluation fails (Ceres shortens the step).
+  l = {0, 0, -1};
+  EXPECT_FALSE(err.Evaluate(params, r, nullptr));
+  EXPECT_THROW(ReprojectionError(Eigen::Vector3d(0, 0, -1), T_c_b, 200, 0.5), std::invalid_argument);
+}
+
+TEST(LinearPrior, GradientCheckerWithPoseAndEuclideanBlocks) {
+  std::mt19937 rng(5);
+  std::normal_distribution<double> n(0.0, 1.0);
+  auto pose = random_pose(rng);
+  std::array<double, 9> sb;
+  for (double& v : sb) v = n(rng);
+  const auto pose0 = random_pose(rng, 0.2);
+  PriorBlock a{pose.data(), 7, true, std::vector<double>(pose0.begin(), pose0.end())};
+  std::vector<double> sb0(9);
+  for (double& v : sb0) v = n(rng);
+  PriorBlock b{sb.data(), 9, false, sb0};
+  Eigen::MatrixXd J = Eigen::MatrixXd::Random(12, 15);
+  Eigen::VectorXd r0 = Eigen::VectorXd::Random(12);
+  const LinearPrior prior({a, b}, J, r0);
+  const PoseManifold pm;
+  const ceres::EuclideanManifold<9> e9;
+  const std::vector<const ceres::Manifold*> manifolds = {&pm, &e9};
+  ceres::NumericDiffOptions nd;
+  const ceres::GradientChecker checker(&prior, &manifolds, nd);
+  ceres::GradientChecker::ProbeResults res;
+  const double* params[2] = {pose.data(), sb.data()};
+  checker.Probe(params, 1e-6, &res);
+  ASSERT_TRUE(res.return_value);
+  EXPECT_LT(worst_error(res), 1e-6);
+  // At the linearisation point the residual is r0.
+  Eigen::VectorXd r(12);
+  const double* at0[2] = {pose0.data(), sb0.data()};
+  ASSERT_TRUE(prior.Evaluate(at0, r.data(), nullptr));
+  EXPECT_LT((r - r0).norm(), 1e-12);
+}
+
+// y = A x + noise over three 3-vectors x0, x1, x2 (a chain with an extra link 0-2): solving
+// everything, or marginalising x0 and solving x1, x2 with the prior, gives the same x1, x2.
+class LinearResidual final : public ceres::CostFunction {
+ public:
+  LinearResidual(Eigen::MatrixXd A, Eigen::VectorXd y, int blocks) : A_(std::move(A)), y_(std::move(y)) {
+    for (int i = 0; i < blocks; ++i) mutable_parameter_block_sizes()->push_back(3);
+    set_num_residuals(static_cast<int>(y_.size()));
+  }
+  bool Evaluate(double const* const* p, double* r, double** J) const override {
+    const int nb = static_cast<int>(parameter_block_sizes().size());
+    Eigen::VectorXd x(3 * nb);
+    for (int i = 0; i < nb; ++i) x.segment<3>(3 * i) = Eigen::Map<const Eigen::Vector3d>(p[i]);
+    Eigen::Map<Eigen::VectorXd>(r, y_.size()) = A_ * x - y_;
+    if (J) {
+      for (int i = 0; i < nb; ++i) {
+        if (J[i]) Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>(J[i], y_.size(), 3) = A_.middleCols(3 * i, 3);
+      }
+    }
+    return true;
+  }
+
+ private:
+  Eigen::MatrixXd A_;
+  Eigen::VectorXd y_;
+};
+
+ceres::Solver::Options tight() {
+  ceres::Solver::Options so;
+  so.max_num_iterations = 50;
+  so.function_tolerance = so.gradient_tolerance = so.parameter_tolerance = 1e-16;
+  so.linear_solver_type = ceres::DENSE_QR;
+  return so;
+}
+
+TEST(Marginalization, SchurPriorReproducesTheFullSolutionOfKeptVariables) {
+  std::mt19937 rng(9);
+  std::normal_distribution<double> n(0.0, 1.0);
+  auto rnd = [&](int r, int c) {
+    Eigen::MatrixXd m(r, c);
+    for (int i = 0; i < r; ++i)
+      for (int j = 0; j < c; ++j) m(i, j) = n(rng);
+    return m;
+  };
+  const LinearResidual f0(rnd(4, 3), rnd(4, 1), 1);   // on x0
+  const LinearResidual f01(rnd(5, 6), rnd(5, 1), 2);  // x0, x1
+  const LinearResidual f02(rnd(4, 6), rnd(4, 1), 2);  // x0, x2
+  const LinearResidual f12(rnd(6, 6), rnd(6, 1), 2);  // x1, x2
+  ceres::Problem::Options po;
+  po.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  // Full solve.
+  std::array<double, 3> x0{}, x1{}, x2{};
+  {
+    ceres::Problem p(po);
+    p.AddResidualBlock(const_cast<LinearResidual*>(&f0), nullptr, x0.data());
+    p.AddResidualBlock(const_cast<LinearResidual*>(&f01), nullptr, x0.data(), x1.data());
+    p.AddResidualBlock(const_cast<LinearResidual*>(&f02), nullptr, x0.data(), x2.data());
+    p.AddResidualBlock(const_cast<LinearResidual*>(&f12), nullptr, x1.data(), x2.data());
+    ceres::Solver::Options so = tight();
+    ceres::Solver::Summary s;
+    ceres::Solve(so, &p, &s);
+  }
+  // Marginalise x0 at an arbitrary linearisation point (exact for a linear problem), then solve.
+  std::array<double, 3> y0 = {0.3, -0.2, 0.1}, y1 = {1, 2, 3}, y2 = {-1, 0.5, 0};
+  ceres::Problem pm(po);
+  std::vector<ceres::ResidualBlockId> ids = {
+      pm.AddResidualBlock(const_cast<LinearResidual*>(&f0), nullptr, y0.data()),
+      pm.AddResidualBlock(const_cast<LinearResidual*>(&f01), nullptr, y0.data(), y1.data()),
+      pm.AddResidualBlock(const_cast<LinearResidual*>(&f02), nullptr, y0.data(), y2.data())};
+  MarginalizationStats st;
+  auto prior = marginalize(&pm, ids, {y0.data()}, [](const double*) { return false; }, &st);
+  ASSERT_TRUE(prior);
+  EXPECT_EQ(st.removed_dims, 3);
+  EXPECT_EQ(st.kept_dims, 6);
+  ceres::Problem p2(po);
+  p2.AddResidualBlock(prior.get(), nullptr, y1.data(), y2.data());
+  p2.AddResidualBlock(const_cast<LinearResidual*>(&f12), nullptr, y1.data(), y2.data());
+  ceres::Solver::Options so = tight();
+  ceres::Solver::Summary s;
+  ceres::Solve(so, &p2, &s);
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_NEAR(y1[i], x1[i], 1e-8);
+    EXPECT_NEAR(y2[i], x2[i], 1e-8);
+  }
+}
+
+}  // namespace
+}  // namespace evio::backend

@@ -1,0 +1,73 @@
+// Static initialisation: gravity direction (roll, pitch) and gyro bias from a still, tilted IMU
+// with the simulator's noise and biases; rejection of a moving start.
+#include <cmath>
+
+#include <gtest/gtest.h>
+
+#include "evio/backend/initialization.h"
+#include "evio/sensors/sim_imu.h"
+#include "evio/sensors/sim_trajectory.h"
+
+namespace evio::backend {
+namespace {
+
+calib::ImuNoise davis_imu() {
+  calib::ImuNoise n;
+  n.accelerometer_noise_density = 0.002;
+  n.accelerometer_random_walk = 0.0002;
+  n.gyroscope_noise_density = 0.0003;
+  n.gyroscope_random_walk = 2e-5;
+  n.update_rate_hz = 1000;
+  return n;
+}
+
+std::vector<ImuSample> imu_of(const sim::SinusoidTrajectoryOptions& t, uint64_t seed) {
+  const sim::SinusoidTrajectory traj(t);
+  sim::ImuSimOptions o;
+  o.noise = davis_imu();
+  o.initial_bias_gyro_radps = Eigen::Vector3d(0.01, -0.02, 0.005);
+  o.initial_bias_accel_mps2 = Eigen::Vector3d(0.05, 0.02, -0.03);
+  o.seed = seed;
+  return sim::simulate_imu(traj, traj.t_begin_ns(), traj.t_end_ns(), o);
+}
+
+TEST(StaticInitialization, RecoversRollPitchAndGyroBias) {
+  sim::SinusoidTrajectoryOptions t;
+  t.t_begin_ns = 1'700'000'000'000'000'000;  // large stamps
+  t.duration_s = 1.5;
+  t.q_w_b0 = Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitX()) * Eigen::AngleAxisd(-0.2, Eigen::Vector3d::UnitY()) *
+             Eigen::AngleAxisd(1.0, Eigen::Vector3d::UnitZ());
+  const auto imu = imu_of(t, 3);
+  std::string why;
+  const auto s = static_initialization(imu, t.t_begin_ns, davis_imu(), StaticInitOptions{}, &why);
+  ASSERT_TRUE(s.has_value()) << why;
+  // Gravity direction in the body: estimated vs true (the accelerometer bias tilts it slightly).
+  const Eigen::Vector3d up_true = t.q_w_b0.conjugate() * Eigen::Vector3d::UnitZ();
+  const Eigen::Vector3d up_est = s->T_w_b.rotation.conjugate() * Eigen::Vector3d::UnitZ();
+  const double tilt_err_deg = std::acos(std::clamp(up_true.dot(up_est), -1.0, 1.0)) * 180 / M_PI;
+  std::printf("tilt error %.4f deg, gyro bias error %.2e rad/s\n", tilt_err_deg,
+              (s->bias_gyro - Eigen::Vector3d(0.01, -0.02, 0.005)).norm());
+  EXPECT_LT(tilt_err_deg, 0.5);  // 0.06 m/s^2 of accelerometer bias is at most ~0.35 deg of tilt
+  EXPECT_LT((s->bias_gyro - Eigen::Vector3d(0.01, -0.02, 0.005)).norm(), 1e-3);
+  EXPECT_EQ(s->v_w, Eigen::Vector3d::Zero());
+  EXPECT_GE(s->t_ns, t.t_begin_ns + 990'000'000);
+}
+
+TEST(StaticInitialization, RejectsAMovingStartAndTooFewSamples) {
+  sim::SinusoidTrajectoryOptions t;
+  t.duration_s = 1.5;
+  t.amplitude_m = Eigen::Vector3d(0.1, 0, 0);
+  t.frequency_hz = Eigen::Vector3d(1.0, 0, 0);
+  std::string why;
+  EXPECT_FALSE(static_initialization(imu_of(t, 4), 0, davis_imu(), StaticInitOptions{}, &why).has_value());
+  EXPECT_NE(why.find("not still"), std::string::npos) << why;
+  t.amplitude_m.setZero();
+  t.angle_amplitude_rad = Eigen::Vector3d(0, 0, 0.2);
+  t.angle_frequency_hz = Eigen::Vector3d(0, 0, 1.0);
+  EXPECT_FALSE(static_initialization(imu_of(t, 5), 0, davis_imu(), StaticInitOptions{}, &why).has_value());
+  EXPECT_FALSE(static_initialization({}, 0, davis_imu(), StaticInitOptions{}, &why).has_value());
+  EXPECT_NE(why.find("samples"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace evio::backend
