@@ -59,3 +59,51 @@ bool ReprojectionError::Evaluate(double const* const* parameters, double* residu
 }
 
 }  // namespace evio::backend
+
+namespace evio::backend {
+
+RotationOnlyError::RotationOnlyError(const Eigen::Vector3d& bearing_i, const Eigen::Vector3d& bearing_j,
+                                     const calib::SE3& T_c_b, double focal_px, double sigma_px)
+    : R_c_b_(T_c_b.rotation.toRotationMatrix()) {
+  if (!bearing_i.allFinite() || !(bearing_j.z() > 1e-9) || !bearing_j.allFinite()) {
+    throw std::invalid_argument("rotation-only error: bearings must be finite, the second with z > 0");
+  }
+  if (!(focal_px > 0) || !(sigma_px > 0) || !std::isfinite(focal_px) || !std::isfinite(sigma_px)) {
+    throw std::invalid_argument("rotation-only error: focal_px and sigma_px must be finite and > 0");
+  }
+  b_i_b_ = R_c_b_.transpose() * bearing_i.normalized();
+  measurement_ = bearing_j.head<2>() / bearing_j.z();
+  scale_ = focal_px / sigma_px;
+}
+
+bool RotationOnlyError::Evaluate(double const* const* parameters, double* residuals, double** jacobians) const {
+  const Eigen::Matrix3d R_i = Eigen::Map<const Eigen::Quaterniond>(parameters[0]).normalized().toRotationMatrix();
+  const Eigen::Matrix3d R_j = Eigen::Map<const Eigen::Quaterniond>(parameters[1]).normalized().toRotationMatrix();
+  const Eigen::Vector3d w = R_j.transpose() * R_i * b_i_b_;  // in body j
+  const Eigen::Vector3d u = R_c_b_ * w;                      // in camera j
+  if (!(u.z() > 1e-6)) return false;
+  const double iz = 1.0 / u.z();
+  Eigen::Map<Eigen::Vector2d> r(residuals);
+  r = scale_ * (Eigen::Vector2d(u.x() * iz, u.y() * iz) - measurement_);
+  if (jacobians == nullptr) return true;
+  Eigen::Matrix<double, 2, 3> d_pi;
+  d_pi << iz, 0, -u.x() * iz * iz, 0, iz, -u.y() * iz * iz;
+  const Eigen::Matrix<double, 2, 3> d_r_d_u = scale_ * d_pi;
+  if (jacobians[0] != nullptr) {
+    // R_i Exp(d): u = R_c_b R_j^T R_i (I + [d]x) b  ->  du/dd = -R_c_b R_j^T R_i [b]x
+    Eigen::Matrix<double, 2, 6> J = Eigen::Matrix<double, 2, 6>::Zero();
+    J.leftCols<3>() = -d_r_d_u * R_c_b_ * R_j.transpose() * R_i * calib::hat(b_i_b_);
+    Eigen::Map<Eigen::Matrix<double, 2, 7, Eigen::RowMajor>> out(jacobians[0]);
+    out = J * PoseManifold::minus_jacobian(parameters[0]);
+  }
+  if (jacobians[1] != nullptr) {
+    // R_j Exp(d): u = R_c_b Exp(-d) w  ->  du/dd = R_c_b [w]x
+    Eigen::Matrix<double, 2, 6> J = Eigen::Matrix<double, 2, 6>::Zero();
+    J.leftCols<3>() = d_r_d_u * R_c_b_ * calib::hat(w);
+    Eigen::Map<Eigen::Matrix<double, 2, 7, Eigen::RowMajor>> out(jacobians[1]);
+    out = J * PoseManifold::minus_jacobian(parameters[1]);
+  }
+  return true;
+}
+
+}  // namespace evio::backend

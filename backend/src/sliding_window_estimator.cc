@@ -25,6 +25,8 @@ struct SlidingWindowEstimator::Keyframe {
   std::unique_ptr<ImuError> imu_error;
   std::unordered_map<int64_t, Eigen::Vector3d> obs;                          // track -> bearing
   std::unordered_map<int64_t, std::unique_ptr<ReprojectionError>> reproj;   // track -> residual
+  bool rotation_only = false;                                                // no parallax to the previous keyframe
+  std::unordered_map<int64_t, std::unique_ptr<RotationOnlyError>> rot;      // track -> residual to the previous keyframe
 };
 
 struct SlidingWindowEstimator::Landmark {
@@ -132,9 +134,8 @@ std::unordered_map<int64_t, Eigen::Vector3d> SlidingWindowEstimator::landmarks()
   return out;
 }
 
-bool SlidingWindowEstimator::is_keyframe(const FeatureObservations& frame, const VioState& predicted) const {
+double SlidingWindowEstimator::parallax_px(const FeatureObservations& frame, const VioState& predicted, size_t* common) const {
   const Keyframe& last = *window_.back();
-  if (static_cast<double>(frame.t_ns - last.t_ns) * 1e-9 >= options_.keyframe_max_interval_s) return true;
   const Eigen::Matrix3d R_c_b = camera_.T_c_b.rotation.toRotationMatrix();
   // Rotation taking a bearing of the last keyframe's camera into the current camera.
   const Eigen::Matrix3d R_cj_ci = R_c_b * predicted.T_w_b.rotation.toRotationMatrix().transpose() *
@@ -147,10 +148,19 @@ bool SlidingWindowEstimator::is_keyframe(const FeatureObservations& frame, const
     if (b.z() <= 1e-6 || o.bearing_c.z() <= 1e-6) continue;
     disp.push_back(focal_px_ * (b.head<2>() / b.z() - o.bearing_c.head<2>() / o.bearing_c.z()).norm());
   }
-  if (!last.obs.empty() && static_cast<double>(disp.size()) < options_.keyframe_min_tracked_ratio * static_cast<double>(last.obs.size())) {
+  if (common) *common = disp.size();
+  return median(disp);
+}
+
+bool SlidingWindowEstimator::is_keyframe(const FeatureObservations& frame, const VioState& predicted) const {
+  const Keyframe& last = *window_.back();
+  if (static_cast<double>(frame.t_ns - last.t_ns) * 1e-9 >= options_.keyframe_max_interval_s) return true;
+  size_t common = 0;
+  const double parallax = parallax_px(frame, predicted, &common);
+  if (!last.obs.empty() && static_cast<double>(common) < options_.keyframe_min_tracked_ratio * static_cast<double>(last.obs.size())) {
     return true;
   }
-  return median(disp) >= options_.keyframe_min_parallax_px;
+  return parallax >= options_.keyframe_min_parallax_px;
 }
 
 void SlidingWindowEstimator::triangulate(int64_t track, Landmark* lm) {
@@ -235,6 +245,17 @@ bool SlidingWindowEstimator::add_frame(const FeatureObservations& frame) {
   if (!window_.empty()) {
     const Keyframe& prev = *window_.back();
     const VioState ps = state_of(prev);
+    size_t common = 0;
+    const double parallax = parallax_px(frame, predicted, &common);
+    kf->rotation_only = options_.rotation_only_parallax_px > 0 && common >= 5 && parallax < options_.rotation_only_parallax_px;
+    if (kf->rotation_only) {
+      for (const FeatureObservation& o : frame.observations) {
+        const auto it = prev.obs.find(o.track_id);
+        if (it == prev.obs.end() || !(o.bearing_c.z() > 1e-6)) continue;
+        kf->rot[o.track_id] =
+            std::make_unique<RotationOnlyError>(it->second, o.bearing_c, camera_.T_c_b, focal_px_, options_.pixel_sigma);
+      }
+    }
     kf->pre = std::make_unique<ImuPreintegration>(
         ImuPreintegration::between(imu_, prev.t_ns, kf->t_ns, ps.bias_gyro, ps.bias_accel, noise_));
     kf->imu_error = std::make_unique<ImuError>(*kf->pre, options_.gravity_w);
@@ -245,6 +266,8 @@ bool SlidingWindowEstimator::add_frame(const FeatureObservations& frame) {
     kf->reproj[o.track_id] = std::make_unique<ReprojectionError>(o.bearing_c, camera_.T_c_b, focal_px_, options_.pixel_sigma);
   }
   const bool first = window_.empty();
+  stats_.motion_model.emplace_back(kf->t_ns, kf->rotation_only);
+  stats_.rotation_only_keyframes += kf->rotation_only ? 1 : 0;
   window_.push_back(std::move(kf));
   ++stats_.keyframes;
   if (first) {
@@ -266,8 +289,9 @@ bool SlidingWindowEstimator::add_frame(const FeatureObservations& frame) {
         Eigen::Vector3d::Constant(1.0 / options_.init_sigma_bias_accel_mps2);
     prior_ = LinearPrior::anchor({pose_block, sb_block}, {S_pose, S_sb});
   }
-  // Landmarks: triangulate tracks seen from two or more keyframes.
-  for (const auto& [track, b] : window_.back()->obs) {
+  // Landmarks: triangulate tracks seen from two or more keyframes; not in a rotation-only
+  // keyframe (any apparent parallax there is noise or an outlier).
+  for (const auto& [track, b] : window_.back()->rotation_only ? decltype(window_.back()->obs){} : window_.back()->obs) {
     (void)b;
     Landmark& lm = landmarks_[track];
     if (!lm.triangulated) triangulate(track, &lm);
@@ -333,6 +357,16 @@ void SlidingWindowEstimator::solve() {
     std::vector<double*> blocks;
     for (const PriorBlock& pb : prior_->blocks()) blocks.push_back(const_cast<double*>(pb.parameters));
     problem.AddResidualBlock(prior_.get(), nullptr, blocks);
+  }
+  // Rotation-only links of untriangulated tracks.
+  for (size_t i = 1; i < window_.size(); ++i) {
+    Keyframe& a = *window_[i - 1];
+    Keyframe& b = *window_[i];
+    for (auto& [track, cost] : b.rot) {
+      const auto lit = landmarks_.find(track);
+      if (lit != landmarks_.end() && lit->second.triangulated) continue;
+      problem.AddResidualBlock(cost.get(), loss.get(), a.pose.data(), b.pose.data());
+    }
   }
   int used = 0;
   for (auto& [track, lm] : landmarks_) {
@@ -420,6 +454,11 @@ void SlidingWindowEstimator::marginalize_oldest() {
     }
     ids.push_back(problem.AddResidualBlock(prior_.get(), nullptr, blocks));
   }
+  for (auto& [track, cost] : k1.rot) {
+    const auto lit = landmarks_.find(track);
+    if (lit != landmarks_.end() && lit->second.triangulated) continue;
+    ids.push_back(problem.AddResidualBlock(cost.get(), loss.get(), k0.pose.data(), k1.pose.data()));
+  }
   std::vector<int64_t> marginalised_tracks;
   for (const auto& [track, b] : k0.obs) {
     (void)b;
@@ -456,6 +495,7 @@ void SlidingWindowEstimator::marginalize_oldest() {
     (void)b;
     ++stats_.observations_dropped;
   }
+  k1.rot.clear();  // they linked k1 to k0, which is gone
   window_.pop_front();
   for (auto it = landmarks_.begin(); it != landmarks_.end();) {
     int n = 0;

@@ -83,6 +83,39 @@ TEST(ReprojectionError, ResidualIsThePixelErrorInSigmas) {
   EXPECT_THROW(ReprojectionError(Eigen::Vector3d(0, 0, -1), T_c_b, 200, 0.5), std::invalid_argument);
 }
 
+TEST(RotationOnlyError, GradientCheckerAndZeroAtTheTrueRotation) {
+  std::mt19937 rng(4);
+  std::normal_distribution<double> n(0.0, 1.0);
+  const PoseManifold pm;
+  const std::vector<const ceres::Manifold*> manifolds = {&pm, &pm};
+  const calib::SE3 T_c_b(calib::so3_exp_quat(Eigen::Vector3d(-0.1, 0.2, 0.05)), Eigen::Vector3d(0.02, -0.01, 0.03));
+  double worst = 0;
+  for (int trial = 0; trial < 50; ++trial) {
+    auto pi = random_pose(rng);
+    const Eigen::Quaterniond qi(pi[3], pi[0], pi[1], pi[2]);
+    const Eigen::Quaterniond qj = qi * calib::so3_exp_quat(Eigen::Vector3d(n(rng), n(rng), n(rng)) * 0.1);
+    std::array<double, 7> pj = {qj.x(), qj.y(), qj.z(), qj.w(), n(rng), n(rng), n(rng)};
+    // A direction at infinity seen by both cameras.
+    const Eigen::Vector3d b_j = Eigen::Vector3d(0.2 * n(rng), 0.2 * n(rng), 1.0).normalized();
+    const Eigen::Matrix3d R_c_b = T_c_b.rotation.toRotationMatrix();
+    const Eigen::Vector3d b_i = R_c_b * qi.conjugate().toRotationMatrix() * qj.toRotationMatrix() * R_c_b.transpose() * b_j;
+    const RotationOnlyError exact(b_i, b_j, T_c_b, 200.0, 0.5);
+    double r[2];
+    const double* params[2] = {pi.data(), pj.data()};
+    ASSERT_TRUE(exact.Evaluate(params, r, nullptr));
+    EXPECT_LT(std::hypot(r[0], r[1]), 1e-8);
+    const RotationOnlyError err((b_i + Eigen::Vector3d(0.01 * n(rng), 0.01 * n(rng), 0)).normalized(), b_j, T_c_b, 200.0, 0.5);
+    ceres::NumericDiffOptions nd;
+    const ceres::GradientChecker checker(&err, &manifolds, nd);
+    ceres::GradientChecker::ProbeResults res;
+    checker.Probe(params, 1e-5, &res);
+    ASSERT_TRUE(res.return_value);
+    worst = std::max(worst, worst_error(res));
+  }
+  std::printf("RotationOnlyError: worst Jacobian error %.2e\n", worst);
+  EXPECT_LT(worst, 1e-5);
+}
+
 TEST(LinearPrior, GradientCheckerWithPoseAndEuclideanBlocks) {
   std::mt19937 rng(5);
   std::normal_distribution<double> n(0.0, 1.0);

@@ -1,6 +1,8 @@
 #include "vio_simulation.h"
 
 #include <algorithm>
+#include <fstream>
+#include <sstream>
 #include <random>
 #include <stdexcept>
 #include <unordered_map>
@@ -34,10 +36,19 @@ Trajectory VioSimulation::groundtruth_at_frames() const {
 VioSimulation make_vio_simulation(const VioSimOptions& o) {
   apps::SimulateOverrides ov;
   // The texture is irrelevant here: keep it tiny so loading is fast.
-  ov.set.push_back("scene.planes.0.texture.size=[64,64]");
-  const apps::SimulationConfig cfg = apps::load_simulation_config(o.scene_yaml, ov);
+  {
+    std::ifstream f(o.scene_yaml);
+    std::stringstream text;
+    text << f.rdbuf();
+    ov.set.push_back(text.str().find("type: panorama") != std::string::npos ? "scene.texture.size=[64,32]"
+                                                                             : "scene.planes.0.texture.size=[64,64]");
+  }
+  if (o.scene_duration_s > 0) ov.duration_s = o.scene_duration_s;
+  apps::SimulationConfig cfg = apps::load_simulation_config(o.scene_yaml, ov);
   const auto* planes = dynamic_cast<const sim::PlanarScene*>(cfg.scene.get());
-  if (planes == nullptr) throw std::invalid_argument(o.scene_yaml + ": not a planes scene");
+  if (planes == nullptr && dynamic_cast<const sim::PanoramaScene*>(cfg.scene.get()) == nullptr) {
+    throw std::invalid_argument(o.scene_yaml + ": neither a planes nor a panorama scene");
+  }
 
   VioSimulation v;
   v.camera = cfg.camera;
@@ -57,14 +68,23 @@ VioSimulation make_vio_simulation(const VioSimOptions& o) {
 
   std::mt19937_64 rng(o.seed);
   std::uniform_real_distribution<double> u01(0.0, 1.0);
-  // Landmarks: uniform over the planes' areas.
-  double total_area = 0;
-  for (const auto& p : planes->planes()) total_area += p.width_m * p.height_m;
-  for (const auto& p : planes->planes()) {
-    const int n = static_cast<int>(std::lround(o.landmarks * p.width_m * p.height_m / total_area));
-    for (int i = 0; i < n; ++i) {
-      v.landmarks_w.push_back(p.center_w + (u01(rng) - 0.5) * p.width_m * p.axis_u_w +
-                              (u01(rng) - 0.5) * p.height_m * p.axis_v_w);
+  if (planes != nullptr) {
+    // Landmarks: uniform over the planes' areas.
+    double total_area = 0;
+    for (const auto& p : planes->planes()) total_area += p.width_m * p.height_m;
+    for (const auto& p : planes->planes()) {
+      const int n = static_cast<int>(std::lround(o.landmarks * p.width_m * p.height_m / total_area));
+      for (int i = 0; i < n; ++i) {
+        v.landmarks_w.push_back(p.center_w + (u01(rng) - 0.5) * p.width_m * p.axis_u_w +
+                                (u01(rng) - 0.5) * p.height_m * p.axis_v_w);
+      }
+    }
+  } else {
+    // Panorama: uniform on a sphere around the start position.
+    const Eigen::Vector3d c = cfg.trajectory->evaluate(v.t_begin_ns).T_w_b.translation;
+    std::normal_distribution<double> g(0.0, 1.0);
+    for (int i = 0; i < o.landmarks; ++i) {
+      v.landmarks_w.push_back(c + o.sphere_radius_m * Eigen::Vector3d(g(rng), g(rng), g(rng)).normalized());
     }
   }
 

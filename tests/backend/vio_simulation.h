@@ -1,7 +1,8 @@
 // Simulated VIO measurements with ground truth, for back-end tests and benchmarks: a simulator
 // scene YAML (datasets/*.yaml) gives the trajectory (e.g. the real poster_6dof motion capture
 // spline fit), the camera (intrinsics, T_c_b) and the IMU noise model; landmarks are random points
-// on the scene's planes; every frame observes the landmarks in view, projected through the
+// on the scene's planes (panorama scenes: on a sphere around the start, far enough that pure
+// rotation shows no parallax); every frame observes the landmarks in view, projected through the
 // distorted camera with Gaussian pixel noise, a share replaced by outliers, and undistorted back
 // to bearings (what a front-end delivers). A landmark that leaves the view and returns gets a new
 // track id, as a real tracker would.
@@ -33,6 +34,8 @@ struct VioSimOptions {
   Eigen::Vector3d bias_gyro = Eigen::Vector3d(0.002, -0.003, 0.001);   // initial biases, rad/s
   Eigen::Vector3d bias_accel = Eigen::Vector3d(0.02, -0.01, 0.03);     // m/s^2
   uint64_t seed = 7;
+  double scene_duration_s = 0;       // > 0: overrides the scene's `duration` (analytic trajectories), s
+  double sphere_radius_m = 20.0;     // panorama scenes: landmarks on a sphere of this radius around the start, m
 };
 
 struct VioSimulation {

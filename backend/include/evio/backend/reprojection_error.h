@@ -33,3 +33,26 @@ class ReprojectionError final : public ceres::SizedCostFunction<2, 7, 3> {
 };
 
 }  // namespace evio::backend
+
+namespace evio::backend {
+
+// Rotation-only residual between two keyframes observing the same (untriangulated) track, for
+// motion without parallax: the bearing of keyframe i, rotated into keyframe j's camera by the
+// relative rotation of the two poses (translation ignored: landmarks at infinity), against the
+// bearing observed in j, on the undistorted image plane in pixel sigmas:
+//   r = (f / sigma) (pi(R_c_b R_w_bj^T R_w_bi R_b_c b_i) - pi(b_j)).
+// Parameter blocks: pose_i, pose_j (7, PoseManifold); the position columns are zero.
+class RotationOnlyError final : public ceres::SizedCostFunction<2, 7, 7> {
+ public:
+  RotationOnlyError(const Eigen::Vector3d& bearing_i, const Eigen::Vector3d& bearing_j, const calib::SE3& T_c_b,
+                    double focal_px, double sigma_px);
+  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override;
+
+ private:
+  Eigen::Vector3d b_i_b_;        // R_b_c b_i
+  Eigen::Vector2d measurement_;  // pi(b_j)
+  Eigen::Matrix3d R_c_b_;
+  double scale_;
+};
+
+}  // namespace evio::backend

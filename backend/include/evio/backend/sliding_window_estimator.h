@@ -15,6 +15,11 @@
 //
 // Gauge: the first keyframe gets an anchor prior from the initial state (yaw and position tight,
 // roll/pitch, velocity and biases from their sigmas); later the marginalisation prior carries it.
+// Rotation-only model: when a new keyframe shows no parallax (median rotation-compensated
+// displacement below `rotation_only_parallax_px`), its untriangulated tracks shared with the
+// previous keyframe constrain the relative orientation directly (landmarks at infinity), so
+// orientation and gyro bias stay estimated; no landmark is triangulated without parallax (the
+// triangulation angle test). The model chosen per keyframe is in stats().motion_model.
 // Keyframes: a frame becomes a keyframe when the median rotation-compensated displacement of the
 // tracks it shares with the last keyframe reaches `keyframe_min_parallax_px`, when fewer than
 // `keyframe_min_tracked_ratio` of the last keyframe's tracks remain, or after
@@ -60,6 +65,10 @@ struct SlidingWindowOptions {
   double min_triangulation_angle_deg = 1.0;  // between the most separated rays, deg
   double max_reprojection_px = 2.0;        // after a solve, larger errors are outliers, px
   double min_depth_m = 0.05;               // landmarks closer to any observing camera are rejected, m
+  // Rotation-only model: a keyframe whose median rotation-compensated displacement from the
+  // previous keyframe is below this (no usable parallax) links the two keyframes' orientations
+  // through their common untriangulated tracks (RotationOnlyError); 0 disables the model, px.
+  double rotation_only_parallax_px = 1.5;
   Eigen::Vector3d gravity_w = Eigen::Vector3d(0, 0, -9.81);  // m/s^2
   // Anchor prior on the first keyframe (1 sigma).
   double init_sigma_roll_pitch_rad = 0.02;
@@ -78,6 +87,8 @@ struct SlidingWindowStats {
   int64_t outliers_removed = 0;
   int64_t landmarks_marginalised = 0;
   int64_t observations_dropped = 0;
+  int64_t rotation_only_keyframes = 0;  // keyframes that used the rotation-only model
+  std::vector<std::pair<int64_t, bool>> motion_model;  // per keyframe: (t_ns, rotation-only)
   std::vector<double> solve_time_s;   // per keyframe (solve + marginalisation)
   std::vector<int> solve_landmarks;   // landmarks in each solve
 };
@@ -114,6 +125,9 @@ class SlidingWindowEstimator {
   struct Landmark;
   VioState state_of(const Keyframe& k) const;
   VioState propagate(const Keyframe& from, int64_t t_ns) const;
+  // Median rotation-compensated displacement (px) of the tracks the frame shares with the last
+  // keyframe; *common receives their number.
+  double parallax_px(const FeatureObservations& frame, const VioState& predicted, size_t* common) const;
   bool is_keyframe(const FeatureObservations& frame, const VioState& predicted) const;
   void triangulate(int64_t track, Landmark* lm);
   void solve();
