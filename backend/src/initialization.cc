@@ -1,9 +1,15 @@
 #include "evio/backend/initialization.h"
 
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 
 #include <Eigen/Geometry>
+#include <Eigen/QR>
+#include <algorithm>
+#include <unordered_map>
+
+#include "evio/backend/imu_preintegration.h"
 
 namespace evio::backend {
 
@@ -66,6 +72,185 @@ std::optional<VioState> static_initialization(const std::vector<ImuSample>& imu,
   // R_w_b maps the measured up direction (specific force at rest = -g) onto world +z; yaw 0.
   s.T_w_b = calib::SE3(Eigen::Quaterniond::FromTwoVectors(ma.normalized(), Eigen::Vector3d::UnitZ()), Eigen::Vector3d::Zero());
   s.bias_gyro = mg;
+  return s;
+}
+
+}  // namespace evio::backend
+
+namespace evio::backend {
+
+bool VisualInertialInitOptions::Validate(std::string* why) const {
+  auto fail = [why](const std::string& m) {
+    if (why) *why = m;
+    return false;
+  };
+  if (min_frames < 3) return fail("min_frames must be >= 3");
+  if (min_track_frames < 2) return fail("min_track_frames must be >= 2");
+  if (min_tracks < 3 || max_tracks < min_tracks) return fail("need 3 <= min_tracks <= max_tracks");
+  if (!(gravity_mps2 > 0) || !(max_gravity_error > 0)) return fail("gravity settings must be > 0");
+  if (!(min_accel_excitation_mps2 >= 0)) return fail("min_accel_excitation_mps2 must be >= 0 m/s^2");
+  return true;
+}
+
+std::optional<VioState> visual_inertial_initialization(const std::vector<FeatureObservations>& frames,
+                                                       const std::vector<ImuSample>& imu,
+                                                       const calib::CameraCalibration& camera, const calib::ImuNoise& noise,
+                                                       const Eigen::Vector3d& bias_gyro, const Eigen::Vector3d& bias_accel,
+                                                       const VisualInertialInitOptions& o, std::string* why) {
+  auto fail = [why](const std::string& m) -> std::optional<VioState> {
+    if (why) *why = m;
+    return std::nullopt;
+  };
+  std::string v;
+  if (!o.Validate(&v)) throw std::invalid_argument("visual-inertial initialisation options: " + v);
+  if (static_cast<int>(frames.size()) < o.min_frames) {
+    return fail(std::to_string(frames.size()) + " frames (need " + std::to_string(o.min_frames) + ")");
+  }
+  if (imu.empty() || imu.front().t_ns > frames.front().t_ns || imu.back().t_ns < frames.back().t_ns) {
+    return fail("the IMU samples do not cover the frames");
+  }
+  // IMU: rotation and position deltas of each frame from the first (first body frame).
+  const int F = static_cast<int>(frames.size());
+  std::vector<Eigen::Matrix3d> R0(F);
+  std::vector<Eigen::Vector3d> dp(F);
+  std::vector<double> t(F);
+  for (int j = 0; j < F; ++j) {
+    const ImuPreintegration pre =
+        ImuPreintegration::between(imu, frames.front().t_ns, frames[j].t_ns, bias_gyro, bias_accel, noise);
+    R0[j] = pre.delta_R();
+    dp[j] = pre.delta_p();
+    t[j] = pre.dt_s();
+  }
+  // Excitation: the specific force must vary, else gravity and acceleration cannot be separated.
+  {
+    Eigen::Vector3d s = Eigen::Vector3d::Zero(), s2 = Eigen::Vector3d::Zero();
+    int n = 0;
+    for (const ImuSample& m : imu) {
+      if (m.t_ns < frames.front().t_ns || m.t_ns > frames.back().t_ns) continue;
+      s += m.accel;
+      s2 += m.accel.cwiseProduct(m.accel);
+      ++n;
+    }
+    const Eigen::Vector3d mean = s / std::max(1, n);
+    const double spread = (s2 / std::max(1, n) - mean.cwiseProduct(mean)).cwiseMax(0.0).cwiseSqrt().norm();
+    if (spread < o.min_accel_excitation_mps2) {
+      return fail("too little acceleration (specific-force spread " + std::to_string(spread) + " m/s^2)");
+    }
+  }
+  // Tracks seen in enough frames; the most observed first.
+  std::unordered_map<int64_t, std::vector<std::pair<int, Eigen::Vector3d>>> tracks;
+  for (int j = 0; j < F; ++j)
+    for (const FeatureObservation& ob : frames[j].observations) tracks[ob.track_id].push_back({j, ob.bearing_c});
+  std::vector<std::pair<int64_t, size_t>> order;
+  for (const auto& [id, obs] : tracks)
+    if (static_cast<int>(obs.size()) >= o.min_track_frames) order.push_back({id, obs.size()});
+  std::sort(order.begin(), order.end(), [](const auto& a, const auto& b) { return a.second != b.second ? a.second > b.second : a.first < b.first; });
+  if (static_cast<int>(order.size()) < o.min_tracks) {
+    return fail(std::to_string(order.size()) + " tracks seen in " + std::to_string(o.min_track_frames) + "+ frames (need " +
+                std::to_string(o.min_tracks) + ")");
+  }
+  if (static_cast<int>(order.size()) > o.max_tracks) order.resize(static_cast<size_t>(o.max_tracks));
+  const int K = static_cast<int>(order.size());
+  const Eigen::Matrix3d R_b_c = camera.T_c_b.rotation.toRotationMatrix().transpose();
+  const Eigen::Vector3d t_b_c = -(R_b_c * camera.T_c_b.translation);
+  // Observations used (outliers are dropped after each solve by their angular error).
+  struct Obs {
+    int k, j;
+    Eigen::Vector3d d;  // world (first body frame) direction
+    bool used = true;
+  };
+  std::vector<Obs> obs;
+  for (int k = 0; k < K; ++k)
+    for (const auto& [j, bearing] : tracks[order[static_cast<size_t>(k)].first])
+      obs.push_back({k, j, (R0[j] * R_b_c * bearing).normalized(), true});
+  const double focal = camera.camera.intrinsics().fx;
+  // Unknowns: v0 (3), g0 (3), X_k (3K).
+  // Column of each track's point: only tracks with two or more used observations take part.
+  std::vector<int> column(static_cast<size_t>(K), -1);
+  auto solve = [&](const std::optional<Eigen::Vector3d>& g_fixed, Eigen::VectorXd* x) {
+    std::vector<int> count(static_cast<size_t>(K), 0);
+    for (const Obs& ob : obs) count[static_cast<size_t>(ob.k)] += ob.used ? 1 : 0;
+    int active = 0;
+    for (int k = 0; k < K; ++k) column[static_cast<size_t>(k)] = count[static_cast<size_t>(k)] >= 2 ? active++ : -1;
+    if (active < o.min_tracks) return false;
+    const int n = (g_fixed ? 3 : 6) + 3 * active;
+    int rows = 0;
+    for (const Obs& ob : obs) rows += ob.used && column[static_cast<size_t>(ob.k)] >= 0 ? 3 : 0;
+    Eigen::MatrixXd A = Eigen::MatrixXd::Zero(rows, n);
+    Eigen::VectorXd b = Eigen::VectorXd::Zero(rows);
+    int r = 0;
+    for (const Obs& ob : obs) {
+      if (!ob.used || column[static_cast<size_t>(ob.k)] < 0) continue;
+      const int k = column[static_cast<size_t>(ob.k)], j = ob.j;
+      {
+        const Eigen::Vector3d& d = ob.d;
+        const Eigen::Matrix3d P = Eigen::Matrix3d::Identity() - d * d.transpose();
+        A.block<3, 3>(r, 0) = -P * t[j];
+        Eigen::Vector3d rhs = P * (dp[j] + R0[j] * t_b_c);
+        if (g_fixed) {
+          rhs += P * (0.5 * t[j] * t[j] * *g_fixed);
+        } else {
+          A.block<3, 3>(r, 3) = -P * (0.5 * t[j] * t[j]);
+        }
+        A.block<3, 3>(r, (g_fixed ? 3 : 6) + 3 * k) = P;
+        b.segment<3>(r) = rhs;
+        r += 3;
+      }
+    }
+    const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(A);
+    *x = qr.solve(b);
+    return qr.rank() == n;
+  };
+  // Angular error of each observation for a solution: the ray from the camera centre of frame j
+  // to X_k against the observed direction; above 3 px (at the focal length) it is an outlier.
+  auto reject = [&](const Eigen::VectorXd& x, const std::optional<Eigen::Vector3d>& g_fixed) {
+    const Eigen::Vector3d v0 = x.head<3>();
+    const Eigen::Vector3d g = g_fixed ? *g_fixed : Eigen::Vector3d(x.segment<3>(3));
+    const int off = g_fixed ? 3 : 6;
+    std::vector<double> err(obs.size(), std::numeric_limits<double>::infinity());
+    std::vector<double> used_err;
+    for (size_t i = 0; i < obs.size(); ++i) {
+      const Obs& ob = obs[i];
+      const int col = column[static_cast<size_t>(ob.k)];
+      if (col < 0) continue;
+      const Eigen::Vector3d c = v0 * t[ob.j] + 0.5 * g * t[ob.j] * t[ob.j] + dp[ob.j] + R0[ob.j] * t_b_c;
+      const Eigen::Vector3d ray = x.segment<3>(off + 3 * col) - c;
+      if (ray.dot(ob.d) <= 0) continue;
+      err[i] = std::acos(std::clamp(ray.normalized().dot(ob.d), -1.0, 1.0)) * focal;  // px
+      if (ob.used) used_err.push_back(err[i]);
+    }
+    // Outliers: above 3 px and above 4x the median error (a poorly conditioned first solution
+    // has large errors everywhere; those are not outliers).
+    std::nth_element(used_err.begin(), used_err.begin() + static_cast<long>(used_err.size() / 2), used_err.end());
+    const double thresh = std::max(3.0, used_err.empty() ? 0.0 : 4.0 * used_err[used_err.size() / 2]);
+    int dropped = 0;
+    for (size_t i = 0; i < obs.size(); ++i) {
+      const bool ok = err[i] < thresh;
+      if (obs[i].used && !ok) ++dropped;
+      obs[i].used = ok;
+    }
+    return dropped;
+  };
+  Eigen::VectorXd x;
+  for (int it = 0; it < 3; ++it) {
+    if (!solve(std::nullopt, &x) || !x.allFinite()) return fail("rank-deficient alignment (degenerate motion or too few tracks)");
+    if (reject(x, std::nullopt) == 0) break;
+  }
+  Eigen::Vector3d g0 = x.segment<3>(3);
+  if (std::abs(g0.norm() - o.gravity_mps2) > o.max_gravity_error) {
+    return fail("aligned gravity magnitude " + std::to_string(g0.norm()) + " m/s^2 is not " + std::to_string(o.gravity_mps2));
+  }
+  g0 = g0.normalized() * o.gravity_mps2;
+  if (!solve(g0, &x) || !x.allFinite()) return fail("rank-deficient alignment with fixed gravity");
+  const Eigen::Vector3d v0 = x.head<3>();
+  VioState s;
+  s.t_ns = frames.front().t_ns;
+  // R_w_b0 g0 = (0, 0, -g): the minimal tilt.
+  const Eigen::Quaterniond q = Eigen::Quaterniond::FromTwoVectors(g0.normalized(), -Eigen::Vector3d::UnitZ());
+  s.T_w_b = calib::SE3(q, Eigen::Vector3d::Zero());
+  s.v_w = q * v0;
+  s.bias_gyro = bias_gyro;
+  s.bias_accel = bias_accel;
   return s;
 }
 

@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include "evio/backend/initialization.h"
 #include "evio/backend/sliding_window_estimator.h"
 #include "evio/evaluation/trajectory_evaluation.h"
 #include "evio_test/real_data.h"
@@ -147,6 +148,96 @@ TEST(SlidingWindowSimulated, RotationOnlySegmentKeepsOrientation) {
   EXPECT_LT(worst, 1.0);
   EXPECT_GT(st.rotation_only_keyframes, st.keyframes * 9 / 10);
   EXPECT_EQ(st.landmarks_triangulated, 0);
+}
+
+// No ground truth: the visual-inertial alignment over the first second initialises the estimator
+// on the moving (hand-held) start of the poster_6dof recording.
+TEST(SlidingWindowSimulated, VisualInertialInitialisationOnTheMovingStart) {
+  if (!evio_test::real_data_dir("trajectories")) GTEST_SKIP() << "real motion-capture trajectory not found";
+  test::VioSimOptions so;
+  so.scene_yaml = poster_yaml();
+  so.duration_s = 60.0;
+  const test::VioSimulation sim = test::make_vio_simulation(so);
+  const std::vector<FeatureObservations> first(sim.frames.begin(), sim.frames.begin() + 41);  // 2 s
+  std::string why;
+  const auto init = visual_inertial_initialization(first, sim.imu, sim.camera, sim.imu_noise, Eigen::Vector3d::Zero(),
+                                                   Eigen::Vector3d::Zero(), VisualInertialInitOptions{}, &why);
+  ASSERT_TRUE(init.has_value()) << why;
+  const VioState truth = sim.true_state(first.front().t_ns);
+  // Gravity direction and velocity in the body frame (gauge-free).
+  const Eigen::Vector3d up_e = init->T_w_b.rotation.conjugate() * Eigen::Vector3d::UnitZ();
+  const Eigen::Vector3d up_t = truth.T_w_b.rotation.conjugate() * Eigen::Vector3d::UnitZ();
+  const double tilt_deg = std::acos(std::clamp(up_e.dot(up_t), -1.0, 1.0)) * 180 / M_PI;
+  const Eigen::Vector3d v_e = init->T_w_b.rotation.conjugate() * init->v_w, v_t = truth.T_w_b.rotation.conjugate() * truth.v_w;
+  // Then the whole recording from that state.
+  SlidingWindowEstimator est(SlidingWindowOptions{}, sim.camera, sim.imu_noise);
+  est.initialize(*init);
+  size_t next_imu = 0;
+  std::vector<StampedPose> poses;
+  for (const FeatureObservations& f : sim.frames) {
+    while (next_imu < sim.imu.size() && sim.imu[next_imu].t_ns <= f.t_ns + 5'000'000) est.add_imu(sim.imu[next_imu++]);
+    est.add_frame(f);
+    poses.push_back({f.t_ns, est.latest_state().T_w_b});
+  }
+  evaluation::EvaluationOptions eo;
+  eo.alignment.method = evaluation::Alignment::kSE3;
+  eo.alignment.first_s = 5.0;
+  const auto r = evaluation::evaluate(sim.groundtruth_at_frames(), Trajectory(poses), eo);
+  std::printf("VI alignment (2 s): tilt error %.3f deg, velocity error %.4f m/s (|v| %.3f m/s); whole run: mean position "
+              "error %.3f%%, yaw drift %.4f deg/m\n",
+              tilt_deg, (v_e - v_t).norm(), v_t.norm(), r.mean_position_error_percent, r.yaw_drift_deg_per_m);
+  EXPECT_LT(tilt_deg, 1.5);
+  EXPECT_LT((v_e - v_t).norm(), 0.1);
+  EXPECT_LT(r.mean_position_error_percent, 0.2);
+}
+
+// The same alignment started in the middle of the recording, where the camera moves faster.
+TEST(VisualInertialInitialisation, GravityAndVelocityAtFasterStarts) {
+  if (!evio_test::real_data_dir("trajectories")) GTEST_SKIP() << "real motion-capture trajectory not found";
+  for (double start : {15.0, 30.0, 45.0}) {
+    test::VioSimOptions so;
+    so.scene_yaml = poster_yaml();
+    so.t_begin_s = start;
+    so.duration_s = 2.5;
+    const test::VioSimulation sim = test::make_vio_simulation(so);
+    const std::vector<FeatureObservations> first(sim.frames.begin(), sim.frames.begin() + 41);
+    std::string why;
+    const auto init = visual_inertial_initialization(first, sim.imu, sim.camera, sim.imu_noise, Eigen::Vector3d::Zero(),
+                                                     Eigen::Vector3d::Zero(), VisualInertialInitOptions{}, &why);
+    ASSERT_TRUE(init.has_value()) << start << ": " << why;
+    const VioState truth = sim.true_state(first.front().t_ns);
+    const Eigen::Vector3d up_e = init->T_w_b.rotation.conjugate() * Eigen::Vector3d::UnitZ();
+    const Eigen::Vector3d up_t = truth.T_w_b.rotation.conjugate() * Eigen::Vector3d::UnitZ();
+    const double tilt_deg = std::acos(std::clamp(up_e.dot(up_t), -1.0, 1.0)) * 180 / M_PI;
+    const Eigen::Vector3d v_e = init->T_w_b.rotation.conjugate() * init->v_w, v_t = truth.T_w_b.rotation.conjugate() * truth.v_w;
+    std::printf("start %.0f s: tilt error %.3f deg, velocity error %.4f m/s of %.3f m/s\n", start, tilt_deg,
+                (v_e - v_t).norm(), v_t.norm());
+    EXPECT_LT(tilt_deg, 0.5);
+    EXPECT_LT((v_e - v_t).norm(), 0.05);
+  }
+}
+
+TEST(VisualInertialInitialisation, RejectsTooFewFramesAndNoExcitation) {
+  if (!evio_test::real_data_dir("trajectories")) GTEST_SKIP() << "real motion-capture trajectory not found";
+  test::VioSimOptions so;
+  so.scene_yaml = poster_yaml();
+  so.duration_s = 2.0;
+  const test::VioSimulation sim = test::make_vio_simulation(so);
+  std::string why;
+  const std::vector<FeatureObservations> three(sim.frames.begin(), sim.frames.begin() + 3);
+  EXPECT_FALSE(visual_inertial_initialization(three, sim.imu, sim.camera, sim.imu_noise, Eigen::Vector3d::Zero(),
+                                              Eigen::Vector3d::Zero(), VisualInertialInitOptions{}, &why));
+  EXPECT_NE(why.find("frames"), std::string::npos) << why;
+  // A still IMU (gravity only): no excitation.
+  std::vector<ImuSample> still = sim.imu;
+  for (ImuSample& m : still) {
+    m.accel = Eigen::Vector3d(0, 0, 9.81);
+    m.gyro.setZero();
+  }
+  const std::vector<FeatureObservations> second(sim.frames.begin(), sim.frames.begin() + 21);
+  EXPECT_FALSE(visual_inertial_initialization(second, still, sim.camera, sim.imu_noise, Eigen::Vector3d::Zero(),
+                                              Eigen::Vector3d::Zero(), VisualInertialInitOptions{}, &why));
+  EXPECT_NE(why.find("acceleration"), std::string::npos) << why;
 }
 
 }  // namespace
