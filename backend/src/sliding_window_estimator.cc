@@ -207,6 +207,8 @@ void SlidingWindowEstimator::triangulate(int64_t track, Landmark* lm) {
 bool SlidingWindowEstimator::add_frame(const FeatureObservations& frame) {
   if (!initial_ || frame.t_ns < initial_->t_ns) return false;
   if (imu_.empty() || imu_.back().t_ns < frame.t_ns || imu_.front().t_ns > frame.t_ns) return false;
+  // A frame at (or before) the newest keyframe's time adds no interval: ignored.
+  if (!window_.empty() && frame.t_ns <= window_.back()->t_ns) return false;
   ++stats_.frames;
   VioState predicted;
   if (window_.empty()) {
@@ -391,6 +393,19 @@ void SlidingWindowEstimator::solve() {
   if (options_.max_solver_time_s > 0) so.max_solver_time_in_seconds = options_.max_solver_time_s;
   ceres::Solver::Summary summary;
   ceres::Solve(so, &problem, &summary);
+  latest_cov_.reset();
+  if (options_.compute_covariance) {
+    ceres::Covariance::Options co;
+    co.algorithm_type = ceres::DENSE_SVD;
+    co.null_space_rank = -1;  // pseudo-inverse: the gauge is fixed by the prior, but be safe
+    ceres::Covariance cov(co);
+    const double* pose = window_.back()->pose.data();
+    const std::vector<std::pair<const double*, const double*>> blocks = {{pose, pose}};
+    if (cov.Compute(blocks, &problem)) {
+      Eigen::Matrix<double, 6, 6, Eigen::RowMajor> c;
+      if (cov.GetCovarianceBlockInTangentSpace(pose, pose, c.data())) latest_cov_ = c;
+    }
+  }
 }
 
 void SlidingWindowEstimator::remove_outliers() {

@@ -70,6 +70,7 @@ struct SlidingWindowOptions {
   // through their common untriangulated tracks (RotationOnlyError); 0 disables the model, px.
   double rotation_only_parallax_px = 1.5;
   Eigen::Vector3d gravity_w = Eigen::Vector3d(0, 0, -9.81);  // m/s^2
+  bool compute_covariance = false;         // covariance of the newest keyframe's pose after each solve
   // Anchor prior on the first keyframe (1 sigma).
   double init_sigma_roll_pitch_rad = 0.02;
   double init_sigma_yaw_rad = 1e-4;
@@ -115,6 +116,9 @@ class SlidingWindowEstimator {
   // Latest estimate: the newest keyframe, or the last frame propagated from it with the IMU.
   VioState latest_state() const { return latest_; }
   std::vector<VioState> keyframe_states() const;
+  // Covariance of the newest keyframe's pose in its tangent space [dtheta (rad, body frame), dp
+  // (m, world)], when compute_covariance is set and the last solve's covariance was computable.
+  const std::optional<Eigen::Matrix<double, 6, 6>>& latest_pose_covariance() const { return latest_cov_; }
   // Triangulated landmarks in the window (world frame), by track id.
   std::unordered_map<int64_t, Eigen::Vector3d> landmarks() const;
   const SlidingWindowStats& stats() const { return stats_; }
@@ -145,6 +149,7 @@ class SlidingWindowEstimator {
   std::unordered_set<int64_t> closed_tracks_;
   std::unique_ptr<LinearPrior> prior_;
   VioState latest_;
+  std::optional<Eigen::Matrix<double, 6, 6>> latest_cov_;
   SlidingWindowStats stats_;
 };
 
