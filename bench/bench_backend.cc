@@ -22,6 +22,9 @@ int main(int argc, char** argv) {
   evio::test::VioSimOptions so;
   so.scene_yaml = std::string(EVIO_SOURCE_DIR) + "/datasets/poster_6dof_mocap.yaml";
   so.duration_s = 60.0;
+  const char* env = std::getenv("EVIO_REAL_DATA");
+  so.trajectory_file = (env ? std::string(env) : std::string(EVIO_SOURCE_DIR) + "/../shared/data/real") +
+                       "/trajectories/poster_6dof_mocap.csv";
   evio::test::VioSimulation sim;
   try {
     sim = evio::test::make_vio_simulation(so);

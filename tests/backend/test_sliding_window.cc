@@ -18,6 +18,14 @@ namespace {
 
 std::string poster_yaml() { return std::string(EVIO_SOURCE_DIR) + "/datasets/poster_6dof_mocap.yaml"; }
 
+// Options for the poster_6dof mocap scene, with the real trajectory from wherever it lives
+// ($EVIO_REAL_DATA or ../shared/data/real); callers skip when it is missing.
+test::VioSimOptions poster_options() {
+  test::VioSimOptions so = poster_options();
+  if (const auto dir = evio_test::real_data_dir("trajectories")) so.trajectory_file = *dir + "/poster_6dof_mocap.csv";
+  return so;
+}
+
 struct RunResult {
   evaluation::EvaluationResult eval;
   SlidingWindowStats stats;
@@ -41,8 +49,7 @@ RunResult run(const test::VioSimulation& sim, const SlidingWindowOptions& o) {
 
 TEST(SlidingWindowSimulated, PosterMocapMeanPositionErrorBelowTarget) {
   if (!evio_test::real_data_dir("trajectories")) GTEST_SKIP() << "real motion-capture trajectory not found";
-  test::VioSimOptions so;
-  so.scene_yaml = poster_yaml();
+  test::VioSimOptions so = poster_options();
   so.duration_s = 60.0;  // the whole 59.8 s recording
   const test::VioSimulation sim = test::make_vio_simulation(so);
   SlidingWindowOptions o;
@@ -64,8 +71,7 @@ TEST(SlidingWindowSimulated, PosterMocapMeanPositionErrorBelowTarget) {
 // propagates the IMU; with a noise-free IMU the state follows the truth.
 TEST(SlidingWindowSimulated, WindowWithoutLandmarksPropagatesTheImu) {
   if (!evio_test::real_data_dir("trajectories")) GTEST_SKIP() << "real motion-capture trajectory not found";
-  test::VioSimOptions so;
-  so.scene_yaml = poster_yaml();
+  test::VioSimOptions so = poster_options();
   so.duration_s = 3.0;
   so.imu_noise = false;
   test::VioSimulation sim = test::make_vio_simulation(so);
@@ -92,8 +98,7 @@ TEST(SlidingWindowSimulated, WindowWithoutLandmarksPropagatesTheImu) {
 // landmarks constrain the window.
 TEST(SlidingWindowSimulated, DuplicateFramesImuGapsAndCovariance) {
   if (!evio_test::real_data_dir("trajectories")) GTEST_SKIP() << "real motion-capture trajectory not found";
-  test::VioSimOptions so;
-  so.scene_yaml = poster_yaml();
+  test::VioSimOptions so = poster_options();
   so.duration_s = 4.0;
   test::VioSimulation sim = test::make_vio_simulation(so);
   // Drop IMU samples in (1.0 s, 1.1 s] after the start.
@@ -134,8 +139,7 @@ TEST(SlidingWindowSimulated, DuplicateFramesImuGapsAndCovariance) {
 // The same run at t0 = 1.7e18 ns gives the same estimates (times enter only as int64 differences).
 TEST(SlidingWindowSimulated, LargeTimestampsGiveTheSameEstimates) {
   if (!evio_test::real_data_dir("trajectories")) GTEST_SKIP() << "real motion-capture trajectory not found";
-  test::VioSimOptions so;
-  so.scene_yaml = poster_yaml();
+  test::VioSimOptions so = poster_options();
   so.duration_s = 3.0;
   const test::VioSimulation sim = test::make_vio_simulation(so);
   const int64_t shift = 1'700'000'000'000'000'000 - sim.t_begin_ns;
@@ -200,8 +204,7 @@ TEST(SlidingWindowSimulated, RotationOnlySegmentKeepsOrientation) {
 // on the moving (hand-held) start of the poster_6dof recording.
 TEST(SlidingWindowSimulated, VisualInertialInitialisationOnTheMovingStart) {
   if (!evio_test::real_data_dir("trajectories")) GTEST_SKIP() << "real motion-capture trajectory not found";
-  test::VioSimOptions so;
-  so.scene_yaml = poster_yaml();
+  test::VioSimOptions so = poster_options();
   so.duration_s = 60.0;
   const test::VioSimulation sim = test::make_vio_simulation(so);
   const std::vector<FeatureObservations> first(sim.frames.begin(), sim.frames.begin() + 41);  // 2 s
@@ -241,8 +244,7 @@ TEST(SlidingWindowSimulated, VisualInertialInitialisationOnTheMovingStart) {
 TEST(VisualInertialInitialisation, GravityAndVelocityAtFasterStarts) {
   if (!evio_test::real_data_dir("trajectories")) GTEST_SKIP() << "real motion-capture trajectory not found";
   for (double start : {15.0, 30.0, 45.0}) {
-    test::VioSimOptions so;
-    so.scene_yaml = poster_yaml();
+    test::VioSimOptions so = poster_options();
     so.t_begin_s = start;
     so.duration_s = 2.5;
     const test::VioSimulation sim = test::make_vio_simulation(so);
@@ -265,8 +267,7 @@ TEST(VisualInertialInitialisation, GravityAndVelocityAtFasterStarts) {
 
 TEST(VisualInertialInitialisation, RejectsTooFewFramesAndNoExcitation) {
   if (!evio_test::real_data_dir("trajectories")) GTEST_SKIP() << "real motion-capture trajectory not found";
-  test::VioSimOptions so;
-  so.scene_yaml = poster_yaml();
+  test::VioSimOptions so = poster_options();
   so.duration_s = 2.0;
   const test::VioSimulation sim = test::make_vio_simulation(so);
   std::string why;

@@ -44,6 +44,7 @@ VioSimulation make_vio_simulation(const VioSimOptions& o) {
                                                                              : "scene.planes.0.texture.size=[64,64]");
   }
   if (o.scene_duration_s > 0) ov.duration_s = o.scene_duration_s;
+  if (!o.trajectory_file.empty()) ov.set.push_back("trajectory.path=" + o.trajectory_file);
   apps::SimulationConfig cfg = apps::load_simulation_config(o.scene_yaml, ov);
   const auto* planes = dynamic_cast<const sim::PlanarScene*>(cfg.scene.get());
   if (planes == nullptr && dynamic_cast<const sim::PanoramaScene*>(cfg.scene.get()) == nullptr) {

@@ -35,6 +35,7 @@ struct VioSimOptions {
   Eigen::Vector3d bias_accel = Eigen::Vector3d(0.02, -0.01, 0.03);     // m/s^2
   uint64_t seed = 7;
   double scene_duration_s = 0;       // > 0: overrides the scene's `duration` (analytic trajectories), s
+  std::string trajectory_file;       // non-empty: overrides `trajectory.path` (file trajectories)
   double sphere_radius_m = 20.0;     // panorama scenes: landmarks on a sphere of this radius around the start, m
 };
 
