@@ -21,7 +21,8 @@ std::string poster_yaml() { return std::string(EVIO_SOURCE_DIR) + "/datasets/pos
 // Options for the poster_6dof mocap scene, with the real trajectory from wherever it lives
 // ($EVIO_REAL_DATA or ../shared/data/real); callers skip when it is missing.
 test::VioSimOptions poster_options() {
-  test::VioSimOptions so = poster_options();
+  test::VioSimOptions so;
+  so.scene_yaml = poster_yaml();
   if (const auto dir = evio_test::real_data_dir("trajectories")) so.trajectory_file = *dir + "/poster_6dof_mocap.csv";
   return so;
 }
