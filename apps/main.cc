@@ -17,6 +17,7 @@
 #include "evio/sensors/time.h"
 #include "info_command.h"
 #include "simulate_command.h"
+#include "vio_command.h"
 
 namespace {
 
@@ -270,6 +271,21 @@ int main(int argc, char** argv) {
       ->check(CLI::NonNegativeNumber);
   add_dataset_options(corners_cmd, &corners.dataset_options, &corners_format, &corners_unit, &corners_bad);
 
+  evio::apps::VioArgs vio;
+  std::string vio_format = "auto", vio_unit = "auto", vio_bad = "error";
+  CLI::App* vio_cmd = app.add_subcommand(
+      "vio", "Event-based visual-inertial odometry: events + IMU -> trajectory.tum, keyframes.txt, map.ply, "
+             "stats.json (and eval.json with --gt)");
+  vio_cmd->add_option("DATASET", vio.dataset, "Dataset with events and IMU (any format evio reads)")->required();
+  vio_cmd->add_option("-o,--out", vio.out, "Output folder (created)")->required();
+  vio_cmd->add_option("--config", vio.config, "VIO config YAML (README.md; examples in datasets/vio_*.yaml)");
+  vio_cmd->add_option("--calib", vio.calib,
+                      "Calibration: Kalibr camchain .yaml (with imu0 noise) or ECD calib.txt; default: the dataset "
+                      "folder's calib.yaml, else the dataset's calibration");
+  vio_cmd->add_option("--gt", vio.gt,
+                      "Ground truth (TUM or csv): evaluate at the end (SE3 alignment on the first 5 s) into eval.json");
+  add_dataset_options(vio_cmd, &vio.dataset_options, &vio_format, &vio_unit, &vio_bad);
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -295,6 +311,11 @@ int main(int argc, char** argv) {
       conv.h5_time_unit = conv_h5_unit == "us" ? evio::TimeUnit::kMicroseconds : evio::TimeUnit::kNanoseconds;
       conv.progress = !quiet;
       return evio::apps::run_convert(conv, std::cout);
+    }
+    if (vio_cmd->parsed()) {
+      apply_dataset_strings(vio_format, vio_unit, vio_bad, &vio.dataset_options);
+      vio.progress = !quiet;
+      return evio::apps::run_vio(vio, std::cout);
     }
     if (corners_cmd->parsed()) {
       apply_dataset_strings(corners_format, corners_unit, corners_bad, &corners.dataset_options);

@@ -81,6 +81,17 @@ class CornerTracker {
   std::vector<CornerTrack> finish();
 
   size_t active_tracks() const { return active_.size(); }
+  // Calls f(track id, position predicted at t_ns) for every active track updated within max_age_ns
+  // of t_ns (position + velocity x elapsed time, px): samples asynchronous tracks at a frame time.
+  // Tracks that began less than min_span_ns before t_ns are skipped (too young to trust).
+  void predict_active(int64_t t_ns, int64_t max_age_ns, int64_t min_span_ns,
+                      const std::function<void(int64_t, const Eigen::Vector2d&)>& f) const {
+    for (const Active& a : active_) {
+      if (t_ns - a.track.points.back().t_ns > max_age_ns) continue;
+      if (t_ns - a.track.points.front().t_ns < min_span_ns) continue;
+      f(a.track.id, predict(a, t_ns));
+    }
+  }
   // Calls f on every active (not yet ended) track, e.g. to draw them.
   void visit_active(const std::function<void(const CornerTrack&)>& f) const {
     for (const Active& a : active_) f(a.track);
