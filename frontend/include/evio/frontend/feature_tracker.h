@@ -1,0 +1,142 @@
+// Frame-to-frame feature tracker of the VIO front-end on (motion-compensated, undistorted) 8-bit
+// event frames: FAST corners with grid bucketing, pyramidal Lucas-Kanade (Bouguet's KLT, OpenCV)
+// with a forward-backward check (Kalal et al. 2010), and RANSAC outlier rejection with OpenGV:
+// the 2-point translation-only model with the IMU rotation prior (Kneip et al., "Robust real-time
+// visual odometry with a single camera and an IMU", BMVC 2011) or Nister's 5-point essential matrix.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+
+#include "evio/calib/camera.h"
+#include "evio/sensors/vio_types.h"
+
+namespace evio::frontend {
+
+enum class RansacModel {
+  kNone,      // no geometric verification
+  kTwoPoint,  // translation only (opengv TranslationOnlySacProblem), rotation from the IMU
+  kFivePoint  // essential matrix, Nister's 5-point solver (opengv CentralRelativePoseSacProblem)
+};
+
+// "none", "two_point", "five_point".
+const char* ransac_model_name(RansacModel model);
+
+// Smallest number of correspondences ransac_inliers() runs RANSAC on: OpenGV's sample size,
+// 2 for kTwoPoint, 8 for kFivePoint (5 for Nister's solver + 3 to pick among its solutions),
+// 0 for kNone.
+int ransac_min_correspondences(RansacModel model);
+
+// Geometric verification of bearing correspondences (unit vectors in the camera frame; index i of
+// both lists is one correspondence) between a previous and a current view.
+//   model:          kNone returns all true.
+//   R_cur_prev:     rotation prior for kTwoPoint, p_cur = R_cur_prev p_prev; nullptr = identity
+//                   (pure translation). Ignored by kFivePoint.
+//   threshold_rad:  angular threshold theta (rad); OpenGV scores a correspondence by the sum over
+//                   both views of 1 - cos(reprojection angle) of the triangulated point and keeps
+//                   it when the score is below 1 - cos(theta).
+//   max_iterations: RANSAC iteration cap (OpenGV also stops at 99% confidence).
+//   seed:           seeds OpenGV's sampler (its std::mt19937 is re-seeded from `seed` for every
+//                   call), so the same input and seed give the same result.
+// Degenerate input rule: with fewer correspondences than ransac_min_correspondences(model), or
+// when no minimal sample gives a model, nothing can be verified and every correspondence is
+// returned as an inlier (all true; an empty input gives an empty result). Throws
+// std::invalid_argument when the two lists differ in size or threshold_rad/max_iterations are not
+// positive.
+std::vector<bool> ransac_inliers(const std::vector<Eigen::Vector3d>& bearings_prev,
+                                 const std::vector<Eigen::Vector3d>& bearings_cur,
+                                 RansacModel model, const Eigen::Matrix3d* R_cur_prev,
+                                 double threshold_rad, int max_iterations, uint64_t seed);
+
+struct FeatureTrackerOptions {
+  // Bucketing grid over the image (cells). Detection never fills a cell beyond max_per_cell
+  // features (tracks already in the cell count).
+  int grid_cols = 6;
+  int grid_rows = 4;
+  int max_features = 150;  // total features after detection (count)
+  int max_per_cell = 8;    // features per grid cell after detection (count)
+  // FAST-9 threshold: intensity difference (8-bit grey levels, 0..255) between the centre and the
+  // contiguous arc of the Bresenham circle, on the 8-bit event frame (e.g. scaled event counts).
+  int fast_threshold = 20;
+  int min_distance_px = 8;  // minimum distance of a new feature to any other feature (px)
+  int klt_window_px = 21;     // KLT search window side (px, odd, >= 3)
+  int klt_pyramid_levels = 3; // pyramid levels above full resolution (OpenCV maxLevel; 0 = none)
+  int klt_max_iterations = 30;  // per pyramid level (count); also stops at 0.01 px updates
+  // Forward-backward check: a track is dropped when tracking the new position back into the
+  // previous frame lands farther than this from where it started (px).
+  double forward_backward_max_px = 1.0;
+  // Geometric verification. kTwoPoint needs the IMU rotation: when track() gets no R_cur_prev it
+  // falls back to kFivePoint.
+  RansacModel ransac = RansacModel::kTwoPoint;
+  // Inlier threshold (px on the ideal pinhole), converted to the angle atan(px / f) with
+  // f = sqrt(fx fy), passed to OpenGV as 1 - cos(angle).
+  double ransac_threshold_px = 1.0;
+  int ransac_max_iterations = 200;  // count
+  // New features are detected when fewer tracks than this survive a frame (count, 0..max_features;
+  // the first frame always detects).
+  int min_tracks_before_detection = 100;
+  // Features closer than this to the image border are not detected, and tracks that move closer
+  // are dropped as KLT losses (px).
+  int border_px = 4;
+  uint64_t seed = 1;  // RANSAC seed (each frame's RANSAC seed is derived from it and the frame id)
+
+  bool Validate(std::string* why) const;
+};
+
+struct FeatureTrackerStats {
+  int64_t frames = 0;           // frames processed
+  int64_t detected = 0;         // new tracks started
+  int64_t tracked = 0;          // track continuations that survived every check (sum over frames)
+  int64_t lost_klt = 0;         // KLT failure or left the image (minus border)
+  int64_t lost_fb = 0;          // forward-backward check failed
+  int64_t rejected_ransac = 0;  // RANSAC outliers
+};
+
+class FeatureTracker {
+ public:
+  // ideal_pinhole: the IDEAL pinhole of the frames (fx, fy, cx, cy; frames are undistorted, the
+  // distortion fields must be kNone), width x height. Throws std::invalid_argument when the
+  // intrinsics or the options are invalid.
+  FeatureTracker(const calib::CameraIntrinsics& ideal_pinhole, const FeatureTrackerOptions& options);
+
+  // Tracks into a new 8-bit single-channel frame of the camera's size (throws
+  // std::invalid_argument otherwise). R_cur_prev (optional): rotation of the previous camera frame
+  // into the current one from the IMU (p_cur = R_cur_prev p_prev for points at infinity); used to
+  // predict KLT positions and by the 2-point RANSAC. Returns the observations of this frame (every
+  // surviving track, in track order, then every new one; bearing = normalised K^-1 [u v 1]).
+  // frame_id counts the frames given to track() from 0.
+  FeatureObservations track(int64_t t_ns, const cv::Mat& frame,
+                            const Eigen::Matrix3d* R_cur_prev = nullptr);
+
+  // Current tracks' pixel positions (for drawing overlays), in the order of the last observations.
+  std::vector<std::pair<int64_t, cv::Point2f>> current() const;
+  const FeatureTrackerStats& stats() const { return stats_; }
+  const FeatureTrackerOptions& options() const { return options_; }
+
+  // Unit bearing of a pixel of the ideal pinhole: normalised K^-1 [u v 1].
+  Eigen::Vector3d bearing(const cv::Point2f& px) const;
+
+ private:
+  struct Track {
+    int64_t id;
+    cv::Point2f px;
+  };
+  int cell_of(const cv::Point2f& px) const;
+  bool inside(const cv::Point2f& px) const;
+  void detect(const cv::Mat& frame);
+
+  calib::CameraIntrinsics K_;
+  FeatureTrackerOptions options_;
+  FeatureTrackerStats stats_;
+  std::vector<Track> tracks_;
+  std::vector<cv::Mat> prev_pyramid_;
+  int64_t next_id_ = 0;
+  int64_t frame_id_ = 0;
+};
+
+}  // namespace evio::frontend

@@ -1,0 +1,323 @@
+#include "evio/frontend/feature_tracker.h"
+
+#include <algorithm>
+#include <cmath>
+#include <functional>
+#include <memory>
+#include <random>
+#include <sstream>
+#include <stdexcept>
+
+#include <opencv2/features2d.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/video/tracking.hpp>
+
+#include <opengv/relative_pose/CentralRelativeAdapter.hpp>
+#include <opengv/sac/Ransac.hpp>
+#include <opengv/sac_problems/relative_pose/CentralRelativePoseSacProblem.hpp>
+#include <opengv/sac_problems/relative_pose/TranslationOnlySacProblem.hpp>
+
+namespace evio::frontend {
+namespace {
+
+// OpenGV's SampleConsensusProblem draws its samples from a protected std::mt19937 seeded either
+// from the clock or with a fixed 12345; this wrapper re-seeds it from our seed (both 32-bit
+// halves through a seed_seq) and rebuilds the generator functor, which holds a copy of the engine.
+template <class Problem>
+class SeededProblem : public Problem {
+ public:
+  template <class... Args>
+  explicit SeededProblem(uint64_t seed, Args&&... args)
+      : Problem(std::forward<Args>(args)..., /*randomSeed=*/false) {
+    std::seed_seq seq{static_cast<uint32_t>(seed & 0xffffffffu), static_cast<uint32_t>(seed >> 32)};
+    this->rng_alg_.seed(seq);
+    this->rng_gen_.reset(new std::function<int()>(std::bind(*this->rng_dist_, this->rng_alg_)));
+  }
+};
+
+template <class Problem, class... Args>
+bool run_ransac(double threshold, int max_iterations, uint64_t seed, std::vector<int>* inliers,
+                Args&&... args) {
+  auto problem = std::make_shared<SeededProblem<Problem>>(seed, std::forward<Args>(args)...);
+  opengv::sac::Ransac<SeededProblem<Problem>> ransac(max_iterations, threshold, 0.99);
+  ransac.sac_model_ = problem;
+  if (!ransac.computeModel(0)) return false;
+  *inliers = ransac.inliers_;
+  return true;
+}
+
+uint64_t splitmix64(uint64_t x) {
+  x += 0x9E3779B97F4A7C15ull;
+  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
+  x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
+  return x ^ (x >> 31);
+}
+
+}  // namespace
+
+const char* ransac_model_name(RansacModel model) {
+  switch (model) {
+    case RansacModel::kNone: return "none";
+    case RansacModel::kTwoPoint: return "two_point";
+    case RansacModel::kFivePoint: return "five_point";
+  }
+  return "unknown";
+}
+
+int ransac_min_correspondences(RansacModel model) {
+  switch (model) {
+    case RansacModel::kNone: return 0;
+    case RansacModel::kTwoPoint: return 2;
+    case RansacModel::kFivePoint: return 8;
+  }
+  return 0;
+}
+
+std::vector<bool> ransac_inliers(const std::vector<Eigen::Vector3d>& bearings_prev,
+                                 const std::vector<Eigen::Vector3d>& bearings_cur,
+                                 RansacModel model, const Eigen::Matrix3d* R_cur_prev,
+                                 double threshold_rad, int max_iterations, uint64_t seed) {
+  if (bearings_prev.size() != bearings_cur.size()) {
+    std::ostringstream os;
+    os << "ransac_inliers: " << bearings_prev.size() << " previous bearings but "
+       << bearings_cur.size() << " current ones";
+    throw std::invalid_argument(os.str());
+  }
+  if (!(threshold_rad > 0) || !std::isfinite(threshold_rad) || max_iterations < 1) {
+    throw std::invalid_argument("ransac_inliers: threshold_rad must be positive and finite and "
+                                "max_iterations >= 1");
+  }
+  const size_t n = bearings_prev.size();
+  std::vector<bool> all(n, true);
+  if (model == RansacModel::kNone || n < static_cast<size_t>(ransac_min_correspondences(model))) {
+    return all;
+  }
+  // OpenGV: viewpoint 1 = previous, 2 = current; R12 maps viewpoint-2 coordinates into viewpoint 1
+  // (p_1 = R12 p_2 + t12), so R12 = R_cur_prev^T.
+  opengv::bearingVectors_t f1(bearings_prev.begin(), bearings_prev.end());
+  opengv::bearingVectors_t f2(bearings_cur.begin(), bearings_cur.end());
+  for (auto& f : f1) f.normalize();
+  for (auto& f : f2) f.normalize();
+  const opengv::rotation_t R12 =
+      R_cur_prev ? opengv::rotation_t(R_cur_prev->transpose()) : opengv::rotation_t::Identity();
+  opengv::relative_pose::CentralRelativeAdapter adapter(f1, f2, R12);
+  const double threshold = 1.0 - std::cos(threshold_rad);
+  std::vector<int> inliers;
+  bool ok = false;
+  using opengv::sac_problems::relative_pose::CentralRelativePoseSacProblem;
+  using opengv::sac_problems::relative_pose::TranslationOnlySacProblem;
+  if (model == RansacModel::kTwoPoint) {
+    ok = run_ransac<TranslationOnlySacProblem>(threshold, max_iterations, seed, &inliers, adapter);
+  } else {
+    ok = run_ransac<CentralRelativePoseSacProblem>(threshold, max_iterations, seed, &inliers,
+                                                   adapter, CentralRelativePoseSacProblem::NISTER);
+  }
+  if (!ok) return all;
+  std::vector<bool> out(n, false);
+  for (int i : inliers) out[static_cast<size_t>(i)] = true;
+  return out;
+}
+
+bool FeatureTrackerOptions::Validate(std::string* why) const {
+  auto fail = [why](const std::string& msg) {
+    if (why) *why = msg;
+    return false;
+  };
+  if (grid_cols < 1 || grid_rows < 1) return fail("grid_cols and grid_rows must be >= 1");
+  if (max_features < 1) return fail("max_features must be >= 1");
+  if (max_per_cell < 1) return fail("max_per_cell must be >= 1");
+  if (fast_threshold < 1 || fast_threshold > 255) return fail("fast_threshold must be in 1..255");
+  if (min_distance_px < 0) return fail("min_distance_px must be >= 0");
+  if (klt_window_px < 3 || klt_window_px % 2 == 0) return fail("klt_window_px must be odd and >= 3");
+  if (klt_pyramid_levels < 0 || klt_pyramid_levels > 8)
+    return fail("klt_pyramid_levels must be in 0..8");
+  if (klt_max_iterations < 1) return fail("klt_max_iterations must be >= 1");
+  if (!(forward_backward_max_px > 0) || !std::isfinite(forward_backward_max_px))
+    return fail("forward_backward_max_px must be positive and finite");
+  if (ransac != RansacModel::kNone && ransac != RansacModel::kTwoPoint &&
+      ransac != RansacModel::kFivePoint)
+    return fail("ransac must be none, two_point or five_point");
+  if (!(ransac_threshold_px > 0) || !std::isfinite(ransac_threshold_px))
+    return fail("ransac_threshold_px must be positive and finite");
+  if (ransac_max_iterations < 1) return fail("ransac_max_iterations must be >= 1");
+  if (min_tracks_before_detection < 0 || min_tracks_before_detection > max_features)
+    return fail("min_tracks_before_detection must be in 0..max_features");
+  if (border_px < 0) return fail("border_px must be >= 0");
+  return true;
+}
+
+FeatureTracker::FeatureTracker(const calib::CameraIntrinsics& ideal_pinhole,
+                               const FeatureTrackerOptions& options)
+    : K_(ideal_pinhole), options_(options) {
+  std::string why;
+  if (!K_.Validate(&why)) throw std::invalid_argument("FeatureTracker: camera: " + why);
+  if (K_.model != calib::DistortionModel::kNone)
+    throw std::invalid_argument("FeatureTracker: the camera must be the ideal pinhole of "
+                                "undistorted frames (distortion model none)");
+  if (!options_.Validate(&why)) throw std::invalid_argument("FeatureTracker: options: " + why);
+  if (2 * options_.border_px >= std::min(K_.width, K_.height))
+    throw std::invalid_argument("FeatureTracker: border_px leaves no image");
+}
+
+Eigen::Vector3d FeatureTracker::bearing(const cv::Point2f& px) const {
+  return Eigen::Vector3d((px.x - K_.cx) / K_.fx, (px.y - K_.cy) / K_.fy, 1.0).normalized();
+}
+
+int FeatureTracker::cell_of(const cv::Point2f& px) const {
+  int c = static_cast<int>(std::floor(px.x * options_.grid_cols / K_.width));
+  int r = static_cast<int>(std::floor(px.y * options_.grid_rows / K_.height));
+  c = std::clamp(c, 0, options_.grid_cols - 1);
+  r = std::clamp(r, 0, options_.grid_rows - 1);
+  return r * options_.grid_cols + c;
+}
+
+bool FeatureTracker::inside(const cv::Point2f& px) const {
+  const float b = static_cast<float>(options_.border_px);
+  return std::isfinite(px.x) && std::isfinite(px.y) && px.x >= b && px.y >= b &&
+         px.x <= K_.width - 1 - b && px.y <= K_.height - 1 - b;
+}
+
+std::vector<std::pair<int64_t, cv::Point2f>> FeatureTracker::current() const {
+  std::vector<std::pair<int64_t, cv::Point2f>> out;
+  out.reserve(tracks_.size());
+  for (const Track& t : tracks_) out.emplace_back(t.id, t.px);
+  return out;
+}
+
+void FeatureTracker::detect(const cv::Mat& frame) {
+  const int budget = options_.max_features - static_cast<int>(tracks_.size());
+  if (budget <= 0) return;
+  std::vector<cv::KeyPoint> corners;
+  cv::FAST(frame, corners, options_.fast_threshold, /*nonmaxSuppression=*/true);
+  // Strongest first; ties broken by position so the order never depends on the detector's.
+  std::sort(corners.begin(), corners.end(), [](const cv::KeyPoint& a, const cv::KeyPoint& b) {
+    if (a.response != b.response) return a.response > b.response;
+    if (a.pt.y != b.pt.y) return a.pt.y < b.pt.y;
+    return a.pt.x < b.pt.x;
+  });
+  std::vector<int> per_cell(static_cast<size_t>(options_.grid_cols * options_.grid_rows), 0);
+  cv::Mat occupied(frame.size(), CV_8UC1, cv::Scalar(0));
+  const int r = options_.min_distance_px;
+  for (const Track& t : tracks_) {
+    ++per_cell[static_cast<size_t>(cell_of(t.px))];
+    if (r > 0) cv::circle(occupied, cv::Point(cvRound(t.px.x), cvRound(t.px.y)), r, 255, -1);
+  }
+  int added = 0;
+  for (const cv::KeyPoint& kp : corners) {
+    if (added >= budget) break;
+    if (!inside(kp.pt)) continue;
+    const int cell = cell_of(kp.pt);
+    if (per_cell[static_cast<size_t>(cell)] >= options_.max_per_cell) continue;
+    const cv::Point ip(cvRound(kp.pt.x), cvRound(kp.pt.y));
+    if (occupied.at<uint8_t>(ip) != 0) continue;
+    tracks_.push_back({next_id_++, kp.pt});
+    ++per_cell[static_cast<size_t>(cell)];
+    if (r > 0) cv::circle(occupied, ip, r, 255, -1);
+    ++added;
+  }
+  stats_.detected += added;
+}
+
+FeatureObservations FeatureTracker::track(int64_t t_ns, const cv::Mat& frame,
+                                          const Eigen::Matrix3d* R_cur_prev) {
+  if (frame.empty() || frame.type() != CV_8UC1 || frame.cols != K_.width ||
+      frame.rows != K_.height) {
+    std::ostringstream os;
+    os << "FeatureTracker::track: expected an 8-bit single-channel " << K_.width << "x"
+       << K_.height << " frame, got type " << frame.type() << " " << frame.cols << "x"
+       << frame.rows;
+    throw std::invalid_argument(os.str());
+  }
+  const cv::Size win(options_.klt_window_px, options_.klt_window_px);
+  std::vector<cv::Mat> pyramid;
+  const int levels = cv::buildOpticalFlowPyramid(frame, pyramid, win, options_.klt_pyramid_levels,
+                                                 /*withDerivatives=*/true, cv::BORDER_REFLECT_101,
+                                                 cv::BORDER_CONSTANT, /*tryReuseInputImage=*/false);
+  const cv::TermCriteria term(cv::TermCriteria::COUNT | cv::TermCriteria::EPS,
+                              options_.klt_max_iterations, 0.01);
+
+  if (!tracks_.empty() && !prev_pyramid_.empty()) {
+    const size_t n = tracks_.size();
+    std::vector<cv::Point2f> p0(n), p1(n);
+    for (size_t i = 0; i < n; ++i) {
+      p0[i] = tracks_[i].px;
+      p1[i] = p0[i];
+      if (R_cur_prev) {  // rotate the bearing (points at infinity) and project
+        const Eigen::Vector3d b =
+            *R_cur_prev * Eigen::Vector3d((p0[i].x - K_.cx) / K_.fx, (p0[i].y - K_.cy) / K_.fy, 1);
+        if (b.z() > 1e-6) {
+          const cv::Point2f q(static_cast<float>(K_.fx * b.x() / b.z() + K_.cx),
+                              static_cast<float>(K_.fy * b.y() / b.z() + K_.cy));
+          if (inside(q)) p1[i] = q;
+        }
+      }
+    }
+    std::vector<uchar> st_f, st_b;
+    std::vector<float> err;
+    cv::calcOpticalFlowPyrLK(prev_pyramid_, pyramid, p0, p1, st_f, err, win, levels, term,
+                             cv::OPTFLOW_USE_INITIAL_FLOW);
+    std::vector<cv::Point2f> back = p0;
+    cv::calcOpticalFlowPyrLK(pyramid, prev_pyramid_, p1, back, st_b, err, win, levels, term,
+                             cv::OPTFLOW_USE_INITIAL_FLOW);
+    std::vector<size_t> kept;
+    kept.reserve(n);
+    const double fb2 = options_.forward_backward_max_px * options_.forward_backward_max_px;
+    for (size_t i = 0; i < n; ++i) {
+      if (!st_f[i] || !inside(p1[i])) {
+        ++stats_.lost_klt;
+        continue;
+      }
+      const double dx = back[i].x - p0[i].x, dy = back[i].y - p0[i].y;
+      if (!st_b[i] || !(dx * dx + dy * dy <= fb2)) {
+        ++stats_.lost_fb;
+        continue;
+      }
+      kept.push_back(i);
+    }
+    RansacModel model = options_.ransac;
+    if (model == RansacModel::kTwoPoint && !R_cur_prev) model = RansacModel::kFivePoint;
+    std::vector<bool> inlier(kept.size(), true);
+    if (model != RansacModel::kNone) {
+      std::vector<Eigen::Vector3d> b0, b1;
+      b0.reserve(kept.size());
+      b1.reserve(kept.size());
+      for (size_t i : kept) {
+        b0.push_back(bearing(p0[i]));
+        b1.push_back(bearing(p1[i]));
+      }
+      const double f = std::sqrt(K_.fx * K_.fy);
+      inlier = ransac_inliers(b0, b1, model, R_cur_prev, std::atan(options_.ransac_threshold_px / f),
+                              options_.ransac_max_iterations,
+                              splitmix64(options_.seed ^ splitmix64(static_cast<uint64_t>(frame_id_))));
+    }
+    std::vector<Track> survivors;
+    survivors.reserve(kept.size());
+    for (size_t k = 0; k < kept.size(); ++k) {
+      if (!inlier[k]) {
+        ++stats_.rejected_ransac;
+        continue;
+      }
+      survivors.push_back({tracks_[kept[k]].id, p1[kept[k]]});
+    }
+    stats_.tracked += static_cast<int64_t>(survivors.size());
+    tracks_ = std::move(survivors);
+  } else {
+    tracks_.clear();
+  }
+
+  if (stats_.frames == 0 ||
+      static_cast<int>(tracks_.size()) < options_.min_tracks_before_detection) {
+    detect(frame);
+  }
+  prev_pyramid_ = std::move(pyramid);
+
+  FeatureObservations out;
+  out.t_ns = t_ns;
+  out.frame_id = frame_id_++;
+  out.observations.reserve(tracks_.size());
+  for (const Track& t : tracks_) out.observations.push_back({t.id, bearing(t.px)});
+  ++stats_.frames;
+  return out;
+}
+
+}  // namespace evio::frontend
