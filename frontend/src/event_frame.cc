@@ -1,0 +1,283 @@
+// Motion-compensated event frames: see event_frame.h.
+#include "evio/frontend/event_frame.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+#include "evio/calib/geometry.h"
+
+namespace evio::frontend {
+
+bool EventFrameOptions::Validate(std::string* why) const {
+  auto fail = [why](const char* msg) {
+    if (why) *why = msg;
+    return false;
+  };
+  if (events_per_frame < 1) return fail("events_per_frame must be >= 1");
+  if (max_window_ns <= 0) return fail("max_window_ns must be > 0 ns");
+  if (min_events < 1 || min_events > events_per_frame) return fail("min_events must be in 1..events_per_frame");
+  if (use_depth && !motion_compensation) return fail("use_depth needs motion_compensation");
+  if (!(clip_percentile > 0.0 && clip_percentile <= 1.0)) return fail("clip_percentile must be in (0, 1]");
+  if (knot_spacing_ns <= 0) return fail("knot_spacing_ns must be > 0 ns");
+  if (max_imu_extrapolation_ns < 0) return fail("max_imu_extrapolation_ns must be >= 0 ns");
+  if (max_imu_gap_ns <= 0) return fail("max_imu_gap_ns must be > 0 ns");
+  return true;
+}
+
+EventFrameBuilder::EventFrameBuilder(const calib::CameraCalibration& camera, const EventFrameOptions& options)
+    : o_(options) {
+  std::string why;
+  if (!o_.Validate(&why)) throw std::invalid_argument("EventFrameOptions: " + why);
+  const calib::PinholeCamera& cam = camera.camera;
+  const calib::CameraIntrinsics& in = cam.intrinsics();
+  std::string cam_why;
+  if (!in.Validate(&cam_why)) throw std::invalid_argument("EventFrameBuilder: camera: " + cam_why);
+  width_ = in.width;
+  height_ = in.height;
+  fx_ = static_cast<float>(in.fx);
+  fy_ = static_cast<float>(in.fy);
+  cx_ = static_cast<float>(in.cx);
+  cy_ = static_cast<float>(in.cy);
+  const calib::UndistortionLut lut(cam);
+  bearings_.resize(static_cast<size_t>(width_) * height_);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  for (int y = 0; y < height_; ++y)
+    for (int x = 0; x < width_; ++x) {
+      Eigen::Vector3f b = lut.bearing(x, y);
+      // Rays not in front of the camera cannot be drawn in a pinhole image.
+      if (!lut.valid(x, y) || !(b.z() > 1e-6f)) b = Eigen::Vector3f(nan, nan, nan);
+      bearings_[static_cast<size_t>(y) * width_ + x] = b;
+    }
+  // Without extrinsics the camera is taken as the body frame (R_c_b = I).
+  if (camera.has_T_c_b) R_c_b_ = camera.T_c_b.rotation_matrix();
+  time_shift_ns_ = camera.time_shift_ns;
+  pending_.reserve(static_cast<size_t>(o_.events_per_frame));
+}
+
+Eigen::Matrix3d EventFrameBuilder::K() const {
+  Eigen::Matrix3d K = Eigen::Matrix3d::Identity();
+  K(0, 0) = fx_;
+  K(1, 1) = fy_;
+  K(0, 2) = cx_;
+  K(1, 2) = cy_;
+  return K;
+}
+
+void EventFrameBuilder::add_imu(const ImuSample& s) {
+  if (!imu_.empty() && s.t_ns <= imu_.back().t_ns) {
+    ++stats_.imu_rejected;
+    return;
+  }
+  imu_.push_back(s);
+  // Keep the samples the pending (or next) frame can need: from the last sample at or before its
+  // first event (or the last event seen) on.
+  if (!pending_.empty()) prune_imu(pending_.front().t_ns + time_shift_ns_);
+  else if (have_last_event_) prune_imu(last_event_t_ns_ + time_shift_ns_);
+}
+
+void EventFrameBuilder::prune_imu(int64_t t_keep_imu) {
+  // Keep one sample at or before t_keep (the bracket), and a margin for extrapolation.
+  const int64_t t = t_keep_imu - o_.max_imu_extrapolation_ns;
+  while (imu_.size() >= 2 && imu_[1].t_ns <= t) imu_.pop_front();
+}
+
+void EventFrameBuilder::set_gyro_bias(const Eigen::Vector3d& b_g) { bias_gyro_ = b_g; }
+
+void EventFrameBuilder::set_motion(const Eigen::Vector3d& v_c, double median_depth_m) {
+  if (!(median_depth_m > 0) || !std::isfinite(median_depth_m) || !v_c.allFinite())
+    throw std::invalid_argument("EventFrameBuilder::set_motion: need finite v_c and median_depth_m > 0 m");
+  v_c_ = v_c;
+  depth_m_ = median_depth_m;
+}
+
+Eigen::Vector3d EventFrameBuilder::gyro_at(int64_t t_imu) const {
+  // imu_ is non-empty here (coverage was checked).
+  if (t_imu <= imu_.front().t_ns) return imu_.front().gyro - bias_gyro_;
+  if (t_imu >= imu_.back().t_ns) return imu_.back().gyro - bias_gyro_;
+  const auto it = std::upper_bound(imu_.begin(), imu_.end(), t_imu,
+                                   [](int64_t t, const ImuSample& s) { return t < s.t_ns; });
+  const ImuSample& b = *it;
+  const ImuSample& a = *(it - 1);
+  const double s = static_cast<double>(t_imu - a.t_ns) / static_cast<double>(b.t_ns - a.t_ns);
+  return a.gyro + s * (b.gyro - a.gyro) - bias_gyro_;
+}
+
+bool EventFrameBuilder::compute_knots(int64_t t_begin_cam, int64_t t_end_cam, int64_t t_ref_cam) {
+  const int64_t t_lo = std::min(t_begin_cam, t_ref_cam), t_hi = std::max(t_end_cam, t_ref_cam);
+  const int64_t a = t_lo + time_shift_ns_, b = t_hi + time_shift_ns_;  // IMU clock
+  if (imu_.empty()) return false;
+  if (imu_.front().t_ns > a + o_.max_imu_extrapolation_ns) return false;
+  if (imu_.back().t_ns < b - o_.max_imu_extrapolation_ns) return false;
+  // Gaps: consecutive samples from the last one at or before a to the first one at or after b.
+  auto first = std::upper_bound(imu_.begin(), imu_.end(), a, [](int64_t t, const ImuSample& s) { return t < s.t_ns; });
+  if (first != imu_.begin()) --first;
+  for (auto it = first; it + 1 != imu_.end(); ++it) {
+    if ((it + 1)->t_ns - it->t_ns > o_.max_imu_gap_ns) return false;
+    if (it->t_ns >= b) break;
+  }
+
+  const int64_t h = o_.knot_spacing_ns;
+  const int64_t span = t_hi - t_lo;
+  const int64_t n_steps = std::max<int64_t>(1, (span + h - 1) / h);
+  t_knot0_ = t_lo;
+  // Body rotations R_b(t_lo)^T R_b(t_i), integrated with the midpoint rate of each step.
+  std::vector<Eigen::Matrix3d> R(static_cast<size_t>(n_steps) + 1);
+  R[0].setIdentity();
+  const double h_s = static_cast<double>(h) * 1e-9;
+  for (int64_t i = 0; i < n_steps; ++i) {
+    const Eigen::Vector3d w = gyro_at(a + i * h + h / 2);
+    R[i + 1] = R[i] * calib::so3_exp(w * h_s);
+  }
+  // Rotation at the reference time within its step.
+  const int64_t dref = t_ref_cam - t_lo;
+  const int64_t iref = std::min<int64_t>(dref / h, n_steps - 1);
+  const int64_t rem = dref - iref * h;
+  const Eigen::Vector3d w_ref = gyro_at(a + iref * h + h / 2);
+  const Eigen::Matrix3d R_ref = R[iref] * calib::so3_exp(w_ref * (static_cast<double>(rem) * 1e-9));
+  // Camera-frame knots R_c(ref)_c(t_i) = R_c_b R_b(ref)^T R_b(t_i) R_b_c.
+  const Eigen::Matrix3d A = R_c_b_ * R_ref.transpose();
+  const Eigen::Matrix3d R_b_c = R_c_b_.transpose();
+  knots_.resize(R.size());
+  for (size_t i = 0; i < R.size(); ++i) knots_[i] = (A * R[i] * R_b_c).cast<float>();
+  return true;
+}
+
+EventFrame EventFrameBuilder::build_frame(EventSpan events, int64_t t_ref_ns) {
+  EventFrame f;
+  f.t_ns = t_ref_ns;
+  f.events = events.size();
+  if (!events.empty()) {
+    f.t_begin_ns = events.front().t_ns;
+    f.t_end_ns = events.back().t_ns;
+  } else {
+    f.t_begin_ns = f.t_end_ns = t_ref_ns;
+  }
+  cv::Mat acc(height_, width_, CV_32F, cv::Scalar(0));
+  bool compensate = false;
+  if (o_.motion_compensation && !events.empty()) {
+    compensate = compute_knots(f.t_begin_ns, f.t_end_ns, t_ref_ns);
+    if (!compensate) ++stats_.frames_uncompensated;
+  }
+  f.motion_compensated = compensate;
+  const bool translate = compensate && o_.use_depth && depth_m_ > 0;
+  const Eigen::Vector3f v_over_d = (v_c_ / (translate ? depth_m_ : 1.0)).cast<float>();
+  const int64_t h = o_.knot_spacing_ns;
+  const float inv_h = 1.0f / static_cast<float>(h);
+  const int64_t last_step = static_cast<int64_t>(knots_.size()) - 2;
+  const float w_max = static_cast<float>(width_ - 1), h_max = static_cast<float>(height_ - 1);
+  float* a = acc.ptr<float>();
+  size_t outside = 0;
+  for (const Event& e : events) {
+    const Eigen::Vector3f& b = bearings_[static_cast<size_t>(e.y) * width_ + e.x];
+    Eigen::Vector3f p;
+    if (compensate) {
+      const int64_t d = e.t_ns - t_knot0_;
+      const int64_t i = std::min(d / h, last_step);
+      const float s = static_cast<float>(d - i * h) * inv_h;
+      const Eigen::Matrix3f& M0 = knots_[static_cast<size_t>(i)];
+      const Eigen::Matrix3f& M1 = knots_[static_cast<size_t>(i) + 1];
+      const Eigen::Vector3f p0 = M0 * b;
+      p = p0 + s * (M1 * b - p0);
+      if (translate) {
+        // Point at z-depth D along b, moved by the camera displacement: P_ref = (D / b_z) R b +
+        // v (t_k - t_ref); scaled by b_z / D (projection is scale-free).
+        const float dt_s = static_cast<float>(static_cast<double>(e.t_ns - t_ref_ns) * 1e-9);
+        p += v_over_d * (dt_s * b.z());
+      }
+    } else {
+      p = b;
+    }
+    if (!(p.z() > 1e-6f)) {  // also catches NaN bearings
+      ++outside;
+      continue;
+    }
+    const float iz = 1.0f / p.z();
+    const float u = fx_ * p.x() * iz + cx_, v = fy_ * p.y() * iz + cy_;
+    if (!(u >= 0.0f && v >= 0.0f && u <= w_max && v <= h_max)) {
+      ++outside;
+      continue;
+    }
+    const int x0 = static_cast<int>(u), y0 = static_cast<int>(v);
+    const float fu = u - static_cast<float>(x0), fv = v - static_cast<float>(y0);
+    const int x1 = std::min(x0 + 1, width_ - 1), y1 = std::min(y0 + 1, height_ - 1);
+    const float wgt = o_.use_polarity ? static_cast<float>(e.polarity) : 1.0f;
+    float* r0 = a + static_cast<size_t>(y0) * width_;
+    float* r1 = a + static_cast<size_t>(y1) * width_;
+    r0[x0] += wgt * (1.0f - fu) * (1.0f - fv);
+    r0[x1] += wgt * fu * (1.0f - fv);
+    r1[x0] += wgt * (1.0f - fu) * fv;
+    r1[x1] += wgt * fu * fv;
+  }
+  f.events_outside = outside;
+
+  // Normalisation.
+  f.image.create(height_, width_, CV_8UC1);
+  const size_t n = static_cast<size_t>(width_) * height_;
+  uint8_t* img = f.image.ptr<uint8_t>();
+  if (o_.normalize) {
+    // Non-zero magnitudes, collected without branches, then the exact quantile by nth_element.
+    scratch_.resize(n);
+    size_t m = 0;
+    for (size_t k = 0; k < n; ++k) {
+      scratch_[m] = std::abs(a[k]);
+      m += a[k] != 0.0f;
+    }
+    float c = 0.0f;
+    if (m > 0) {
+      const size_t q = static_cast<size_t>(std::floor(o_.clip_percentile * static_cast<double>(m - 1)));
+      std::nth_element(scratch_.begin(), scratch_.begin() + static_cast<std::ptrdiff_t>(q),
+                       scratch_.begin() + static_cast<std::ptrdiff_t>(m));
+      c = scratch_[q];
+    }
+    if (!(c > 0.0f)) {
+      f.image.setTo(o_.use_polarity ? 128 : 0);
+    } else if (o_.use_polarity) {
+      const float k = 127.5f / c;
+      for (size_t i = 0; i < n; ++i)
+        img[i] = static_cast<uint8_t>(128.0f + std::clamp(a[i] * k, -127.5f, 127.5f));  // round half up
+    } else {
+      const float k = 255.0f / c;
+      for (size_t i = 0; i < n; ++i) img[i] = static_cast<uint8_t>(std::min(a[i] * k, 255.0f) + 0.5f);  // round
+    }
+  } else {
+    const float off = o_.use_polarity ? 128.0f : 0.0f;
+    for (size_t i = 0; i < n; ++i)
+      img[i] = static_cast<uint8_t>(std::clamp(a[i] + off, 0.0f, 255.0f) + 0.5f);  // round half up
+  }
+  if (o_.keep_accumulator) f.accumulator = acc;
+  return f;
+}
+
+void EventFrameBuilder::emit_pending(std::vector<EventFrame>* out) {
+  if (pending_.empty()) return;
+  if (static_cast<int>(pending_.size()) < o_.min_events) {
+    ++stats_.frames_dropped_sparse;
+    stats_.events_dropped_sparse += static_cast<int64_t>(pending_.size());
+  } else {
+    out->push_back(build_frame(EventSpan(pending_.data(), pending_.size()), pending_.back().t_ns));
+    ++stats_.frames_emitted;
+  }
+  pending_.clear();
+  prune_imu(last_event_t_ns_ + time_shift_ns_);
+}
+
+void EventFrameBuilder::add_events(EventSpan events, std::vector<EventFrame>* out) {
+  const size_t n = static_cast<size_t>(o_.events_per_frame);
+  for (const Event& e : events) {
+    if (!pending_.empty() && e.t_ns - pending_.front().t_ns >= o_.max_window_ns) emit_pending(out);
+    if (e.x >= width_ || e.y >= height_) {  // outside the sensor: ignored
+      ++stats_.events_outside_sensor;
+      continue;
+    }
+    pending_.push_back(e);
+    last_event_t_ns_ = e.t_ns;
+    have_last_event_ = true;
+    if (pending_.size() == n) emit_pending(out);
+  }
+}
+
+void EventFrameBuilder::flush(std::vector<EventFrame>* out) { emit_pending(out); }
+
+}  // namespace evio::frontend
