@@ -14,6 +14,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include "eval_command.h"
+#include "evio/backend/imu_preintegration.h"
 #include "evio/calib/calibration_io.h"
 #include "evio/calib/error.h"
 #include "evio/calib/log.h"
@@ -50,6 +51,17 @@ std::string config_yaml(const VioConfig& c) {
   y << "  background_activity: {enabled: " << (c.background_activity_enabled ? "true" : "false")
     << ", window_ms: " << num(ns_to_ms(c.background_activity.window_ns)) << ", radius: " << c.background_activity.radius
     << ", min_support: " << c.background_activity.min_support << "}\n";
+  const auto& fr = c.frames;
+  y << "frames: {events_per_frame: " << fr.events_per_frame << ", max_window_ms: " << num(ns_to_ms(fr.max_window_ns))
+    << ", min_events: " << fr.min_events << ", motion_compensation: " << (fr.motion_compensation ? "true" : "false")
+    << ", clip_percentile: " << num(fr.clip_percentile) << "}\n";
+  const auto& tk = c.tracker;
+  y << "tracker: {grid_cols: " << tk.grid_cols << ", grid_rows: " << tk.grid_rows << ", max_features: " << tk.max_features
+    << ", max_per_cell: " << tk.max_per_cell << ", fast_threshold: " << tk.fast_threshold
+    << ", min_distance_px: " << tk.min_distance_px << ", klt_window_px: " << tk.klt_window_px
+    << ", klt_pyramid_levels: " << tk.klt_pyramid_levels << ", forward_backward_max_px: " << num(tk.forward_backward_max_px)
+    << ", ransac: " << (tk.ransac == frontend::RansacModel::kTwoPoint ? "two_point" : tk.ransac == frontend::RansacModel::kFivePoint ? "five_point" : "none")
+    << ", ransac_threshold_px: " << num(tk.ransac_threshold_px) << ", min_tracks_before_detection: " << tk.min_tracks_before_detection << "}\n";
   y << "efast: {filter_sae: " << (c.efast.filter_sae ? "true" : "false")
     << ", filter_window_ms: " << num(ns_to_ms(c.efast.filter_window_ns)) << "}\n";
   const auto& t = c.corner_tracker;
@@ -107,8 +119,42 @@ VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
     if (!root.IsMap()) parser.fail(root, "", "is not a map", expected);
     try {
       const Section top(&parser, root, "");
-      top.allow({"frontend", "filters", "efast", "corner_tracker", "window", "imu", "init", "description"});
-      c.frontend = top.string("frontend", c.frontend, {"corners", "frames"});
+      top.allow({"frontend", "filters", "frames", "tracker", "efast", "corner_tracker", "window", "imu", "init", "description"});
+      c.frontend = top.string("frontend", c.frontend, {"frames", "corners"});
+      if (top.has("frames")) {
+        const Section s = top.child("frames", false, "a map");
+        s.allow({"events_per_frame", "max_window_ms", "min_events", "motion_compensation", "clip_percentile"});
+        auto& f = c.frames;
+        f.events_per_frame = s.integer("events_per_frame", f.events_per_frame, 1, 100000000);
+        f.max_window_ns = ms_to_ns(s.number("max_window_ms", ns_to_ms(f.max_window_ns), Range::kPositive, "ms"));
+        f.min_events = s.integer("min_events", f.min_events, 1, 100000000);
+        f.motion_compensation = s.boolean("motion_compensation", f.motion_compensation);
+        f.clip_percentile = s.number("clip_percentile", f.clip_percentile, Range::kUnit, "");
+        std::string why;
+        if (!f.Validate(&why)) s.fail("invalid frame settings: " + why, "consistent settings");
+      }
+      if (top.has("tracker")) {
+        const Section s = top.child("tracker", false, "a map");
+        s.allow({"grid_cols", "grid_rows", "max_features", "max_per_cell", "fast_threshold", "min_distance_px",
+                 "klt_window_px", "klt_pyramid_levels", "forward_backward_max_px", "ransac", "ransac_threshold_px",
+                 "min_tracks_before_detection"});
+        auto& t = c.tracker;
+        t.grid_cols = s.integer("grid_cols", t.grid_cols, 1, 100);
+        t.grid_rows = s.integer("grid_rows", t.grid_rows, 1, 100);
+        t.max_features = s.integer("max_features", t.max_features, 1, 100000);
+        t.max_per_cell = s.integer("max_per_cell", t.max_per_cell, 1, 100000);
+        t.fast_threshold = s.integer("fast_threshold", t.fast_threshold, 1, 255);
+        t.min_distance_px = s.integer("min_distance_px", t.min_distance_px, 0, 1000);
+        t.klt_window_px = s.integer("klt_window_px", t.klt_window_px, 3, 255);
+        t.klt_pyramid_levels = s.integer("klt_pyramid_levels", t.klt_pyramid_levels, 0, 8);
+        t.forward_backward_max_px = s.number("forward_backward_max_px", t.forward_backward_max_px, Range::kPositive, "px");
+        const std::string r = s.string("ransac", "two_point", {"two_point", "five_point", "none"});
+        t.ransac = r == "two_point" ? frontend::RansacModel::kTwoPoint : r == "five_point" ? frontend::RansacModel::kFivePoint : frontend::RansacModel::kNone;
+        t.ransac_threshold_px = s.number("ransac_threshold_px", t.ransac_threshold_px, Range::kPositive, "px");
+        t.min_tracks_before_detection = s.integer("min_tracks_before_detection", t.min_tracks_before_detection, 0, 100000);
+        std::string why;
+        if (!t.Validate(&why)) s.fail("invalid tracker settings: " + why, "consistent settings");
+      }
       if (top.has("filters")) {
         const Section f = top.child("filters", false, "a map");
         f.allow({"refractory", "background_activity"});
@@ -184,7 +230,7 @@ VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
       if (top.has("init")) {
         const Section s = top.child("init", false, "a map");
         s.allow({"method", "window_ms"});
-        c.init = s.string("method", c.init, {"auto", "static", "alignment"});
+        c.init = s.string("method", c.init, {"auto", "static", "alignment", "groundtruth"});
         c.init_window_ns = ms_to_ns(s.number("window_ms", ns_to_ms(c.init_window_ns), Range::kPositive, "ms"));
       }
     } catch (const YAML::Exception& e) {
@@ -227,9 +273,6 @@ int run_vio(const VioArgs& args, std::ostream& out) {
   } else {
     resolved = config_yaml(cfg);
   }
-  if (cfg.frontend == "frames") {
-    throw InputError(args.config, 0, "frontend 'frames' is not available in this build yet", "frontend: corners");
-  }
   auto reader = open_dataset(args.dataset, args.dataset_options);
   // Calibration: --calib, else the dataset folder's calib.yaml (camchain + imu0), else the reader's.
   std::optional<calib::CameraCalibration> cal;
@@ -271,7 +314,26 @@ int run_vio(const VioArgs& args, std::ostream& out) {
   frontend::EfastDetector detector(W, H, cfg.efast);
   frontend::CornerTracker tracker(W, H, cfg.corner_tracker);
   const int64_t shift = cal->time_shift_ns;  // t_imu = t_cam + shift
+  const bool use_frames = cfg.frontend == "frames";
+  std::unique_ptr<frontend::EventFrameBuilder> frame_builder;
+  std::unique_ptr<frontend::FeatureTracker> frame_tracker;
+  if (use_frames) {
+    frame_builder = std::make_unique<frontend::EventFrameBuilder>(*cal, cfg.frames);
+    for (const ImuSample& m : imu) frame_builder->add_imu(m);
+    calib::CameraIntrinsics ideal = cal->camera.intrinsics();
+    ideal.model = calib::DistortionModel::kNone;
+    ideal.distortion.clear();
+    frame_tracker = std::make_unique<frontend::FeatureTracker>(ideal, cfg.tracker);
+  }
+  std::vector<Event> filtered;
+  std::vector<frontend::EventFrame> built;
+  int64_t prev_frame_t = -1;
 
+  std::optional<Trajectory> gt_traj;
+  if (cfg.init == "groundtruth") {
+    if (args.gt.empty()) throw InputError(args.config, 0, "init.method groundtruth needs --gt", "--gt GT.tum, or another init.method");
+    gt_traj = load_trajectory(args.gt);
+  }
   std::unique_ptr<backend::SlidingWindowEstimator> est;
   std::vector<FeatureObservations> pending;  // frames before initialisation
   std::vector<VioState> trajectory;
@@ -297,6 +359,20 @@ int run_vio(const VioArgs& args, std::ostream& out) {
     if (span < cfg.init_window_ns && !final_attempt) return;
     std::optional<VioState> s;
     std::string why;
+    if (cfg.init == "groundtruth") {
+      // Diagnostic: pose and velocity (central difference over 10 ms) from --gt at the first frame.
+      const int64_t t0 = pending.front().t_ns;
+      const auto a = gt_traj->interpolate(t0 - 5'000'000), b = gt_traj->interpolate(t0 + 5'000'000), c = gt_traj->interpolate(t0);
+      if (a && b && c) {
+        s = VioState{};
+        s->t_ns = t0;
+        s->T_w_b = *c;
+        s->v_w = (b->translation - a->translation) / 0.01;
+        init_method = "ground truth (diagnostic)";
+      } else {
+        why = "ground truth does not cover " + format_seconds(t0) + " s";
+      }
+    }
     if (cfg.init == "auto" || cfg.init == "static") {
       s = backend::static_initialization(imu, pending.front().t_ns, noise, cfg.static_init, &why);
       if (s) init_method = "static";
@@ -327,14 +403,7 @@ int run_vio(const VioArgs& args, std::ostream& out) {
   };
   std::ofstream obs_file((fs::path(args.out) / "observations.txt").string());
   obs_file << "# t[s] track_id bx by bz  (front-end observations: unit bearings in the camera frame, body clock)\n";
-  auto emit_frame = [&](int64_t t_cam) {
-    FeatureObservations f;
-    f.t_ns = t_cam + shift;
-    f.frame_id = frame_id++;
-    tracker.predict_active(t_cam, cfg.observation_period_ns, cfg.min_track_age_ns, [&](int64_t id, const Eigen::Vector2d& px) {
-      Eigen::Vector3d b;
-      if (px.allFinite() && cal->camera.unproject(px, &b) && b.z() > 1e-3) f.observations.push_back({id, b});
-    });
+  auto handle_frame = [&](FeatureObservations f) {
     for (const auto& o : f.observations) {
       char line[160];
       std::snprintf(line, sizeof(line), "%s %lld %.7f %.7f %.7f\n", format_seconds(f.t_ns).c_str(),
@@ -355,6 +424,38 @@ int run_vio(const VioArgs& args, std::ostream& out) {
       try_init(false);
     }
   };
+  // Corners front-end: the active corner tracks sampled at t_cam.
+  auto emit_frame = [&](int64_t t_cam) {
+    FeatureObservations f;
+    f.t_ns = t_cam + shift;
+    f.frame_id = frame_id++;
+    tracker.predict_active(t_cam, cfg.observation_period_ns, cfg.min_track_age_ns, [&](int64_t id, const Eigen::Vector2d& px) {
+      Eigen::Vector3d b;
+      if (px.allFinite() && cal->camera.unproject(px, &b) && b.z() > 1e-3) f.observations.push_back({id, b});
+    });
+    handle_frame(std::move(f));
+  };
+  // Frames front-end: one observation frame per event frame, tracked with the IMU rotation prior.
+  auto track_event_frame = [&](const frontend::EventFrame& ef) {
+    Eigen::Matrix3d R_cur_prev = Eigen::Matrix3d::Identity();
+    bool have_prior = false;
+    const Eigen::Vector3d bg = est ? est->latest_state().bias_gyro : Eigen::Vector3d::Zero();
+    if (prev_frame_t >= 0) {
+      try {
+        const auto pre = backend::ImuPreintegration::between(imu, prev_frame_t + shift, ef.t_ns + shift, bg, Eigen::Vector3d::Zero(), noise);
+        const Eigen::Matrix3d R_c_b = cal->T_c_b.rotation.toRotationMatrix();
+        R_cur_prev = R_c_b * pre.delta_R().transpose() * R_c_b.transpose();
+        have_prior = true;
+      } catch (const std::invalid_argument&) {
+        // no IMU around the frame: track without the rotation prior
+      }
+    }
+    prev_frame_t = ef.t_ns;
+    FeatureObservations f = frame_tracker->track(ef.t_ns + shift, ef.image, have_prior ? &R_cur_prev : nullptr);
+    f.frame_id = frame_id++;
+    if (est) frame_builder->set_gyro_bias(est->latest_state().bias_gyro);
+    handle_frame(std::move(f));
+  };
 
   Progress progress("evio vio", args.progress, "events");
   EventBuffer chunk;
@@ -365,32 +466,49 @@ int run_vio(const VioArgs& args, std::ostream& out) {
   for (;;) {
     chunk.clear();
     if (reader->read_events(&chunk, size_t{1} << 18) == 0) break;
+    filtered.clear();
     for (const Event& e : chunk.span()) {
       if (first) {
         t_first = e.t_ns;
         next_obs = t_first + cfg.observation_period_ns;
         first = false;
       }
-      while (e.t_ns >= next_obs) {
-        emit_frame(next_obs);
-        next_obs += cfg.observation_period_ns;
+      if (!use_frames) {
+        while (e.t_ns >= next_obs) {
+          emit_frame(next_obs);
+          next_obs += cfg.observation_period_ns;
+        }
       }
       t_last = e.t_ns;
       ++events;
       if (e.x >= W || e.y >= H || !undistorter.valid(e.x, e.y)) continue;
       if (cfg.refractory_enabled && !refractory.accept(e)) continue;
       if (cfg.background_activity_enabled && !background.accept(e)) continue;
+      if (use_frames) {
+        filtered.push_back(e);
+        continue;
+      }
       if (!detector.process(e)) continue;
       ++corners;
       tracker.add(e);
+    }
+    if (use_frames) {
+      built.clear();
+      frame_builder->add_events(EventSpan(filtered.data(), filtered.size()), &built);
+      for (const auto& ef : built) track_event_frame(ef);
     }
     const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
     const double seq = static_cast<double>(t_last - t_first) * 1e-9;
     progress.update(reader->progress(), events, "real-time factor " + num(seq > 0 ? elapsed / seq : 0.0));
   }
   // Event-rate drops at the end: frames up to the last IMU sample keep the state propagating.
+  if (use_frames) {
+    built.clear();
+    frame_builder->flush(&built);
+    for (const auto& ef : built) track_event_frame(ef);
+  }
   const int64_t t_end_cam = std::min(imu.back().t_ns - shift, t_last);
-  while (!first && next_obs <= t_end_cam) {
+  while (!use_frames && !first && next_obs <= t_end_cam) {
     emit_frame(next_obs);
     next_obs += cfg.observation_period_ns;
   }
@@ -453,7 +571,18 @@ int run_vio(const VioArgs& args, std::ostream& out) {
     j << (i ? ", " : "") << "{\"t_begin\": " << format_seconds(lost[i].t_begin_ns) << ", \"t_end\": "
       << format_seconds(lost[i].t_end_ns) << ", \"reason\": \"" << lost[i].what << "\"}";
   }
-  j << "],\n  \"outliers_removed\": " << st.outliers_removed << ",\n  \"rotation_only_keyframes\": " << st.rotation_only_keyframes
+  j << "],\n  \"frontend_stats\": {";
+  if (use_frames) {
+    const auto& ts = frame_tracker->stats();
+    const auto& fs_ = frame_builder->stats();
+    j << "\"event_frames\": " << fs_.frames_emitted << ", \"frames_uncompensated\": " << fs_.frames_uncompensated
+      << ", \"frames_dropped_sparse\": " << fs_.frames_dropped_sparse << ", \"tracks_detected\": " << ts.detected
+      << ", \"tracked\": " << ts.tracked << ", \"lost_klt\": " << ts.lost_klt << ", \"lost_forward_backward\": " << ts.lost_fb
+      << ", \"rejected_ransac\": " << ts.rejected_ransac;
+  } else {
+    j << "\"corner_events\": " << corners << ", \"corner_tracks_started\": " << tracker.stats().tracks_started;
+  }
+  j << "},\n  \"outliers_removed\": " << st.outliers_removed << ",\n  \"rotation_only_keyframes\": " << st.rotation_only_keyframes
     << "\n}\n";
   {
     std::ofstream f((fs::path(args.out) / "stats.json").string());

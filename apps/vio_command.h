@@ -13,6 +13,8 @@
 #include "evio/backend/sliding_window_estimator.h"
 #include "evio/frontend/corner_tracker.h"
 #include "evio/frontend/efast.h"
+#include "evio/frontend/event_frame.h"
+#include "evio/frontend/feature_tracker.h"
 #include "evio/frontend/event_filters.h"
 #include "evio/sensors/dataset.h"
 
@@ -20,7 +22,10 @@ namespace evio::apps {
 
 // Everything `--config FILE` sets (YAML schema in README.md and datasets/vio_*.yaml).
 struct VioConfig {
-  std::string frontend = "corners";              // frontend: corners (eFAST tracks) | frames
+  std::string frontend = "frames";               // frontend: frames (event frames + FAST/KLT/RANSAC) | corners (eFAST tracks)
+  // frames front-end
+  frontend::EventFrameOptions frames;            // frames.{events_per_frame, max_window_ms, min_events, motion_compensation, clip_percentile}
+  frontend::FeatureTrackerOptions tracker;       // tracker.{grid_cols, grid_rows, max_features, max_per_cell, fast_threshold, ...}
   // corners front-end
   frontend::EfastOptions efast;                  // efast.{filter_sae, filter_window_ms}
   frontend::CornerTrackerOptions corner_tracker; // corner_tracker.{max_distance_px, max_gap_ms, position_gain, min_length, ...}
@@ -35,7 +40,9 @@ struct VioConfig {
   // IMU noise (Kalibr densities) when neither --calib nor the dataset's calib.yaml has imu0
   calib::ImuNoise imu_noise;                     // imu.{accelerometer_noise_density, ...}
   // initialisation
-  std::string init = "auto";                     // init.method: auto (static, else alignment) | static | alignment
+  // init.method: auto (static, else alignment) | static | alignment | groundtruth (diagnostic:
+  // pose and velocity from --gt at the first frame, to judge front-end and back-end alone)
+  std::string init = "auto";
   backend::StaticInitOptions static_init;
   backend::VisualInertialInitOptions vi_init;
   int64_t init_window_ns = 2'000'000'000;        // init.window_ms: frames used by the alignment

@@ -5,7 +5,7 @@
 #include <stdexcept>
 
 #include <Eigen/Geometry>
-#include <Eigen/QR>
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <unordered_map>
 
@@ -164,8 +164,11 @@ std::optional<VioState> visual_inertial_initialization(const std::vector<Feature
     for (const auto& [j, bearing] : tracks[order[static_cast<size_t>(k)].first])
       obs.push_back({k, j, (R0[j] * R_b_c * bearing).normalized(), true});
   const double focal = camera.camera.intrinsics().fx;
-  // Unknowns: v0 (3), g0 (3), X_k (3K).
-  // Column of each track's point: only tracks with two or more used observations take part.
+  // Unknowns: v0 (3), g0 (3), X_k (3 per active track). Each row block is
+  //   P (X_k - v0 t_j - g0 t_j^2 / 2) = P (dp_j + R0_j t_b_c),  P = I - d d^T,
+  // so the normal equations have a block-diagonal point part: the points are eliminated per track
+  // (Schur complement), the 6x6 (3x3 with gravity fixed) system in v0, g0 is solved, and the
+  // points follow by back-substitution. Linear in the number of observations.
   std::vector<int> column(static_cast<size_t>(K), -1);
   auto solve = [&](const std::optional<Eigen::Vector3d>& g_fixed, Eigen::VectorXd* x) {
     std::vector<int> count(static_cast<size_t>(K), 0);
@@ -173,33 +176,56 @@ std::optional<VioState> visual_inertial_initialization(const std::vector<Feature
     int active = 0;
     for (int k = 0; k < K; ++k) column[static_cast<size_t>(k)] = count[static_cast<size_t>(k)] >= 2 ? active++ : -1;
     if (active < o.min_tracks) return false;
-    const int n = (g_fixed ? 3 : 6) + 3 * active;
-    int rows = 0;
-    for (const Obs& ob : obs) rows += ob.used && column[static_cast<size_t>(ob.k)] >= 0 ? 3 : 0;
-    Eigen::MatrixXd A = Eigen::MatrixXd::Zero(rows, n);
-    Eigen::VectorXd b = Eigen::VectorXd::Zero(rows);
-    int r = 0;
+    const int m = g_fixed ? 3 : 6;  // state unknowns
+    std::vector<Eigen::Matrix3d> Hkk(static_cast<size_t>(active), Eigen::Matrix3d::Zero());
+    std::vector<Eigen::Matrix<double, 3, 6>> Hks(static_cast<size_t>(active), Eigen::Matrix<double, 3, 6>::Zero());
+    std::vector<Eigen::Vector3d> bk(static_cast<size_t>(active), Eigen::Vector3d::Zero());
+    Eigen::Matrix<double, 6, 6> Hss = Eigen::Matrix<double, 6, 6>::Zero();
+    Eigen::Matrix<double, 6, 1> bs = Eigen::Matrix<double, 6, 1>::Zero();
     for (const Obs& ob : obs) {
-      if (!ob.used || column[static_cast<size_t>(ob.k)] < 0) continue;
-      const int k = column[static_cast<size_t>(ob.k)], j = ob.j;
-      {
-        const Eigen::Vector3d& d = ob.d;
-        const Eigen::Matrix3d P = Eigen::Matrix3d::Identity() - d * d.transpose();
-        A.block<3, 3>(r, 0) = -P * t[j];
-        Eigen::Vector3d rhs = P * (dp[j] + R0[j] * t_b_c);
-        if (g_fixed) {
-          rhs += P * (0.5 * t[j] * t[j] * *g_fixed);
-        } else {
-          A.block<3, 3>(r, 3) = -P * (0.5 * t[j] * t[j]);
-        }
-        A.block<3, 3>(r, (g_fixed ? 3 : 6) + 3 * k) = P;
-        b.segment<3>(r) = rhs;
-        r += 3;
+      const int col = column[static_cast<size_t>(ob.k)];
+      if (!ob.used || col < 0) continue;
+      const int j = ob.j;
+      const Eigen::Matrix3d P = Eigen::Matrix3d::Identity() - ob.d * ob.d.transpose();
+      // Row block: P X_k + As s = rhs with As = [-P t_j, -P t_j^2/2] ([-P t_j] with gravity fixed).
+      Eigen::Matrix<double, 3, 6> As = Eigen::Matrix<double, 3, 6>::Zero();
+      As.leftCols<3>() = -P * t[j];
+      Eigen::Vector3d rhs = P * (dp[j] + R0[j] * t_b_c);
+      if (g_fixed) {
+        rhs += P * (0.5 * t[j] * t[j] * *g_fixed);
+      } else {
+        As.rightCols<3>() = -P * (0.5 * t[j] * t[j]);
       }
+      // P is symmetric and idempotent: P^T P = P, P^T As = As, P^T rhs = rhs.
+      Hkk[static_cast<size_t>(col)] += P;
+      Hks[static_cast<size_t>(col)] += As;
+      bk[static_cast<size_t>(col)] += rhs;
+      Hss += As.transpose() * As;
+      bs += As.transpose() * rhs;
     }
-    const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(A);
-    *x = qr.solve(b);
-    return qr.rank() == n;
+    Eigen::Matrix<double, 6, 6> S = Hss;
+    Eigen::Matrix<double, 6, 1> r = bs;
+    std::vector<Eigen::Matrix3d> Hinv(static_cast<size_t>(active));
+    for (int k = 0; k < active; ++k) {
+      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(Hkk[static_cast<size_t>(k)]);
+      if (!(es.eigenvalues().minCoeff() > 1e-9 * std::max(1.0, es.eigenvalues().maxCoeff()))) return false;
+      Hinv[static_cast<size_t>(k)] = es.eigenvectors() * es.eigenvalues().cwiseInverse().asDiagonal() * es.eigenvectors().transpose();
+      S -= Hks[static_cast<size_t>(k)].transpose() * Hinv[static_cast<size_t>(k)] * Hks[static_cast<size_t>(k)];
+      r -= Hks[static_cast<size_t>(k)].transpose() * Hinv[static_cast<size_t>(k)] * bk[static_cast<size_t>(k)];
+    }
+    const Eigen::MatrixXd Sm = 0.5 * (S.topLeftCorner(m, m) + S.topLeftCorner(m, m).transpose());
+    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(Sm);
+    if (!(es.eigenvalues().minCoeff() > 1e-12 * std::max(1.0, es.eigenvalues().maxCoeff()))) return false;
+    const Eigen::VectorXd state =
+        es.eigenvectors() * es.eigenvalues().cwiseInverse().asDiagonal() * es.eigenvectors().transpose() * r.head(m);
+    x->resize(m + 3 * active);
+    x->head(m) = state;
+    Eigen::Matrix<double, 6, 1> s6 = Eigen::Matrix<double, 6, 1>::Zero();
+    s6.head(m) = state;
+    for (int k = 0; k < active; ++k) {
+      x->segment<3>(m + 3 * k) = Hinv[static_cast<size_t>(k)] * (bk[static_cast<size_t>(k)] - Hks[static_cast<size_t>(k)] * s6);
+    }
+    return true;
   };
   // Angular error of each observation for a solution: the ray from the camera centre of frame j
   // to X_k against the observed direction; above 3 px (at the focal length) it is an outlier.
