@@ -166,42 +166,62 @@ bool SlidingWindowEstimator::is_keyframe(const FeatureObservations& frame, const
 void SlidingWindowEstimator::triangulate(int64_t track, Landmark* lm) {
   const Eigen::Matrix3d R_b_c = camera_.T_c_b.rotation.toRotationMatrix().transpose();
   const Eigen::Vector3d t_b_c = -(R_b_c * camera_.T_c_b.translation);
-  std::vector<Eigen::Vector3d> centres, dirs;
-  for (const auto& k : window_) {
-    const auto it = k->obs.find(track);
-    if (it == k->obs.end()) continue;
-    const Eigen::Matrix3d R_w_b = quat_of(k->pose).toRotationMatrix();
-    centres.push_back(R_w_b * t_b_c + pos_of(k->pose));
-    dirs.push_back((R_w_b * R_b_c * it->second).normalized());
+  // Up to two rounds: a linear multi-view solution, then without the observations it does not
+  // explain (an outlier among few observations would otherwise spoil the point or reject it).
+  for (int round = 0; round < 2; ++round) {
+    std::vector<Keyframe*> kfs;
+    std::vector<Eigen::Vector3d> centres, dirs;
+    for (const auto& k : window_) {
+      const auto it = k->obs.find(track);
+      if (it == k->obs.end()) continue;
+      const Eigen::Matrix3d R_w_b = quat_of(k->pose).toRotationMatrix();
+      kfs.push_back(k.get());
+      centres.push_back(R_w_b * t_b_c + pos_of(k->pose));
+      dirs.push_back((R_w_b * R_b_c * it->second).normalized());
+    }
+    if (centres.size() < 2) return;
+    double max_angle = 0;
+    for (size_t i = 0; i < dirs.size(); ++i)
+      for (size_t j = i + 1; j < dirs.size(); ++j) max_angle = std::max(max_angle, std::acos(std::clamp(dirs[i].dot(dirs[j]), -1.0, 1.0)));
+    if (max_angle < options_.min_triangulation_angle_deg * kDegToRad) return;
+    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+    Eigen::Vector3d rhs = Eigen::Vector3d::Zero();
+    for (size_t i = 0; i < dirs.size(); ++i) {
+      const Eigen::Matrix3d P = Eigen::Matrix3d::Identity() - dirs[i] * dirs[i].transpose();
+      A += P;
+      rhs += P * centres[i];
+    }
+    const Eigen::Vector3d X = A.ldlt().solve(rhs);
+    if (!X.allFinite()) return;
+    // Depth and reprojection checks in every observing keyframe.
+    std::vector<Keyframe*> bad;
+    bool behind = false;
+    for (Keyframe* k : kfs) {
+      const Eigen::Vector3d p_c = camera_.T_c_b.rotation * (quat_of(k->pose).conjugate() * (X - pos_of(k->pose))) +
+                                  camera_.T_c_b.translation;
+      if (p_c.z() < options_.min_depth_m) {
+        behind = true;
+        break;
+      }
+      const Eigen::Vector3d& b = k->obs.at(track);
+      const double err = focal_px_ * (p_c.head<2>() / p_c.z() - b.head<2>() / b.z()).norm();
+      if (err > options_.max_reprojection_px) bad.push_back(k);
+    }
+    if (!behind && bad.empty()) {
+      lm->p = {X.x(), X.y(), X.z()};
+      lm->triangulated = true;
+      ++stats_.landmarks_triangulated;
+      return;
+    }
+    // Round 2 only when the disagreement is confined to a minority of the observations.
+    if (round == 1 || behind || 2 * bad.size() >= kfs.size() || kfs.size() - bad.size() < 2) return;
+    for (Keyframe* k : bad) {
+      k->obs.erase(track);
+      k->reproj.erase(track);
+      k->rot.erase(track);
+      ++stats_.outliers_removed;
+    }
   }
-  if (centres.size() < 2) return;
-  double max_angle = 0;
-  for (size_t i = 0; i < dirs.size(); ++i)
-    for (size_t j = i + 1; j < dirs.size(); ++j) max_angle = std::max(max_angle, std::acos(std::clamp(dirs[i].dot(dirs[j]), -1.0, 1.0)));
-  if (max_angle < options_.min_triangulation_angle_deg * kDegToRad) return;
-  Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
-  Eigen::Vector3d rhs = Eigen::Vector3d::Zero();
-  for (size_t i = 0; i < dirs.size(); ++i) {
-    const Eigen::Matrix3d P = Eigen::Matrix3d::Identity() - dirs[i] * dirs[i].transpose();
-    A += P;
-    rhs += P * centres[i];
-  }
-  const Eigen::Vector3d X = A.ldlt().solve(rhs);
-  if (!X.allFinite()) return;
-  // Depth and reprojection checks in every observing keyframe.
-  for (const auto& k : window_) {
-    const auto it = k->obs.find(track);
-    if (it == k->obs.end()) continue;
-    const Eigen::Vector3d p_c = camera_.T_c_b.rotation * (quat_of(k->pose).conjugate() * (X - pos_of(k->pose))) +
-                                camera_.T_c_b.translation;
-    if (p_c.z() < options_.min_depth_m) return;
-    const Eigen::Vector3d& b = it->second;
-    const double err = focal_px_ * (p_c.head<2>() / p_c.z() - b.head<2>() / b.z()).norm();
-    if (err > 3.0 * options_.max_reprojection_px) return;
-  }
-  lm->p = {X.x(), X.y(), X.z()};
-  lm->triangulated = true;
-  ++stats_.landmarks_triangulated;
 }
 
 bool SlidingWindowEstimator::add_frame(const FeatureObservations& frame) {
