@@ -1,0 +1,138 @@
+// `evio vio`: config parsing (errors with file:line, round trip of the resolved config), and an
+// end-to-end run on a short simulated sequence (poster_6dof, 6 s) with every output checked.
+#include "vio_command.h"
+
+#include <filesystem>
+#include <fstream>
+#include <regex>
+#include <sstream>
+
+#include <gtest/gtest.h>
+
+#include "evio/calib/error.h"
+#include "evio/mapping/landmark_map.h"
+#include "evio_test/temp_dir.h"
+#include "simulate_command.h"
+
+namespace evio::apps {
+namespace {
+
+std::string read(const std::string& p) {
+  std::ifstream f(p);
+  std::stringstream s;
+  s << f.rdbuf();
+  return s.str();
+}
+
+double json_value(const std::string& j, const std::string& key) {
+  std::smatch m;
+  if (!std::regex_search(j, m, std::regex("\"" + key + "\": ([-0-9.eE+]+)"))) return std::nan("");
+  return std::stod(m[1]);
+}
+
+TEST(VioConfig, ErrorsNameFileLineAndKey) {
+  evio_test::TempDir dir;
+  const auto expect_error = [&](const std::string& yaml, const std::string& what) {
+    const std::string p = dir.write("bad.yaml", yaml);
+    try {
+      load_vio_config(p);
+      ADD_FAILURE() << "no error for " << yaml;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
+    }
+  };
+  expect_error("window:\n  size: 1\n", "bad.yaml:2");
+  expect_error("window:\n  sise: 10\n", "unknown key 'sise'");
+  expect_error("frontend: kalman\n", "frontend");
+  expect_error("tracker:\n  ransac: seven_point\n", "tracker.ransac");
+  expect_error("frames: {events_per_frame: 100, min_events: 500}\n", "min_events");
+  expect_error("init: {method: magic}\n", "init.method");
+}
+
+TEST(VioConfig, ResolvedConfigReadsBackToTheSameValues) {
+  evio_test::TempDir dir;
+  std::string resolved;
+  const VioConfig a = load_vio_config(
+      dir.write("c.yaml", "frontend: corners\nwindow: {size: 7, pixel_sigma: 0.8, loss: cauchy}\nframes: {events_per_frame: 9000}\n"
+                          "tracker: {ransac: five_point, fast_threshold: 30}\ninit: {method: static, window_ms: 1500}\n"),
+      &resolved);
+  std::string again;
+  const VioConfig b = load_vio_config(dir.write("r.yaml", resolved), &again);
+  EXPECT_EQ(resolved, again);
+  EXPECT_EQ(b.frontend, "corners");
+  EXPECT_EQ(b.window.window_size, 7);
+  EXPECT_EQ(b.window.loss, backend::RobustLoss::kCauchy);
+  EXPECT_DOUBLE_EQ(b.window.pixel_sigma, 0.8);
+  EXPECT_EQ(b.frames.events_per_frame, 9000);
+  EXPECT_EQ(b.tracker.ransac, frontend::RansacModel::kFivePoint);
+  EXPECT_EQ(b.tracker.fast_threshold, 30);
+  EXPECT_EQ(b.init, "static");
+  EXPECT_EQ(b.init_window_ns, 1'500'000'000);
+  EXPECT_EQ(a.window.window_size, b.window.window_size);
+}
+
+TEST(VioConfig, EveryExampleConfigInDatasetsParses) {
+  int n = 0;
+  for (const auto& e : std::filesystem::directory_iterator(std::string(EVIO_SOURCE_DIR) + "/datasets")) {
+    const std::string name = e.path().filename().string();
+    if (name.rfind("vio_", 0) != 0 || e.path().extension() != ".yaml") continue;
+    EXPECT_NO_THROW(load_vio_config(e.path().string())) << name;
+    ++n;
+  }
+  EXPECT_GE(n, 3);
+}
+
+// A 6 s simulated poster_6dof sequence through `evio vio --gt`.
+TEST(VioCommand, ShortSimulatedSequenceEndToEnd) {
+  evio_test::TempDir dir;
+  SimulateArgs sa;
+  sa.scene = std::string(EVIO_SOURCE_DIR) + "/datasets/poster_6dof.yaml";
+  sa.out = dir.file("seq");
+  sa.overrides.duration_s = 6.0;
+  sa.progress = false;
+  std::ostringstream so;
+  ASSERT_EQ(run_simulate(sa, so), 0);
+  VioArgs va;
+  va.dataset = sa.out;
+  va.out = dir.file("vio");
+  va.gt = sa.out + "/groundtruth.txt";
+  va.progress = false;
+  std::ostringstream out;
+  ASSERT_EQ(run_vio(va, out), 0);
+  std::printf("%s", out.str().c_str());
+  for (const char* f : {"trajectory.tum", "keyframes.txt", "map.ply", "observations.txt", "stats.json", "vio_config.yaml", "eval.json"}) {
+    EXPECT_TRUE(std::filesystem::exists(va.out + "/" + f)) << f;
+  }
+  const std::string stats = read(va.out + "/stats.json");
+  EXPECT_GT(json_value(stats, "events"), 1e6);
+  EXPECT_GT(json_value(stats, "keyframes"), 20);
+  EXPECT_NEAR(json_value(stats, "sequence_duration_s"), 6.0, 0.05);
+  EXPECT_GT(json_value(stats, "real_time_factor"), 0.0);
+  EXPECT_NE(stats.find("\"motion_model_segments\": [{"), std::string::npos);
+  EXPECT_NE(stats.find("\"initialisation\": {\"method\": \"visual-inertial alignment\""), std::string::npos) << stats;
+  EXPECT_GT(mapping::read_landmark_map(va.out + "/map.ply").size(), 100u);
+  // The trajectory: one pose per event frame after initialisation, finite, in time order.
+  std::istringstream tin(read(va.out + "/trajectory.tum"));
+  double last_t = -1;
+  size_t poses = 0;
+  for (std::string l; std::getline(tin, l);) {
+    if (l.empty() || l[0] == '#') continue;
+    std::istringstream ls(l);
+    double v[8];
+    for (double& x : v) ASSERT_TRUE(static_cast<bool>(ls >> x)) << l;
+    for (double x : v) ASSERT_TRUE(std::isfinite(x)) << l;
+    EXPECT_GT(v[0], last_t);
+    last_t = v[0];
+    ++poses;
+  }
+  EXPECT_GT(poses, 100u);
+  // Accuracy: measured 1.8% on 10 s of this scene (the 0.3% target of the issue is not met yet);
+  // the bound guards against regressions of the whole chain.
+  const std::string ev = read(va.out + "/eval.json");
+  const double mpe = json_value(ev, "mean_position_error_percent");
+  std::printf("mean position error %.3f%%\n", mpe);
+  EXPECT_LT(mpe, 5.0);
+}
+
+}  // namespace
+}  // namespace evio::apps
