@@ -278,7 +278,7 @@ int main(int argc, char** argv) {
              "stats.json (and eval.json with --gt)");
   vio_cmd->add_option("DATASET", vio.dataset, "Dataset with events and IMU (any format evio reads)")->required();
   vio_cmd->add_option("-o,--out", vio.out, "Output folder (created)")->required();
-  vio_cmd->add_option("--config", vio.config, "VIO config YAML (README.md; examples in datasets/vio_*.yaml)");
+  vio_cmd->add_option("--config", vio.config, "VIO config YAML (README.md; examples in datasets/vio/*.yaml)");
   vio_cmd->add_option("--calib", vio.calib,
                       "Calibration: Kalibr camchain .yaml (with imu0 noise) or ECD calib.txt; default: the dataset "
                       "folder's calib.yaml, else the dataset's calibration");

@@ -20,7 +20,7 @@
 
 namespace evio::apps {
 
-// Everything `--config FILE` sets (YAML schema in README.md and datasets/vio_*.yaml).
+// Everything `--config FILE` sets (YAML schema in README.md and datasets/vio/*.yaml).
 struct VioConfig {
   std::string frontend = "frames";               // frontend: frames (event frames + FAST/KLT/RANSAC) | corners (eFAST tracks)
   // frames front-end

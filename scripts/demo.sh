@@ -23,8 +23,8 @@ else
   "$evio" simulate datasets/poster_6dof.yaml --duration 8 --out "$seq"
 fi
 echo
-echo "== evio vio $seq --out $out/vio --config datasets/vio_simulator.yaml --gt $seq/groundtruth.txt"
-"$evio" vio "$seq" --out "$out/vio" --config datasets/vio_simulator.yaml --gt "$seq/groundtruth.txt"
+echo "== evio vio $seq --out $out/vio --config datasets/vio/simulator.yaml --gt $seq/groundtruth.txt"
+"$evio" vio "$seq" --out "$out/vio" --config datasets/vio/simulator.yaml --gt "$seq/groundtruth.txt"
 echo
 echo "== evio eval (table and plots of the estimate against the ground truth)"
 "$evio" -q eval "$seq/groundtruth.txt" "$out/vio/trajectory.tum" --align se3 --align-first-s 5 \
