@@ -18,6 +18,7 @@
 #include "evio/calib/calibration_io.h"
 #include "evio/calib/error.h"
 #include "evio/sensors/time.h"
+#include "json_util.h"
 #include "progress.h"
 #include "yaml_config.h"
 
@@ -74,13 +75,6 @@ TrackLengths summarise(const std::vector<frontend::CornerTrack>& tracks) {
   r.max = len.back();
   r.mean_duration_s = dur / static_cast<double>(n);
   return r;
-}
-
-std::string json_number(double v) {
-  if (!std::isfinite(v)) return "null";
-  char b[40];
-  std::snprintf(b, sizeof(b), "%.17g", v);
-  return b;
 }
 
 }  // namespace
@@ -383,7 +377,7 @@ int run_corners(const CornersArgs& args, std::ostream& out) {
   {
     TextOut f((fs::path(args.out) / "stats.json").string());
     std::ostringstream j;
-    j << "{\n  \"dataset\": \"" << args.dataset << "\",\n  \"sensor\": [" << sensor.width << ", " << sensor.height
+    j << "{\n  \"dataset\": \"" << json_escape(args.dataset) << "\",\n  \"sensor\": [" << sensor.width << ", " << sensor.height
       << "],\n  \"events\": " << events << ",\n  \"events_outside_sensor\": " << outside
       << ",\n  \"corners\": " << corners << ",\n  \"reduction_rate\": " << json_number(reduction)
       << ",\n  \"ns_per_event\": " << json_number(ns_per_event) << ",\n  \"duration_s\": " << json_number(duration_s)

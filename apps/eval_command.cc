@@ -1,4 +1,5 @@
 #include "eval_command.h"
+#include "json_util.h"
 
 #include <algorithm>
 #include <cctype>
@@ -36,23 +37,6 @@ std::string fmt(const char* f, double v) {
 
 // Round-trip precision for machine-read outputs; JSON has no NaN/inf, those become null.
 std::string num(double v) { return std::isfinite(v) ? fmt("%.17g", v) : std::string("null"); }
-
-std::string json_escape(const std::string& s) {
-  std::string o;
-  for (char c : s) {
-    if (c == '"' || c == '\\') {
-      o += '\\';
-      o += c;
-    } else if (static_cast<unsigned char>(c) < 0x20) {
-      char b[8];
-      std::snprintf(b, sizeof(b), "\\u%04x", c);
-      o += b;
-    } else {
-      o += c;
-    }
-  }
-  return o;
-}
 
 std::string quoted(const std::string& s) { return "\"" + json_escape(s) + "\""; }
 

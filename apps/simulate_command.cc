@@ -4,6 +4,7 @@
 // Wall-clock figures go to simulation.json only, so every other file is byte-identical for the
 // same config and seed.
 #include "simulate_command.h"
+#include "json_util.h"
 #include "progress.h"
 
 #include <algorithm>
@@ -66,29 +67,7 @@ class OutFile {
   bool ok_ = true;
 };
 
-std::string json_escape(const std::string& s) {
-  std::string out;
-  for (char c : s) {
-    if (c == '"' || c == '\\') {
-      out += '\\';
-      out += c;
-    } else if (static_cast<unsigned char>(c) < 0x20) {
-      char buf[8];
-      std::snprintf(buf, sizeof(buf), "\\u%04x", c);
-      out += buf;
-    } else {
-      out += c;
-    }
-  }
-  return out;
-}
-
-std::string num(double v) {
-  if (!std::isfinite(v)) return "null";
-  char buf[32];
-  std::snprintf(buf, sizeof(buf), "%.9g", v);
-  return buf;
-}
+std::string num(double v) { return json_number(v, 9); }
 
 void write_text(const std::string& path, const std::string& text) {
   OutFile f(path);

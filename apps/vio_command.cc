@@ -20,6 +20,7 @@
 #include "evio/calib/log.h"
 #include "evio/mapping/landmark_map.h"
 #include "evio/sensors/time.h"
+#include "json_util.h"
 #include "progress.h"
 #include "yaml_config.h"
 
@@ -555,13 +556,13 @@ int run_vio(const VioArgs& args, std::ostream& out) {
   std::sort(solve.begin(), solve.end());
   const double med = solve.empty() ? 0 : solve[solve.size() / 2];
   std::ostringstream j;
-  j << "{\n  \"dataset\": \"" << args.dataset << "\",\n  \"frontend\": \"" << cfg.frontend << "\",\n  \"events\": " << events
+  j << "{\n  \"dataset\": \"" << json_escape(args.dataset) << "\",\n  \"frontend\": \"" << cfg.frontend << "\",\n  \"events\": " << events
     << ",\n  \"corners\": " << corners << ",\n  \"frames\": " << st.frames << ",\n  \"keyframes\": " << st.keyframes
     << ",\n  \"landmarks\": " << pts.size() << ",\n  \"processing_time_s\": " << num(processing_s)
     << ",\n  \"sequence_duration_s\": " << num(duration_s) << ",\n  \"real_time_factor\": "
     << num(duration_s > 0 ? processing_s / duration_s : 0.0) << ",\n  \"solve_ms_median\": " << num(1e3 * med)
     << ",\n  \"initialisation\": {\"method\": \"" << init_method << "\", \"t\": " << format_seconds(init_t)
-    << "},\n  \"imu_noise_from\": \"" << noise_source << "\",\n  \"motion_model_segments\": [";
+    << "},\n  \"imu_noise_from\": \"" << json_escape(noise_source) << "\",\n  \"motion_model_segments\": [";
   for (size_t i = 0; i < models.size(); ++i) {
     j << (i ? ", " : "") << "{\"t_begin\": " << format_seconds(models[i].t_begin_ns) << ", \"t_end\": "
       << format_seconds(models[i].t_end_ns) << ", \"model\": \"" << models[i].what << "\"}";
