@@ -55,6 +55,7 @@ std::string config_yaml(const VioConfig& c) {
   const auto& fr = c.frames;
   y << "frames: {events_per_frame: " << fr.events_per_frame << ", max_window_ms: " << num(ns_to_ms(fr.max_window_ns))
     << ", min_events: " << fr.min_events << ", motion_compensation: " << (fr.motion_compensation ? "true" : "false")
+    << ", use_depth: " << (fr.use_depth ? "true" : "false")
     << ", clip_percentile: " << num(fr.clip_percentile) << "}\n";
   const auto& tk = c.tracker;
   y << "tracker: {grid_cols: " << tk.grid_cols << ", grid_rows: " << tk.grid_rows << ", max_features: " << tk.max_features
@@ -124,12 +125,13 @@ VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
       c.frontend = top.string("frontend", c.frontend, {"frames", "corners"});
       if (top.has("frames")) {
         const Section s = top.child("frames", false, "a map");
-        s.allow({"events_per_frame", "max_window_ms", "min_events", "motion_compensation", "clip_percentile"});
+        s.allow({"events_per_frame", "max_window_ms", "min_events", "motion_compensation", "use_depth", "clip_percentile"});
         auto& f = c.frames;
         f.events_per_frame = s.integer("events_per_frame", f.events_per_frame, 1, 100000000);
         f.max_window_ns = ms_to_ns(s.number("max_window_ms", ns_to_ms(f.max_window_ns), Range::kPositive, "ms"));
         f.min_events = s.integer("min_events", f.min_events, 1, 100000000);
         f.motion_compensation = s.boolean("motion_compensation", f.motion_compensation);
+        f.use_depth = s.boolean("use_depth", f.use_depth);
         f.clip_percentile = s.number("clip_percentile", f.clip_percentile, Range::kUnit, "");
         std::string why;
         if (!f.Validate(&why)) s.fail("invalid frame settings: " + why, "consistent settings");
@@ -454,7 +456,24 @@ int run_vio(const VioArgs& args, std::ostream& out) {
     prev_frame_t = ef.t_ns;
     FeatureObservations f = frame_tracker->track(ef.t_ns + shift, ef.image, have_prior ? &R_cur_prev : nullptr);
     f.frame_id = frame_id++;
-    if (est) frame_builder->set_gyro_bias(est->latest_state().bias_gyro);
+    if (est) {
+      const VioState st = est->latest_state();
+      frame_builder->set_gyro_bias(st.bias_gyro);
+      if (cfg.frames.use_depth) {
+        // Camera velocity and the median landmark depth for translation compensation.
+        const calib::SE3 T_c_w = cal->T_c_b * st.T_w_b.inverse();
+        std::vector<double> depth;
+        for (const auto& [id, p] : est->landmarks()) {
+          const double z = (T_c_w.rotation * p + T_c_w.translation).z();
+          if (z > 0) depth.push_back(z);
+        }
+        if (!depth.empty()) {
+          std::nth_element(depth.begin(), depth.begin() + static_cast<long>(depth.size() / 2), depth.end());
+          const Eigen::Vector3d v_c = cal->T_c_b.rotation * (st.T_w_b.rotation.conjugate() * st.v_w);
+          frame_builder->set_motion(v_c, depth[depth.size() / 2]);
+        }
+      }
+    }
     handle_frame(std::move(f));
   };
 
