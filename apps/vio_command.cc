@@ -342,6 +342,7 @@ int run_vio(const VioArgs& args, std::ostream& out) {
   std::vector<VioState> trajectory;
   std::map<int64_t, Eigen::Vector3d> map_points;
   std::vector<Segment> lost;
+  bool in_gap = false;
   std::string init_method;
   int64_t init_t = 0;
   size_t next_imu = 0;
@@ -351,7 +352,9 @@ int run_vio(const VioArgs& args, std::ostream& out) {
   auto feed = [&](const FeatureObservations& f) {
     while (next_imu < imu.size() && imu[next_imu].t_ns <= f.t_ns + 10'000'000) est->add_imu(imu[next_imu++]);
     const bool kf = est->add_frame(f);
-    if (f.t_ns >= est->latest_state().t_ns) trajectory.push_back(est->latest_state());
+    // One pose per new state time (a frame the estimator skipped adds none).
+    const VioState& ls = est->latest_state();
+    if (trajectory.empty() || ls.t_ns > trajectory.back().t_ns) trajectory.push_back(ls);
     if (kf) {
       for (const auto& [id, p] : est->landmarks()) map_points[id] = p;
     }
@@ -414,7 +417,9 @@ int run_vio(const VioArgs& args, std::ostream& out) {
       obs_file << line;
     }
     // Tracking-lost segments: fewer than 5 observed tracks.
-    if (f.observations.size() < 5) {
+    if (in_gap) {
+      // counted as the event-rate drop
+    } else if (f.observations.size() < 5) {
       if (few_since < 0) few_since = f.t_ns;
     } else if (few_since >= 0) {
       if (f.t_ns - few_since >= 500'000'000) lost.push_back({few_since, f.t_ns, "fewer than 5 tracks"});
@@ -440,6 +445,19 @@ int run_vio(const VioArgs& args, std::ostream& out) {
   };
   // Frames front-end: one observation frame per event frame, tracked with the IMU rotation prior.
   auto track_event_frame = [&](const frontend::EventFrame& ef) {
+    // An event-rate drop: no frames for a while. Empty frames every max_window keep the IMU
+    // propagation (and the trajectory) going; the gap is flagged.
+    if (prev_frame_t >= 0 && ef.t_ns - prev_frame_t > 2 * cfg.frames.max_window_ns) {
+      lost.push_back({prev_frame_t + shift, ef.t_ns + shift, "no event frames (event-rate drop)"});
+      in_gap = true;  // these frames are the flagged gap, not a tracking loss
+      for (int64_t t = prev_frame_t + cfg.frames.max_window_ns; t < ef.t_ns; t += cfg.frames.max_window_ns) {
+        FeatureObservations empty;
+        empty.t_ns = t + shift;
+        empty.frame_id = frame_id++;
+        handle_frame(std::move(empty));
+      }
+      in_gap = false;
+    }
     Eigen::Matrix3d R_cur_prev = Eigen::Matrix3d::Identity();
     bool have_prior = false;
     const Eigen::Vector3d bg = est ? est->latest_state().bias_gyro : Eigen::Vector3d::Zero();

@@ -4,6 +4,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <random>
 #include <regex>
 #include <sstream>
 
@@ -11,6 +12,7 @@
 
 #include "evio/calib/error.h"
 #include "evio/mapping/landmark_map.h"
+#include "evio/sensors/ecd.h"
 #include "evio_test/temp_dir.h"
 #include "simulate_command.h"
 
@@ -132,6 +134,88 @@ TEST(VioCommand, ShortSimulatedSequenceEndToEnd) {
   const double mpe = json_value(ev, "mean_position_error_percent");
   std::printf("mean position error %.3f%%\n", mpe);
   EXPECT_LT(mpe, 5.0);
+}
+
+// Robustness on one simulated sequence (poster_6dof, 6 s), each case a modified copy:
+// no events for 1 s (event-rate drop), a burst of 10x the event rate for 0.3 s of random noise
+// events, a 150 ms IMU gap. Every run finishes, covers the sequence with finite poses, and the
+// drop is flagged as a tracking-lost segment.
+TEST(VioCommand, EventDropBurstAndImuGap) {
+  evio_test::TempDir dir;
+  SimulateArgs sa;
+  sa.scene = std::string(EVIO_SOURCE_DIR) + "/datasets/poster_6dof.yaml";
+  sa.out = dir.file("seq");
+  sa.overrides.duration_s = 6.0;
+  sa.progress = false;
+  std::ostringstream so;
+  ASSERT_EQ(run_simulate(sa, so), 0);
+  const EventBuffer events = read_ecd_events(sa.out + "/events.txt");
+  const std::vector<ImuSample> imu = read_ecd_imu(sa.out + "/imu.txt");
+  const int64_t t0 = events.front().t_ns;
+  auto variant = [&](const std::string& name, const std::vector<Event>& ev, const std::vector<ImuSample>& im) {
+    const std::string d = dir.file(name);
+    std::filesystem::create_directories(d);
+    for (const char* f : {"calib.txt", "calib.yaml", "groundtruth.txt"}) {
+      std::filesystem::copy_file(sa.out + "/" + f, d + "/" + f);
+    }
+    EcdEventWriter w(d + "/events.txt");
+    w.write(EventSpan(ev.data(), ev.size()));
+    w.close();
+    write_ecd_imu(d + "/imu.txt", im);
+    return d;
+  };
+  std::vector<Event> drop, burst;
+  std::mt19937 rng(3);
+  for (const Event& e : events) {
+    if (e.t_ns < t0 + 3'000'000'000 || e.t_ns >= t0 + 4'000'000'000) drop.push_back(e);
+  }
+  // Burst: 9 random events per real event in [2.0, 2.3) s (10x the rate).
+  for (const Event& e : events) {
+    burst.push_back(e);
+    if (e.t_ns >= t0 + 2'000'000'000 && e.t_ns < t0 + 2'300'000'000) {
+      for (int k = 0; k < 9; ++k) {
+        burst.push_back({e.t_ns, static_cast<uint16_t>(rng() % 240), static_cast<uint16_t>(rng() % 180), static_cast<int8_t>(rng() % 2 ? 1 : -1)});
+      }
+    }
+  }
+  std::vector<ImuSample> gap;
+  for (const ImuSample& m : imu) {
+    if (m.t_ns < t0 + 2'500'000'000 || m.t_ns > t0 + 2'650'000'000) gap.push_back(m);
+  }
+  struct Case {
+    std::string name;
+    std::string dataset;
+  };
+  for (const Case& c : {Case{"drop", variant("drop", drop, imu)}, Case{"burst", variant("burst", burst, imu)},
+                        Case{"imu_gap", variant("imu_gap", std::vector<Event>(events.begin(), events.end()), gap)}}) {
+    VioArgs va;
+    va.dataset = c.dataset;
+    va.out = c.dataset + "/vio";
+    va.gt = c.dataset + "/groundtruth.txt";
+    va.progress = false;
+    std::ostringstream out;
+    ASSERT_EQ(run_vio(va, out), 0) << c.name;
+    std::istringstream tin(read(va.out + "/trajectory.tum"));
+    double first = -1, last = -1;
+    for (std::string l; std::getline(tin, l);) {
+      if (l.empty() || l[0] == '#') continue;
+      std::istringstream ls(l);
+      double v[8];
+      for (double& x : v) ASSERT_TRUE(static_cast<bool>(ls >> x)) << c.name << ": " << l;
+      for (double x : v) ASSERT_TRUE(std::isfinite(x)) << c.name << ": " << l;
+      if (first < 0) first = v[0];
+      last = v[0];
+    }
+    const std::string stats = read(va.out + "/stats.json");
+    const double mpe = json_value(read(va.out + "/eval.json"), "mean_position_error_percent");
+    std::printf("%s: trajectory %.2f..%.2f s, mean position error %.2f%%\n", c.name.c_str(), first, last, mpe);
+    EXPECT_LT(first, 2.5) << c.name;
+    EXPECT_GT(last, 5.5) << c.name;
+    EXPECT_LT(mpe, 10.0) << c.name;
+    if (c.name == "drop") {
+      EXPECT_NE(stats.find("\"tracking_lost_segments\": [{"), std::string::npos) << stats;
+    }
+  }
 }
 
 }  // namespace
