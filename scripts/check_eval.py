@@ -162,7 +162,16 @@ def align_posyaw(p_gt, p_est):
     return R, mu_g - R @ mu_e, 1.0
 
 
-def fit_alignment(method, t_ns, p_gt, p_est, first_s, first_n):
+def spans_plane(p):
+    """RMS spread >= 1 mm and second singular value >= 1e-3 of the first (evio's rule)."""
+    if len(p) < 3:
+        return False
+    c = p - p.mean(axis=0)
+    w = np.sqrt(np.clip(np.linalg.eigvalsh(c.T @ c / len(p)), 0, None))  # ascending
+    return w[2] >= 1e-3 and w[1] >= 1e-3 * w[2]
+
+
+def fit_alignment(method, t_ns, p_gt, p_est, first_s, first_n, R_gt0=None, R_est0=None):
     n = len(t_ns)
     use = n
     if first_s > 0:
@@ -172,6 +181,10 @@ def fit_alignment(method, t_ns, p_gt, p_est, first_s, first_n):
     g, e = p_gt[:use], p_est[:use]
     if method == 'none':
         return np.eye(3), np.zeros(3), 1.0, use
+    if method in ('se3', 'sim3') and use >= 2 and R_gt0 is not None and not (spans_plane(g) and spans_plane(e)):
+        # no plane spanned (still / rotating in place / a line): align the first pair's poses
+        R = R_gt0 @ R_est0.T
+        return R, g[0] - R @ e[0], 1.0, use
     if method == 'se3':
         return umeyama(g, e, False) + (use,)
     if method == 'sim3':
@@ -249,7 +262,7 @@ def evaluate(gt, est, protocol):
     p_g, R_g = gt[1][ig], quat_to_rot(gt[2][ig])
     p_e, R_e = est[1][ie], quat_to_rot(est[2][ie])
     al = protocol['alignment']
-    R, tr, s, used = fit_alignment(al['method'], t, p_g, p_e, al['first_s'], al['first_poses'])
+    R, tr, s, used = fit_alignment(al['method'], t, p_g, p_e, al['first_s'], al['first_poses'], R_g[0], R_e[0])
     p_a = s * p_e @ R.T + tr
     R_a = np.einsum('ij,njk->nik', R, R_e)
     e_t = np.linalg.norm(p_g - p_a, axis=1)

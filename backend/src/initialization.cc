@@ -56,8 +56,41 @@ std::optional<VioState> static_initialization(const std::vector<ImuSample>& imu,
   const double gyro_sigma = noise.gyroscope_noise_density * std::sqrt(rate);
   const double accel_sigma = noise.accelerometer_noise_density * std::sqrt(rate);
   if (std_g.maxCoeff() > o.max_gyro_noise_ratio * gyro_sigma) {
-    return fail("not still: gyro spread " + std::to_string(std_g.maxCoeff()) + " rad/s exceeds " +
-                std::to_string(o.max_gyro_noise_ratio * gyro_sigma));
+    if (!o.allow_rotation) {
+      return fail("not still: gyro spread " + std::to_string(std_g.maxCoeff()) + " rad/s exceeds " +
+                  std::to_string(o.max_gyro_noise_ratio * gyro_sigma));
+    }
+    // Rotating in place: the specific force rotated into the body frame at the window's end with
+    // the integrated gyro must be constant (-g, no linear acceleration).
+    std::vector<const ImuSample*> w;
+    for (const ImuSample& m : imu)
+      if (m.t_ns >= t_begin_ns && m.t_ns <= t_end) w.push_back(&m);
+    std::vector<Eigen::Vector3d> a_end(w.size());
+    Eigen::Matrix3d R = Eigen::Matrix3d::Identity();  // R_end_k, built backwards from the end
+    a_end.back() = w.back()->accel;
+    for (size_t k = w.size() - 1; k-- > 0;) {
+      const double dt = static_cast<double>(w[k + 1]->t_ns - w[k]->t_ns) * 1e-9;
+      R = R * calib::so3_exp(-0.5 * (w[k]->gyro + w[k + 1]->gyro) * dt);  // R_end_k = R_end_k+1 Exp(-w dt)
+      a_end[k] = R * w[k]->accel;
+    }
+    Eigen::Vector3d s1 = Eigen::Vector3d::Zero(), s2 = Eigen::Vector3d::Zero();
+    for (const auto& a : a_end) {
+      s1 += a;
+      s2 += a.cwiseProduct(a);
+    }
+    const Eigen::Vector3d mean = s1 / static_cast<double>(a_end.size());
+    const Eigen::Vector3d spread = (s2 / static_cast<double>(a_end.size()) - mean.cwiseProduct(mean)).cwiseMax(0.0).cwiseSqrt();
+    if (spread.maxCoeff() > o.max_accel_noise_ratio * accel_sigma) {
+      return fail("not still and not rotating in place: gyro spread " + std::to_string(std_g.maxCoeff()) +
+                  " rad/s, gyro-compensated accelerometer spread " + std::to_string(spread.maxCoeff()) + " m/s^2");
+    }
+    if (std::abs(mean.norm() - o.gravity_mps2) > o.max_gravity_error) {
+      return fail("mean specific force " + std::to_string(mean.norm()) + " m/s^2 is not gravity");
+    }
+    VioState s;
+    s.t_ns = w.back()->t_ns;
+    s.T_w_b = calib::SE3(Eigen::Quaterniond::FromTwoVectors(mean.normalized(), Eigen::Vector3d::UnitZ()), Eigen::Vector3d::Zero());
+    return s;  // gyro bias unknown while rotating: zero
   }
   if (std_a.maxCoeff() > o.max_accel_noise_ratio * accel_sigma) {
     return fail("not still: accelerometer spread " + std::to_string(std_a.maxCoeff()) + " m/s^2 exceeds " +

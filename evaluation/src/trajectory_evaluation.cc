@@ -12,7 +12,10 @@
 //   mu_est)^T (the best rotation about z, as rpg's align_posyaw), t = mu_gt - R mu_est. As in
 //   rpg, posyaw on a single pair (or on pairs without horizontal spread) takes the yaw from the
 //   orientations of the first pair (rpg's align_position_yaw_single) and the translation from its
-//   position. Aligned orientation: R * R_est (as rpg's align_trajectory).
+//   position. Likewise se3/sim3 on two or more positions that do not span a plane (RMS spread
+//   under 1 mm, or second singular value under 1e-3 of the first: a still or rotating-in-place
+//   camera, a straight line) align the first pair's poses (R = R_gt0 R_est0^T, scale 1), since
+//   Umeyama's rotation is undetermined there. Aligned orientation: R * R_est (as rpg's align_trajectory).
 // - ATE: |p_gt - p_est_aligned| and the angle of R_gt^T R_est_aligned (the same angle as rpg's
 //   R_est R_gt^-1), computed from the quaternion with atan2 (rpg: arccos of the trace, which
 //   loses precision below ~1e-4 deg; same value otherwise).
@@ -366,6 +369,23 @@ AlignmentResult align_positions(const std::vector<Eigen::Vector3d>& p_groundtrut
   return r;
 }
 
+namespace {
+// True when the positions span a plane: RMS spread >= 1 mm and the second singular value of the
+// centred positions at least 1e-3 of the first.
+bool has_3d_spread(const std::vector<Eigen::Vector3d>& p) {
+  if (p.size() < 3) return false;
+  Eigen::Vector3d mu = Eigen::Vector3d::Zero();
+  for (const auto& x : p) mu += x;
+  mu /= static_cast<double>(p.size());
+  Eigen::Matrix3d C = Eigen::Matrix3d::Zero();
+  for (const auto& x : p) C += (x - mu) * (x - mu).transpose();
+  C /= static_cast<double>(p.size());
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(C);  // ascending eigenvalues
+  const double s1 = std::sqrt(std::max(0.0, es.eigenvalues()(2))), s2 = std::sqrt(std::max(0.0, es.eigenvalues()(1)));
+  return s1 >= 1e-3 && s2 >= 1e-3 * s1;
+}
+}  // namespace
+
 AlignmentResult align(const AssociatedPoses& pairs, const AlignmentOptions& options) {
   std::string why;
   if (!options.Validate(&why)) throw std::invalid_argument(why);
@@ -405,6 +425,18 @@ AlignmentResult align(const AssociatedPoses& pairs, const AlignmentOptions& opti
   if (n == 0) {
     throw std::invalid_argument(std::string("alignment ") + alignment_name(options.method) +
                                 ": no pairs within the alignment window (first_s / first_poses)");
+  }
+  if ((options.method == Alignment::kSE3 || options.method == Alignment::kSim3) && n >= 2 &&
+      (!has_3d_spread(p_gt) || !has_3d_spread(p_est))) {
+    // Positions that do not span a plane (a still or rotating-in-place camera, a straight line)
+    // leave the Umeyama rotation undetermined: align the first pair's poses instead
+    // (rotation R_gt0 R_est0^T, translation from its positions, scale 1).
+    AlignmentResult r;
+    r.method = options.method;
+    r.pairs_used = n;
+    r.rotation = pairs.groundtruth[0].rotation_matrix() * pairs.estimate[0].rotation_matrix().transpose();
+    r.translation = p_gt[0] - r.rotation * p_est[0];
+    return r;
   }
   return align_positions(p_gt, p_est, options.method);
 }

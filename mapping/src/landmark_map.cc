@@ -2,6 +2,8 @@
 
 #include <cmath>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <stdexcept>
 
 #include <pcl/io/pcd_io.h>
@@ -35,6 +37,20 @@ void write_landmark_map(const std::string& path, const std::vector<MapPoint>& po
   cloud.width = static_cast<uint32_t>(cloud.size());
   cloud.height = 1;
   cloud.is_dense = true;
+  if (cloud.empty()) {
+    // PCL refuses to write empty clouds: a valid empty file by hand (same fields).
+    std::ofstream f(path);
+    if (format == MapFormat::kPlyBinary || format == MapFormat::kPlyAscii) {
+      f << "ply\nformat " << (format == MapFormat::kPlyBinary ? "binary_little_endian" : "ascii")
+        << " 1.0\nelement vertex 0\nproperty float x\nproperty float y\nproperty float z\nproperty float intensity\nend_header\n";
+    } else {
+      f << "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z intensity\nSIZE 4 4 4 4\nTYPE F F F F\n"
+           "COUNT 1 1 1 1\nWIDTH 0\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 0\nDATA "
+        << (format == MapFormat::kPcdBinary ? "binary" : "ascii") << "\n";
+    }
+    if (!f) throw InputError(path, 0, "cannot write the landmark map", "a writable output folder");
+    return;
+  }
   int rc = -1;
   switch (format) {
     case MapFormat::kPlyBinary:
@@ -56,6 +72,13 @@ void write_landmark_map(const std::string& path, const std::vector<MapPoint>& po
 std::vector<MapPoint> read_landmark_map(const std::string& path) {
   pcl::PointCloud<pcl::PointXYZI> cloud;
   const std::string ext = std::filesystem::path(path).extension().string();
+  {
+    // An empty map (written by hand above; PCL does not read zero-point files back).
+    std::ifstream f(path);
+    if (!f) throw InputError(path, 0, "cannot read the landmark map", "a PLY or PCD file written by evio");
+    std::string head((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+    if (head.find("element vertex 0\n") != std::string::npos || head.find("\nPOINTS 0\n") != std::string::npos) return {};
+  }
   const int rc = ext == ".pcd" ? pcl::io::loadPCDFile(path, cloud) : pcl::io::loadPLYFile(path, cloud);
   if (rc != 0) throw InputError(path, 0, "cannot read the landmark map", "a PLY or PCD file written by evio");
   std::vector<MapPoint> out;

@@ -136,6 +136,38 @@ TEST(VioCommand, ShortSimulatedSequenceEndToEnd) {
   EXPECT_LT(mpe, 5.0);
 }
 
+// Pure rotation (poster_rotation scene, up to ~170 deg/s, 3 s): initialised as rotating in place,
+// the rotation-only model chosen for (almost) every keyframe and reported in the segments, and the
+// orientation tracked (se3 evaluation falls back to the first pose: positions do not move).
+TEST(VioCommand, PureRotationChoosesTheRotationOnlyModel) {
+  evio_test::TempDir dir;
+  SimulateArgs sa;
+  sa.scene = std::string(EVIO_SOURCE_DIR) + "/datasets/poster_rotation.yaml";
+  sa.out = dir.file("seq");
+  sa.overrides.duration_s = 3.0;
+  sa.progress = false;
+  std::ostringstream so;
+  ASSERT_EQ(run_simulate(sa, so), 0);
+  VioArgs va;
+  va.dataset = sa.out;
+  va.out = dir.file("vio");
+  va.gt = sa.out + "/groundtruth.txt";
+  va.progress = false;
+  std::ostringstream out;
+  ASSERT_EQ(run_vio(va, out), 0);
+  std::printf("%s", out.str().c_str());
+  const std::string stats = read(va.out + "/stats.json");
+  const double kf = json_value(stats, "keyframes"), rot = json_value(stats, "rotation_only_keyframes");
+  EXPECT_GT(rot, 0.9 * kf) << stats;
+  EXPECT_NE(stats.find("\"model\": \"rotation_only\""), std::string::npos);
+  EXPECT_NE(stats.find("\"initialisation\": {\"method\": \"static\""), std::string::npos) << stats;
+  const std::string ev = read(va.out + "/eval.json");
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(ev, m, std::regex("\"rot_deg\": \\{\"rmse\": ([-0-9.eE+]+)")));
+  std::printf("orientation error rmse %.3f deg\n", std::stod(m[1]));
+  EXPECT_LT(std::stod(m[1]), 3.0);
+}
+
 // Robustness on one simulated sequence (poster_6dof, 6 s), each case a modified copy:
 // no events for 1 s (event-rate drop), a burst of 10x the event rate for 0.3 s of random noise
 // events, a 150 ms IMU gap. Every run finishes, covers the sequence with finite poses, and the

@@ -53,7 +53,7 @@ TEST(StaticInitialization, RecoversRollPitchAndGyroBias) {
   EXPECT_GE(s->t_ns, t.t_begin_ns + 990'000'000);
 }
 
-TEST(StaticInitialization, RejectsAMovingStartAndTooFewSamples) {
+TEST(StaticInitialization, RejectsAMovingStartAcceptsRotationInPlace) {
   sim::SinusoidTrajectoryOptions t;
   t.duration_s = 1.5;
   t.amplitude_m = Eigen::Vector3d(0.1, 0, 0);
@@ -61,10 +61,25 @@ TEST(StaticInitialization, RejectsAMovingStartAndTooFewSamples) {
   std::string why;
   EXPECT_FALSE(static_initialization(imu_of(t, 4), 0, davis_imu(), StaticInitOptions{}, &why).has_value());
   EXPECT_NE(why.find("not still"), std::string::npos) << why;
+  // Rotating in place: accepted (gravity from the gyro-compensated specific force) unless
+  // allow_rotation is off.
   t.amplitude_m.setZero();
-  t.angle_amplitude_rad = Eigen::Vector3d(0, 0, 0.2);
-  t.angle_frequency_hz = Eigen::Vector3d(0, 0, 1.0);
-  EXPECT_FALSE(static_initialization(imu_of(t, 5), 0, davis_imu(), StaticInitOptions{}, &why).has_value());
+  t.q_w_b0 = Eigen::AngleAxisd(0.25, Eigen::Vector3d::UnitY()) * Eigen::AngleAxisd(0.1, Eigen::Vector3d::UnitX());
+  t.angle_amplitude_rad = Eigen::Vector3d(0.3, 0.2, 0.5);
+  t.angle_frequency_hz = Eigen::Vector3d(0.7, 1.1, 1.0);
+  const auto rot_imu = imu_of(t, 5);
+  const auto s = static_initialization(rot_imu, 0, davis_imu(), StaticInitOptions{}, &why);
+  ASSERT_TRUE(s.has_value()) << why;
+  const sim::SinusoidTrajectory traj(t);
+  const Eigen::Vector3d up_true = traj.evaluate(s->t_ns).T_w_b.rotation.conjugate() * Eigen::Vector3d::UnitZ();
+  const Eigen::Vector3d up_est = s->T_w_b.rotation.conjugate() * Eigen::Vector3d::UnitZ();
+  const double tilt_err_deg = std::acos(std::clamp(up_true.dot(up_est), -1.0, 1.0)) * 180 / M_PI;
+  std::printf("rotating in place: tilt error %.3f deg\n", tilt_err_deg);
+  EXPECT_LT(tilt_err_deg, 1.0);
+  StaticInitOptions strict;
+  strict.allow_rotation = false;
+  EXPECT_FALSE(static_initialization(rot_imu, 0, davis_imu(), strict, &why).has_value());
+  EXPECT_NE(why.find("not still"), std::string::npos) << why;
   EXPECT_FALSE(static_initialization({}, 0, davis_imu(), StaticInitOptions{}, &why).has_value());
   EXPECT_NE(why.find("samples"), std::string::npos);
 }

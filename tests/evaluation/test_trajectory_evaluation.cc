@@ -191,6 +191,19 @@ TEST(Evaluation, DegenerateInputs) {
   EXPECT_TRUE(r.rpe.empty());
   EXPECT_EQ(r.mean_position_error_percent, 0.0);
   EXPECT_EQ(r.yaw_drift_deg_per_m, 0.0);
+  // Rotating in place (all positions equal): se3 falls back to the first pair's poses, so a
+  // known rotation of the estimate's world is undone and the rotation errors vanish.
+  std::vector<evio::StampedPose> spin_gt, spin_est;
+  const auto q_off = evio::calib::so3_exp_quat(Eigen::Vector3d(0.2, -0.4, 1.0));
+  for (int i = 0; i < 50; ++i) {
+    const auto q = evio::calib::so3_exp_quat(Eigen::Vector3d(0.3 * std::sin(0.1 * i), 0.02 * i, 0.5 * std::cos(0.07 * i)));
+    spin_gt.push_back({i * 10000000LL, SE3(q, Eigen::Vector3d(1, 2, 3))});
+    spin_est.push_back({i * 10000000LL, SE3(q_off * q, Eigen::Vector3d(-1, 0, 4))});
+  }
+  o.alignment.method = ev::Alignment::kSE3;
+  const auto spin = ev::evaluate(evio::Trajectory(spin_gt), evio::Trajectory(spin_est), o);
+  EXPECT_LT(spin.ate.rot_deg.max, 1e-9);
+  EXPECT_LT(spin.ate.trans_m.max, 1e-12);
   const auto s = ev::compute_stats({1, 2, 3, 4});
   EXPECT_DOUBLE_EQ(s.median, 2.5);
   EXPECT_DOUBLE_EQ(s.std, std::sqrt(1.25));

@@ -27,6 +27,16 @@ TEST(LandmarkMap, RoundTripEveryFormat) {
   EXPECT_THROW(map_format_for("map.obj"), std::invalid_argument);
 }
 
+TEST(LandmarkMap, EmptyMapsAreValidFiles) {
+  evio_test::TempDir dir;
+  for (const char* name : {"e.ply", "e.pcd"}) {
+    write_landmark_map(dir.file(name), {});
+    EXPECT_TRUE(read_landmark_map(dir.file(name)).empty()) << name;
+  }
+  write_landmark_map(dir.file("ea.ply"), {}, MapFormat::kPlyAscii);
+  EXPECT_TRUE(read_landmark_map(dir.file("ea.ply")).empty());
+}
+
 TEST(LandmarkMap, ErrorsNameTheFile) {
   std::vector<MapPoint> pts = {{Eigen::Vector3d(1, 2, 3), 0}};
   EXPECT_THROW(write_landmark_map("/nonexistent_dir/x.ply", pts), InputError);

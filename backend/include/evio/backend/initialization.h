@@ -28,6 +28,10 @@ struct StaticInitOptions {
   double max_accel_noise_ratio = 3.0;
   double gravity_mps2 = 9.81;         // m/s^2
   double max_gravity_error = 0.5;     // |mean specific force| must be within this of g, m/s^2
+  // Also accept a body rotating in place (no linear acceleration): the specific force rotated with
+  // the integrated gyro into the body frame at the window's end must be constant; the gyro bias is
+  // then unknown (zero).
+  bool allow_rotation = true;
   bool Validate(std::string* why) const;
 };
 
