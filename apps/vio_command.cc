@@ -53,7 +53,8 @@ std::string config_yaml(const VioConfig& c) {
     << ", window_ms: " << num(ns_to_ms(c.background_activity.window_ns)) << ", radius: " << c.background_activity.radius
     << ", min_support: " << c.background_activity.min_support << "}\n";
   const auto& fr = c.frames;
-  y << "frames: {events_per_frame: " << fr.events_per_frame << ", max_window_ms: " << num(ns_to_ms(fr.max_window_ns))
+  y << "frames: {events_per_frame: " << fr.events_per_frame << ", min_window_ms: " << num(ns_to_ms(fr.min_window_ns))
+    << ", max_window_ms: " << num(ns_to_ms(fr.max_window_ns))
     << ", min_events: " << fr.min_events << ", motion_compensation: " << (fr.motion_compensation ? "true" : "false")
     << ", use_depth: " << (fr.use_depth ? "true" : "false")
     << ", clip_percentile: " << num(fr.clip_percentile) << "}\n";
@@ -100,6 +101,10 @@ VioConfig default_vio_config() {
   c.imu_noise.gyroscope_noise_density = 0.00017;
   c.imu_noise.gyroscope_random_walk = 2e-5;
   c.imu_noise.update_rate_hz = 1000;
+  // Frames of at least 10 ms: at high event rates (fast motion) frames hold more events instead of
+  // coming faster than the tracker needs (poster_rotation at 3.2 M events/s: real-time factor
+  // 1.33 -> 0.91, orientation 1.30 -> 0.87 deg rms).
+  c.frames.min_window_ns = 10'000'000;
   return c;
 }
 
@@ -125,10 +130,11 @@ VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
       c.frontend = top.string("frontend", c.frontend, {"frames", "corners"});
       if (top.has("frames")) {
         const Section s = top.child("frames", false, "a map");
-        s.allow({"events_per_frame", "max_window_ms", "min_events", "motion_compensation", "use_depth", "clip_percentile"});
+        s.allow({"events_per_frame", "min_window_ms", "max_window_ms", "min_events", "motion_compensation", "use_depth", "clip_percentile"});
         auto& f = c.frames;
         f.events_per_frame = s.integer("events_per_frame", f.events_per_frame, 1, 100000000);
         f.max_window_ns = ms_to_ns(s.number("max_window_ms", ns_to_ms(f.max_window_ns), Range::kPositive, "ms"));
+        f.min_window_ns = ms_to_ns(s.number("min_window_ms", ns_to_ms(f.min_window_ns), Range::kNonNegative, "ms"));
         f.min_events = s.integer("min_events", f.min_events, 1, 100000000);
         f.motion_compensation = s.boolean("motion_compensation", f.motion_compensation);
         f.use_depth = s.boolean("use_depth", f.use_depth);

@@ -17,6 +17,7 @@ bool EventFrameOptions::Validate(std::string* why) const {
   };
   if (events_per_frame < 1) return fail("events_per_frame must be >= 1");
   if (max_window_ns <= 0) return fail("max_window_ns must be > 0 ns");
+  if (min_window_ns < 0 || min_window_ns > max_window_ns) return fail("min_window_ns must be in 0..max_window_ns");
   if (min_events < 1 || min_events > events_per_frame) return fail("min_events must be in 1..events_per_frame");
   if (use_depth && !motion_compensation) return fail("use_depth needs motion_compensation");
   if (!(clip_percentile > 0.0 && clip_percentile <= 1.0)) return fail("clip_percentile must be in (0, 1]");
@@ -274,7 +275,8 @@ void EventFrameBuilder::add_events(EventSpan events, std::vector<EventFrame>* ou
     pending_.push_back(e);
     last_event_t_ns_ = e.t_ns;
     have_last_event_ = true;
-    if (pending_.size() == n) emit_pending(out);
+    // N events, but not before min_window_ns (high event rates: fewer, fuller frames).
+    if (pending_.size() >= n && e.t_ns - pending_.front().t_ns >= o_.min_window_ns) emit_pending(out);
   }
 }
 

@@ -273,6 +273,40 @@ TEST(EventFrame, WindowRules) {
   }
 }
 
+// min_window_ns: at a high event rate frames hold more than N events and span at least the
+// minimum window, so the frame rate is bounded; at a low rate N events still decide.
+TEST(EventFrame, MinimumWindowBoundsTheFrameRate) {
+  const CameraCalibration cam = undistorted_camera(0, Eigen::Matrix3d::Identity());
+  EventFrameOptions o;
+  o.events_per_frame = 1000;
+  o.min_events = 100;
+  o.min_window_ns = 10'000'000;
+  o.motion_compensation = false;
+  // 1 M events/s: 1000 events take 1 ms, so each frame waits for 10 ms (10,000 events).
+  const std::vector<Event> dense = uniform_events(50'000, 0, 1'000);
+  EventFrameBuilder b(cam, o);
+  std::vector<EventFrame> out;
+  b.add_events(EventSpan(dense.data(), dense.size()), &out);
+  ASSERT_GE(out.size(), 4u);
+  for (const auto& f : out) {
+    EXPECT_GE(f.t_end_ns - f.t_begin_ns, o.min_window_ns);
+    EXPECT_GE(f.events, 10'000u);
+  }
+  // 10 k events/s: 1000 events take 100 ms > min window: N events decide.
+  const std::vector<Event> sparse = uniform_events(5'000, 0, 100'000);
+  o.max_window_ns = 500'000'000;
+  EventFrameBuilder b2(cam, o);
+  out.clear();
+  b2.add_events(EventSpan(sparse.data(), sparse.size()), &out);
+  ASSERT_EQ(out.size(), 5u);
+  for (const auto& f : out) EXPECT_EQ(f.events, 1000u);
+  EventFrameOptions bad;
+  bad.min_window_ns = bad.max_window_ns + 1;
+  std::string why;
+  EXPECT_FALSE(bad.Validate(&why));
+  EXPECT_NE(why.find("min_window_ns"), std::string::npos);
+}
+
 TEST(EventFrame, OptionsValidation) {
   EventFrameOptions o;
   std::string why;

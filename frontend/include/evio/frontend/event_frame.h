@@ -31,6 +31,10 @@ struct EventFrameOptions {
   // frame's first event the frame is closed with the events it has (event-rate drops, a still
   // camera), so frames keep coming at >= 1 / max_window_ns.
   int64_t max_window_ns = 50'000'000;
+  // Shortest frame window, ns, 0..max_window_ns (default 0: N events decide). At high event rates
+  // a frame then holds more than events_per_frame events (every event until min_window_ns), which
+  // bounds the frame rate at 1 / min_window_ns: adaptive to the event rate.
+  int64_t min_window_ns = 0;
   // Frames with fewer events (closed by max_window_ns or flush) are dropped and counted in
   // EventFrameStats::frames_dropped_sparse; 1 <= min_events <= events_per_frame. Default 1000.
   int min_events = 1000;
