@@ -51,10 +51,20 @@ ImuPreintegration ImuPreintegration::between(const std::vector<ImuSample>& sampl
   if (t_j_ns < t_i_ns)
     throw std::invalid_argument("ImuPreintegration::between: t_j (" + ns_str(t_j_ns) + ") is before t_i (" +
                                 ns_str(t_i_ns) + ")");
-  for (size_t k = 1; k < samples.size(); ++k)
-    if (samples[k].t_ns < samples[k - 1].t_ns)
-      throw std::invalid_argument("ImuPreintegration::between: IMU samples are not sorted by time (index " +
-                                  std::to_string(k) + ")");
+  // Sortedness is checked on the samples this interval uses (its bracket), not the whole vector:
+  // callers pass a whole recording's IMU, and between() runs once per frame.
+  if (!samples.empty()) {
+    const auto first = std::lower_bound(samples.begin(), samples.end(), t_i_ns,
+                                        [](const ImuSample& s, int64_t t) { return s.t_ns < t; });
+    const auto last = std::upper_bound(first, samples.end(), t_j_ns,
+                                       [](int64_t t, const ImuSample& s) { return t < s.t_ns; });
+    const size_t k0 = static_cast<size_t>(std::max<std::ptrdiff_t>(1, first - samples.begin()));
+    const size_t k1 = std::min(samples.size(), static_cast<size_t>(last - samples.begin()) + 1);
+    for (size_t k = k0; k < k1; ++k)
+      if (samples[k].t_ns < samples[k - 1].t_ns)
+        throw std::invalid_argument("ImuPreintegration::between: IMU samples are not sorted by time (index " +
+                                    std::to_string(k) + ")");
+  }
   ImuPreintegration pre(bias_gyro, bias_accel, noise);
   pre.add_knot(interpolate(samples, t_i_ns));
   if (t_j_ns == t_i_ns) return pre;

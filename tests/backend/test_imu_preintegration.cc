@@ -13,55 +13,21 @@
 #include "evio/calib/geometry.h"
 #include "evio/sensors/sim_imu.h"
 #include "evio/sensors/sim_trajectory.h"
+#include "imu_test_scenario.h"
 
 namespace evio::backend {
 namespace {
 
+using test_scenario::ideal_samples;
+using test_scenario::kGravity;
+using test_scenario::test_noise;
+sim::SinusoidTrajectory make_trajectory(int64_t t_begin_ns) {
+  return test_scenario::make_trajectory(t_begin_ns, 4.0, true);
+}
+
 using calib::so3_log;
 using Eigen::Matrix3d;
 using Eigen::Vector3d;
-
-const Vector3d kGravity(0, 0, -9.81);
-
-calib::ImuNoise test_noise() {
-  calib::ImuNoise n;
-  n.gyroscope_noise_density = 1e-3;
-  n.accelerometer_noise_density = 1e-2;
-  n.gyroscope_random_walk = 1e-4;
-  n.accelerometer_random_walk = 1e-3;
-  n.update_rate_hz = 1000;
-  return n;
-}
-
-// Brisk motion: rotation about all axes (up to ~1.5 rad/s) and accelerations of a few m/s^2.
-sim::SinusoidTrajectory make_trajectory(int64_t t_begin_ns) {
-  sim::SinusoidTrajectoryOptions o;
-  o.t_begin_ns = t_begin_ns;
-  o.duration_s = 4.0;
-  o.position_m = Vector3d(1, -2, 0.5);
-  o.q_w_b0 = Eigen::Quaterniond(Eigen::AngleAxisd(0.4, Vector3d(1, 2, 3).normalized()));
-  o.velocity_mps = Vector3d(0.3, -0.1, 0.05);
-  o.amplitude_m = Vector3d(0.4, 0.3, 0.2);
-  o.frequency_hz = Vector3d(0.7, 0.5, 0.9);
-  o.phase_rad = Vector3d(0.1, 1.0, 2.0);
-  o.angle_rate_radps = Vector3d(0.2, -0.1, 0.3);
-  o.angle_amplitude_rad = Vector3d(0.3, 0.2, 0.5);
-  o.angle_frequency_hz = Vector3d(0.6, 0.4, 0.3);
-  o.angle_phase_rad = Vector3d(0.5, 0.0, 1.0);
-  return sim::SinusoidTrajectory(o);
-}
-
-std::vector<ImuSample> ideal_samples(const sim::ContinuousTrajectory& traj, int64_t t0, int64_t t1, int64_t period_ns,
-                                     const Vector3d& bg = Vector3d::Zero(), const Vector3d& ba = Vector3d::Zero()) {
-  std::vector<ImuSample> out;
-  for (int64_t t = t0; t <= t1; t += period_ns) {
-    ImuSample s = sim::ideal_imu(traj.evaluate(t), kGravity);
-    s.gyro += bg;
-    s.accel += ba;
-    out.push_back(s);
-  }
-  return out;
-}
 
 struct DeltaErrors {
   double rot_rad, vel_mps, pos_m;
@@ -293,6 +259,22 @@ TEST(ImuPreintegration, GapIntegratesWithBracketingSamplesAndEndsMustBeBracketed
   EXPECT_THROW(ImuPreintegration::between({}, 0, 0, Vector3d::Zero(), Vector3d::Zero(), test_noise()),
                std::invalid_argument);
   EXPECT_THROW(ImuPreintegration(Vector3d::Zero(), Vector3d::Zero(), calib::ImuNoise{}), std::invalid_argument);
+}
+
+TEST(ImuPreintegration, UnsortedSamplesInTheIntervalAreRejected) {
+  std::vector<ImuSample> samples;
+  for (int k = 0; k <= 100; ++k) {
+    ImuSample m;
+    m.t_ns = k * 1'000'000;
+    m.accel = Vector3d(0, 0, 9.81);
+    samples.push_back(m);
+  }
+  std::swap(samples[50].t_ns, samples[51].t_ns);  // out of order inside [40, 60] ms
+  EXPECT_THROW(ImuPreintegration::between(samples, 40'000'000, 60'000'000, Vector3d::Zero(), Vector3d::Zero(), test_noise()),
+               std::invalid_argument);
+  // An interval that does not use them integrates normally.
+  const auto pre = ImuPreintegration::between(samples, 0, 20'000'000, Vector3d::Zero(), Vector3d::Zero(), test_noise());
+  EXPECT_NEAR(pre.dt_s(), 0.02, 1e-12);
 }
 
 }  // namespace
