@@ -32,6 +32,31 @@ double json_value(const std::string& j, const std::string& key) {
   return std::stod(m[1]);
 }
 
+// Simulates `duration_s` of a datasets/ scene into dir/seq; returns the folder.
+std::string simulate(const evio_test::TempDir& dir, const std::string& scene, double duration_s) {
+  SimulateArgs sa;
+  sa.scene = std::string(EVIO_SOURCE_DIR) + "/datasets/" + scene;
+  sa.out = dir.file("seq");
+  sa.overrides.duration_s = duration_s;
+  sa.progress = false;
+  std::ostringstream so;
+  EXPECT_EQ(run_simulate(sa, so), 0);
+  return sa.out;
+}
+
+// Runs `evio vio DATASET --out OUT --gt DATASET/groundtruth.txt` (prints its summary); returns the args.
+VioArgs vio_on(const std::string& dataset, const std::string& out) {
+  VioArgs va;
+  va.dataset = dataset;
+  va.out = out;
+  va.gt = dataset + "/groundtruth.txt";
+  va.progress = false;
+  std::ostringstream o;
+  EXPECT_EQ(run_vio(va, o), 0) << dataset;
+  std::printf("%s", o.str().c_str());
+  return va;
+}
+
 TEST(VioConfig, ErrorsNameFileLineAndKey) {
   evio_test::TempDir dir;
   const auto expect_error = [&](const std::string& yaml, const std::string& what) {
@@ -87,21 +112,7 @@ TEST(VioConfig, EveryExampleConfigInDatasetsParses) {
 // A 6 s simulated poster_6dof sequence through `evio vio --gt`.
 TEST(VioCommand, ShortSimulatedSequenceEndToEnd) {
   evio_test::TempDir dir;
-  SimulateArgs sa;
-  sa.scene = std::string(EVIO_SOURCE_DIR) + "/datasets/poster_6dof.yaml";
-  sa.out = dir.file("seq");
-  sa.overrides.duration_s = 6.0;
-  sa.progress = false;
-  std::ostringstream so;
-  ASSERT_EQ(run_simulate(sa, so), 0);
-  VioArgs va;
-  va.dataset = sa.out;
-  va.out = dir.file("vio");
-  va.gt = sa.out + "/groundtruth.txt";
-  va.progress = false;
-  std::ostringstream out;
-  ASSERT_EQ(run_vio(va, out), 0);
-  std::printf("%s", out.str().c_str());
+  const VioArgs va = vio_on(simulate(dir, "poster_6dof.yaml", 6.0), dir.file("vio"));
   for (const char* f : {"trajectory.tum", "keyframes.txt", "map.ply", "observations.txt", "stats.json", "vio_config.yaml", "eval.json"}) {
     EXPECT_TRUE(std::filesystem::exists(va.out + "/" + f)) << f;
   }
@@ -141,21 +152,7 @@ TEST(VioCommand, ShortSimulatedSequenceEndToEnd) {
 // orientation tracked (se3 evaluation falls back to the first pose: positions do not move).
 TEST(VioCommand, PureRotationChoosesTheRotationOnlyModel) {
   evio_test::TempDir dir;
-  SimulateArgs sa;
-  sa.scene = std::string(EVIO_SOURCE_DIR) + "/datasets/poster_rotation.yaml";
-  sa.out = dir.file("seq");
-  sa.overrides.duration_s = 3.0;
-  sa.progress = false;
-  std::ostringstream so;
-  ASSERT_EQ(run_simulate(sa, so), 0);
-  VioArgs va;
-  va.dataset = sa.out;
-  va.out = dir.file("vio");
-  va.gt = sa.out + "/groundtruth.txt";
-  va.progress = false;
-  std::ostringstream out;
-  ASSERT_EQ(run_vio(va, out), 0);
-  std::printf("%s", out.str().c_str());
+  const VioArgs va = vio_on(simulate(dir, "poster_rotation.yaml", 3.0), dir.file("vio"));
   const std::string stats = read(va.out + "/stats.json");
   const double kf = json_value(stats, "keyframes"), rot = json_value(stats, "rotation_only_keyframes");
   EXPECT_GT(rot, 0.9 * kf) << stats;
@@ -174,21 +171,15 @@ TEST(VioCommand, PureRotationChoosesTheRotationOnlyModel) {
 // drop is flagged as a tracking-lost segment.
 TEST(VioCommand, EventDropBurstAndImuGap) {
   evio_test::TempDir dir;
-  SimulateArgs sa;
-  sa.scene = std::string(EVIO_SOURCE_DIR) + "/datasets/poster_6dof.yaml";
-  sa.out = dir.file("seq");
-  sa.overrides.duration_s = 6.0;
-  sa.progress = false;
-  std::ostringstream so;
-  ASSERT_EQ(run_simulate(sa, so), 0);
-  const EventBuffer events = read_ecd_events(sa.out + "/events.txt");
-  const std::vector<ImuSample> imu = read_ecd_imu(sa.out + "/imu.txt");
+  const std::string seq = simulate(dir, "poster_6dof.yaml", 6.0);
+  const EventBuffer events = read_ecd_events(seq + "/events.txt");
+  const std::vector<ImuSample> imu = read_ecd_imu(seq + "/imu.txt");
   const int64_t t0 = events.front().t_ns;
   auto variant = [&](const std::string& name, const std::vector<Event>& ev, const std::vector<ImuSample>& im) {
     const std::string d = dir.file(name);
     std::filesystem::create_directories(d);
     for (const char* f : {"calib.txt", "calib.yaml", "groundtruth.txt"}) {
-      std::filesystem::copy_file(sa.out + "/" + f, d + "/" + f);
+      std::filesystem::copy_file(seq + "/" + f, d + "/" + f);
     }
     EcdEventWriter w(d + "/events.txt");
     w.write(EventSpan(ev.data(), ev.size()));
@@ -220,13 +211,7 @@ TEST(VioCommand, EventDropBurstAndImuGap) {
   };
   for (const Case& c : {Case{"drop", variant("drop", drop, imu)}, Case{"burst", variant("burst", burst, imu)},
                         Case{"imu_gap", variant("imu_gap", std::vector<Event>(events.begin(), events.end()), gap)}}) {
-    VioArgs va;
-    va.dataset = c.dataset;
-    va.out = c.dataset + "/vio";
-    va.gt = c.dataset + "/groundtruth.txt";
-    va.progress = false;
-    std::ostringstream out;
-    ASSERT_EQ(run_vio(va, out), 0) << c.name;
+    const VioArgs va = vio_on(c.dataset, c.dataset + "/vio");
     std::istringstream tin(read(va.out + "/trajectory.tum"));
     double first = -1, last = -1;
     for (std::string l; std::getline(tin, l);) {

@@ -18,53 +18,22 @@
 #include "evio/calib/geometry.h"
 #include "evio/sensors/sim_imu.h"
 #include "evio/sensors/sim_trajectory.h"
+#include "imu_test_scenario.h"
 
 namespace evio::backend {
 namespace {
+
+using test_scenario::ideal_samples;
+using test_scenario::kGravity;
+using test_scenario::test_noise;
+sim::SinusoidTrajectory make_trajectory(int64_t t_begin_ns) {
+  return test_scenario::make_trajectory(t_begin_ns, 3.0, false);
+}
 
 using Eigen::Matrix3d;
 using Eigen::Vector3d;
 using Vec7 = Eigen::Matrix<double, 7, 1>;
 using Vec9 = Eigen::Matrix<double, 9, 1>;
-
-const Vector3d kGravity(0, 0, -9.81);
-
-calib::ImuNoise test_noise() {
-  calib::ImuNoise n;
-  n.gyroscope_noise_density = 1e-3;
-  n.accelerometer_noise_density = 1e-2;
-  n.gyroscope_random_walk = 1e-4;
-  n.accelerometer_random_walk = 1e-3;
-  n.update_rate_hz = 1000;
-  return n;
-}
-
-sim::SinusoidTrajectory make_trajectory(int64_t t_begin_ns) {
-  sim::SinusoidTrajectoryOptions o;
-  o.t_begin_ns = t_begin_ns;
-  o.duration_s = 3.0;
-  o.position_m = Vector3d(1, -2, 0.5);
-  o.q_w_b0 = Eigen::Quaterniond(Eigen::AngleAxisd(0.4, Vector3d(1, 2, 3).normalized()));
-  o.velocity_mps = Vector3d(0.3, -0.1, 0.05);
-  o.amplitude_m = Vector3d(0.4, 0.3, 0.2);
-  o.frequency_hz = Vector3d(0.7, 0.5, 0.9);
-  o.angle_rate_radps = Vector3d(0.2, -0.1, 0.3);
-  o.angle_amplitude_rad = Vector3d(0.3, 0.2, 0.5);
-  o.angle_frequency_hz = Vector3d(0.6, 0.4, 0.3);
-  return sim::SinusoidTrajectory(o);
-}
-
-std::vector<ImuSample> ideal_samples(const sim::ContinuousTrajectory& traj, int64_t t0, int64_t t1, int64_t period_ns,
-                                     const Vector3d& bg, const Vector3d& ba) {
-  std::vector<ImuSample> out;
-  for (int64_t t = t0; t <= t1; t += period_ns) {
-    ImuSample s = sim::ideal_imu(traj.evaluate(t), kGravity);
-    s.gyro += bg;
-    s.accel += ba;
-    out.push_back(s);
-  }
-  return out;
-}
 
 Vec7 pose_block(const calib::SE3& T) {
   Vec7 x;

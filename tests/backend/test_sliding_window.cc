@@ -2,6 +2,7 @@
 // trajectory (spline fit, datasets/poster_6dof_mocap.yaml), IMU with the simulator's noise model,
 // landmarks on the poster wall observed at 20 Hz with 0.5 px noise and 2% outliers.
 #include <cstdio>
+#include <optional>
 
 #include <Eigen/Eigenvalues>
 
@@ -32,9 +33,10 @@ struct RunResult {
   SlidingWindowStats stats;
 };
 
-RunResult run(const test::VioSimulation& sim, const SlidingWindowOptions& o) {
+// Runs the estimator over the simulation from `init` (default: the true state at the first frame).
+RunResult run(const test::VioSimulation& sim, const SlidingWindowOptions& o, const std::optional<VioState>& init = {}) {
   SlidingWindowEstimator est(o, sim.camera, sim.imu_noise);
-  est.initialize(sim.true_state(sim.frames.front().t_ns));
+  est.initialize(init ? *init : sim.true_state(sim.frames.front().t_ns));
   size_t next_imu = 0;
   std::vector<StampedPose> poses;
   for (const FeatureObservations& f : sim.frames) {
@@ -237,19 +239,7 @@ TEST(SlidingWindowSimulated, VisualInertialInitialisationOnTheMovingStart) {
   const double tilt_deg = std::acos(std::clamp(up_e.dot(up_t), -1.0, 1.0)) * 180 / M_PI;
   const Eigen::Vector3d v_e = init->T_w_b.rotation.conjugate() * init->v_w, v_t = truth.T_w_b.rotation.conjugate() * truth.v_w;
   // Then the whole recording from that state.
-  SlidingWindowEstimator est(SlidingWindowOptions{}, sim.camera, sim.imu_noise);
-  est.initialize(*init);
-  size_t next_imu = 0;
-  std::vector<StampedPose> poses;
-  for (const FeatureObservations& f : sim.frames) {
-    while (next_imu < sim.imu.size() && sim.imu[next_imu].t_ns <= f.t_ns + 5'000'000) est.add_imu(sim.imu[next_imu++]);
-    est.add_frame(f);
-    poses.push_back({f.t_ns, est.latest_state().T_w_b});
-  }
-  evaluation::EvaluationOptions eo;
-  eo.alignment.method = evaluation::Alignment::kSE3;
-  eo.alignment.first_s = 5.0;
-  const auto r = evaluation::evaluate(sim.groundtruth_at_frames(), Trajectory(poses), eo);
+  const auto r = run(sim, SlidingWindowOptions{}, *init).eval;
   std::printf("VI alignment (2 s): tilt error %.3f deg, velocity error %.4f m/s (|v| %.3f m/s); whole run: mean position "
               "error %.3f%%, yaw drift %.4f deg/m\n",
               tilt_deg, (v_e - v_t).norm(), v_t.norm(), r.mean_position_error_percent, r.yaw_drift_deg_per_m);
