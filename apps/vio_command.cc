@@ -81,7 +81,8 @@ std::string config_yaml(const VioConfig& c) {
     << "\n  keyframe_max_interval_ms: " << num(w.keyframe_max_interval_s * 1e3)
     << "\n  min_triangulation_angle_deg: " << num(w.min_triangulation_angle_deg)
     << "\n  max_reprojection_px: " << num(w.max_reprojection_px)
-    << "\n  rotation_only_parallax_px: " << num(w.rotation_only_parallax_px) << "\n";
+    << "\n  rotation_only_parallax_px: " << num(w.rotation_only_parallax_px)
+    << "\n  rotation_only_translation_px: " << num(w.rotation_only_translation_px) << "\n";
   const auto& n = c.imu_noise;
   y << "imu: {accelerometer_noise_density: " << num(n.accelerometer_noise_density)
     << ", accelerometer_random_walk: " << num(n.accelerometer_random_walk)
@@ -207,7 +208,8 @@ VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
         const Section s = top.child("window", false, "a map");
         s.allow({"size", "max_iterations", "max_solver_time_ms", "loss", "loss_scale", "pixel_sigma",
                  "keyframe_min_parallax_px", "keyframe_min_tracked_ratio", "keyframe_max_interval_ms",
-                 "min_triangulation_angle_deg", "max_reprojection_px", "rotation_only_parallax_px"});
+                 "min_triangulation_angle_deg", "max_reprojection_px", "rotation_only_parallax_px",
+                 "rotation_only_translation_px"});
         auto& w = c.window;
         w.window_size = s.integer("size", w.window_size, 2, 200);
         w.max_iterations = s.integer("max_iterations", w.max_iterations, 1, 1000);
@@ -222,6 +224,7 @@ VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
         w.min_triangulation_angle_deg = s.number("min_triangulation_angle_deg", w.min_triangulation_angle_deg, Range::kNonNegative, "deg");
         w.max_reprojection_px = s.number("max_reprojection_px", w.max_reprojection_px, Range::kPositive, "px");
         w.rotation_only_parallax_px = s.number("rotation_only_parallax_px", w.rotation_only_parallax_px, Range::kNonNegative, "px");
+        w.rotation_only_translation_px = s.number("rotation_only_translation_px", w.rotation_only_translation_px, Range::kPositive, "px");
         std::string why;
         if (!w.Validate(&why)) s.fail("invalid window settings: " + why, "consistent settings");
       }

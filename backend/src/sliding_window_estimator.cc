@@ -58,6 +58,8 @@ bool SlidingWindowOptions::Validate(std::string* why) const {
     return false;
   };
   if (window_size < 2) return fail("window_size " + std::to_string(window_size) + " (expected >= 2 keyframes)");
+  if (!(rotation_only_translation_px > 0) || !std::isfinite(rotation_only_translation_px))
+    return fail("rotation_only_translation_px must be finite and > 0 px");
   if (max_iterations < 1) return fail("max_iterations must be >= 1");
   if (!(max_solver_time_s >= 0)) return fail("max_solver_time_s must be >= 0 s");
   if (!(loss_scale > 0)) return fail("loss_scale must be > 0 (pixel sigmas)");
@@ -150,6 +152,21 @@ double SlidingWindowEstimator::parallax_px(const FeatureObservations& frame, con
   }
   if (common) *common = disp.size();
   return median(disp);
+}
+
+double SlidingWindowEstimator::translation_parallax_px(const Keyframe& prev, const VioState& predicted) const {
+  // Depths of the triangulated landmarks in the previous keyframe's camera.
+  const Eigen::Matrix3d R_c_w = camera_.T_c_b.rotation.toRotationMatrix() * quat_of(prev.pose).toRotationMatrix().transpose();
+  const Eigen::Vector3d p_prev = pos_of(prev.pose);
+  std::vector<double> depth;
+  for (const auto& [track, lm] : landmarks_) {
+    if (!lm.triangulated) continue;
+    const double z = (R_c_w * (Eigen::Vector3d(lm.p[0], lm.p[1], lm.p[2]) - p_prev)).z();
+    if (z > 0) depth.push_back(z);
+  }
+  if (depth.empty()) return 0;  // no depth known: the displacement test alone decides
+  const double d = median(depth);
+  return focal_px_ * (R_c_w * (predicted.T_w_b.translation - p_prev)).norm() / std::max(d, options_.min_depth_m);
 }
 
 bool SlidingWindowEstimator::is_keyframe(const FeatureObservations& frame, const VioState& predicted) const {
@@ -269,7 +286,8 @@ bool SlidingWindowEstimator::add_frame(const FeatureObservations& frame) {
     const VioState ps = state_of(prev);
     size_t common = 0;
     const double parallax = parallax_px(frame, predicted, &common);
-    kf->rotation_only = options_.rotation_only_parallax_px > 0 && common >= 5 && parallax < options_.rotation_only_parallax_px;
+    kf->rotation_only = options_.rotation_only_parallax_px > 0 && common >= 5 && parallax < options_.rotation_only_parallax_px &&
+                        translation_parallax_px(prev, predicted) < options_.rotation_only_translation_px;
     if (kf->rotation_only) {
       for (const FeatureObservation& o : frame.observations) {
         const auto it = prev.obs.find(o.track_id);
