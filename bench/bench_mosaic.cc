@@ -1,0 +1,148 @@
+// Panorama mosaicing, mapping half (mapping/poisson.h, mapping/gradient_mosaic.h), one core
+// (OpenCV's threads set to 1): full Poisson solve time for 1024x512 and 2048x1024 mosaics with
+// both boundary kinds (double and float), the region (incremental) solve of a 128x128 rectangle
+// on a 1024x512 mosaic, and the EKF update in ns per event at random positions of a 1024x512
+// mosaic with random velocities. Inputs: fixed-seed random gradient fields. One JSON line per
+// result at the end ("ms_per_solve" or "ns_per_event").
+#include <cstdio>
+#include <random>
+#include <string>
+#include <vector>
+
+#include <benchmark/benchmark.h>
+#include <opencv2/core.hpp>
+
+#include "evio/mapping/gradient_mosaic.h"
+#include "evio/mapping/poisson.h"
+
+namespace {
+
+using evio::mapping::ImageD;
+using evio::mapping::ImageF;
+using evio::mapping::PoissonBoundary;
+
+ImageD random_image(int W, int H, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> N(0.0, 0.1);
+  ImageD g(H, W);
+  for (Eigen::Index k = 0; k < g.size(); ++k) g.data()[k] = N(rng);
+  return g;
+}
+
+// Args: width, height, boundary (0 Neumann, 1 periodic-u), precision (0 double, 1 float).
+void BM_PoissonFull(benchmark::State& state) {
+  const int W = static_cast<int>(state.range(0)), H = static_cast<int>(state.range(1));
+  evio::mapping::PoissonOptions o;
+  o.boundary = state.range(2) ? PoissonBoundary::kPeriodicU : PoissonBoundary::kNeumann;
+  const evio::mapping::PoissonSolver solver(W, H, o);
+  const ImageD gx = random_image(W, H, 1), gy = random_image(W, H, 2);
+  if (state.range(3) == 0) {
+    ImageD L;
+    for (auto _ : state) {
+      solver.solve(gx, gy, &L);
+      benchmark::DoNotOptimize(L.data());
+    }
+  } else {
+    const ImageF gxf = gx.cast<float>(), gyf = gy.cast<float>();
+    ImageF L;
+    for (auto _ : state) {
+      solver.solve(gxf, gyf, &L);
+      benchmark::DoNotOptimize(L.data());
+    }
+  }
+  state.counters["ms_per_solve"] =
+      benchmark::Counter(static_cast<double>(state.iterations()) * 1e-3, benchmark::Counter::kIsRate |
+                                                                               benchmark::Counter::kInvert);
+}
+BENCHMARK(BM_PoissonFull)
+    ->ArgNames({"W", "H", "periodic", "float"})
+    ->Args({1024, 512, 0, 0})
+    ->Args({1024, 512, 1, 0})
+    ->Args({1024, 512, 0, 1})
+    ->Args({1024, 512, 1, 1})
+    ->Args({2048, 1024, 0, 0})
+    ->Args({2048, 1024, 1, 0})
+    ->Args({2048, 1024, 0, 1})
+    ->Args({2048, 1024, 1, 1})
+    ->Unit(benchmark::kMillisecond);
+
+// Region solve: side x side rectangle straddling the seam of a 1024x512 periodic mosaic.
+void BM_PoissonRegion(benchmark::State& state) {
+  const int W = 1024, H = 512, side = static_cast<int>(state.range(0));
+  const evio::mapping::PoissonSolver solver(W, H, {});
+  const ImageD gx = random_image(W, H, 3), gy = random_image(W, H, 4);
+  ImageD L;
+  solver.solve(gx, gy, &L);
+  const evio::mapping::PixelRect rect{W - side / 2, 200, side, side};
+  for (auto _ : state) {
+    solver.solve_region(gx, gy, rect, &L);
+    benchmark::DoNotOptimize(L.data());
+  }
+  state.counters["ms_per_solve"] =
+      benchmark::Counter(static_cast<double>(state.iterations()) * 1e-3, benchmark::Counter::kIsRate |
+                                                                               benchmark::Counter::kInvert);
+}
+BENCHMARK(BM_PoissonRegion)->ArgName("side")->Arg(64)->Arg(128)->Arg(256)->Unit(benchmark::kMillisecond);
+
+// EKF update at random positions (cache-unfriendly, like events spread over the mosaic).
+void BM_EkfUpdate(benchmark::State& state) {
+  evio::mapping::GradientMosaicOptions o;  // 1024 x 512
+  evio::mapping::GradientMosaic mosaic(o);
+  constexpr int kN = 1 << 20;
+  std::vector<Eigen::Vector2d> uv(kN), v(kN);
+  std::vector<double> tau(kN);
+  std::vector<int> pol(kN);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> U(0.0, 1.0);
+  for (int k = 0; k < kN; ++k) {
+    uv[k] = {U(rng) * o.width, U(rng) * o.height};
+    const double a = 2 * M_PI * U(rng), s = 50 + 500 * U(rng);
+    v[k] = {s * std::cos(a), s * std::sin(a)};
+    tau[k] = 1e-4 + 0.05 * U(rng);
+    pol[k] = U(rng) < 0.5 ? 1 : -1;
+  }
+  size_t k = 0, applied = 0;
+  for (auto _ : state) {
+    applied += mosaic.update(uv[k], v[k], tau[k], pol[k]);
+    k = (k + 1) & (kN - 1);
+  }
+  benchmark::DoNotOptimize(applied);
+  state.SetItemsProcessed(static_cast<int64_t>(state.iterations()));
+  state.counters["ns_per_event"] = benchmark::Counter(static_cast<double>(state.iterations()) * 1e-9,
+                                                      benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
+}
+BENCHMARK(BM_EkfUpdate);
+
+class JsonLineReporter : public benchmark::ConsoleReporter {
+ public:
+  JsonLineReporter() : ConsoleReporter(OO_Tabular) {}
+  void ReportRuns(const std::vector<Run>& runs) override {
+    ConsoleReporter::ReportRuns(runs);
+    for (const Run& r : runs) {
+      for (const char* key : {"ms_per_solve", "ns_per_event"}) {
+        const auto it = r.counters.find(key);
+        if (it == r.counters.end()) continue;
+        lines_.push_back("{\"benchmark\":\"" + r.benchmark_name() + "\",\"" + key + "\":" + std::to_string(it->second) +
+                         "}");
+      }
+    }
+  }
+  void Finalize() override {
+    ConsoleReporter::Finalize();
+    for (const auto& l : lines_) std::printf("%s\n", l.c_str());
+  }
+
+ private:
+  std::vector<std::string> lines_;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  cv::setNumThreads(1);  // one core, as stated above
+  benchmark::Initialize(&argc, argv);
+  JsonLineReporter reporter;
+  benchmark::RunSpecifiedBenchmarks(&reporter);
+  benchmark::Shutdown();
+  return 0;
+}

@@ -1,0 +1,261 @@
+// Pixel-wise gradient EKF mosaic and its Poisson reconstruction. Model in gradient_mosaic.h.
+#include "evio/mapping/gradient_mosaic.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include <Eigen/Geometry>
+
+namespace evio::mapping {
+
+bool GradientMosaicOptions::Validate(std::string* why) const {
+  auto fail = [&](const std::string& m) {
+    if (why) *why = m;
+    return false;
+  };
+  auto pos = [](double x) { return std::isfinite(x) && x > 0.0; };
+  auto nonneg = [](double x) { return std::isfinite(x) && x >= 0.0; };
+  if (width < 3 || height < 2) return fail("width must be >= 3 px and height >= 2 px");
+  if (!pos(contrast_threshold)) return fail("contrast_threshold must be > 0 (log units)");
+  if (!pos(initial_gradient_std)) return fail("initial_gradient_std must be > 0 (log units/px)");
+  if (!nonneg(measurement_std_abs) || !nonneg(measurement_relative_std))
+    return fail("measurement_std_abs (1/s) and measurement_relative_std must be >= 0");
+  if (measurement_std_abs == 0.0 && measurement_relative_std == 0.0)
+    return fail("measurement_std_abs and measurement_relative_std must not both be 0");
+  if (!pos(min_tau_s)) return fail("min_tau_s must be > 0 (s)");
+  if (!nonneg(min_speed_px_s)) return fail("min_speed_px_s must be >= 0 (px/s)");
+  if (!pos(min_gradient_std) || min_gradient_std >= initial_gradient_std)
+    return fail("min_gradient_std must be > 0 and < initial_gradient_std (log units/px)");
+  if (seen_min_observations < 1) return fail("seen_min_observations must be >= 1");
+  std::string w;
+  if (!poisson.Validate(&w)) return fail("poisson: " + w);
+  return true;
+}
+
+namespace {
+const GradientMosaicOptions& validated(const GradientMosaicOptions& o) {
+  std::string why;
+  if (!o.Validate(&why)) throw std::invalid_argument("GradientMosaicOptions: " + why);
+  return o;
+}
+}  // namespace
+
+GradientMosaic::GradientMosaic(const GradientMosaicOptions& options)
+    : options_(validated(options)), solver_(options.width, options.height, options.poisson) {
+  const size_t n = static_cast<size_t>(options_.width) * options_.height;
+  const double p0 = options_.initial_gradient_std * options_.initial_gradient_std;
+  state_.assign(n, PixelState{0.0, 0.0, p0, 0.0, p0, 0});
+  edge_gu_ = ImageD::Zero(options_.height, options_.width);
+  edge_gv_ = ImageD::Zero(options_.height, options_.width);
+  log_intensity_ = ImageD::Zero(options_.height, options_.width);
+  dirty_x0_ = dirty_y0_ = 0;
+  dirty_x1_ = dirty_y1_ = -1;
+}
+
+MosaicUpdate GradientMosaic::update_status(const Eigen::Vector2d& uv, const Eigen::Vector2d& v_px_s, double tau_s,
+                                           int polarity) {
+  if (!uv.allFinite() || !v_px_s.allFinite() || !std::isfinite(tau_s)) {
+    ++stats_.non_finite;
+    return MosaicUpdate::kNonFinite;
+  }
+  if (polarity != 1 && polarity != -1) {
+    ++stats_.bad_polarity;
+    return MosaicUpdate::kBadPolarity;
+  }
+  const int W = options_.width, H = options_.height;
+  if (uv.y() < 0.0 || uv.y() > H || std::abs(uv.x()) > 1e12) {
+    ++stats_.outside;
+    return MosaicUpdate::kOutside;
+  }
+  if (tau_s < options_.min_tau_s) {
+    ++stats_.tau_too_small;
+    return MosaicUpdate::kTauTooSmall;
+  }
+  const double speed2 = v_px_s.squaredNorm();
+  if (!(speed2 >= options_.min_speed_px_s * options_.min_speed_px_s) || speed2 == 0.0) {
+    ++stats_.too_slow;
+    return MosaicUpdate::kTooSlow;
+  }
+  double fu = std::floor(uv.x());
+  fu -= W * std::floor(fu / W);
+  const int i = std::min(static_cast<int>(fu), W - 1);
+  const int j = std::min(static_cast<int>(std::floor(uv.y())), H - 1);
+  PixelState& st = state_[index(i, j)];
+
+  // h = H^T = p v / C; z = 1/tau; R = abs^2 + (rel z)^2.
+  const double z = 1.0 / tau_s;
+  const double s = polarity / options_.contrast_threshold;
+  const double hu = s * v_px_s.x(), hv = s * v_px_s.y();
+  const double R = options_.measurement_std_abs * options_.measurement_std_abs +
+                   (options_.measurement_relative_std * z) * (options_.measurement_relative_std * z);
+  const double a = st.puu, b = st.puv, c = st.pvv;
+  const double phu = a * hu + b * hv, phv = b * hu + c * hv;  // P h
+  const double S = hu * phu + hv * phv + R;
+  const double ku = phu / S, kv = phv / S;
+  const double y = z - (hu * st.gu + hv * st.gv);
+  const double ngu = st.gu + ku * y, ngv = st.gv + kv * y;
+  // Joseph form: P' = (I - k h^T) P (I - k h^T)^T + R k k^T.
+  Eigen::Matrix2d P;
+  P << a, b, b, c;
+  Eigen::Matrix2d A = Eigen::Matrix2d::Identity();
+  A(0, 0) -= ku * hu;
+  A(0, 1) -= ku * hv;
+  A(1, 0) -= kv * hu;
+  A(1, 1) -= kv * hv;
+  const Eigen::Vector2d kvec(ku, kv);
+  Eigen::Matrix2d Pn = A * P * A.transpose() + R * kvec * kvec.transpose();
+  const double off = 0.5 * (Pn(0, 1) + Pn(1, 0));
+  Pn(0, 1) = Pn(1, 0) = off;
+  // Eigenvalue floor (closed form for a symmetric 2x2).
+  const double floor_var = options_.min_gradient_std * options_.min_gradient_std;
+  const double mean = 0.5 * (Pn(0, 0) + Pn(1, 1));
+  const double half_diff = 0.5 * (Pn(0, 0) - Pn(1, 1));
+  const double rad = std::sqrt(half_diff * half_diff + off * off);
+  const double l_min = mean - rad;
+  if (!(l_min >= floor_var)) {
+    const double l_max = std::max(mean + rad, floor_var);
+    // Unit eigenvector of the largest eigenvalue.
+    Eigen::Vector2d e_max;
+    if (rad > 0.0) {
+      e_max = half_diff >= 0.0 ? Eigen::Vector2d(half_diff + rad, off) : Eigen::Vector2d(off, rad - half_diff);
+      e_max.normalize();
+    } else {
+      e_max = Eigen::Vector2d::UnitX();
+    }
+    Pn = floor_var * Eigen::Matrix2d::Identity() + (l_max - floor_var) * e_max * e_max.transpose();
+  }
+  if (!Pn.allFinite() || !std::isfinite(ngu) || !std::isfinite(ngv)) {
+    ++stats_.non_finite;
+    return MosaicUpdate::kNonFinite;
+  }
+  st.gu = ngu;
+  st.gv = ngv;
+  st.puu = Pn(0, 0);
+  st.puv = Pn(0, 1);
+  st.pvv = Pn(1, 1);
+  if (st.count < UINT32_MAX) ++st.count;
+  ++stats_.applied;
+  if (dirty_x1_ < dirty_x0_) {
+    dirty_x0_ = dirty_x1_ = i;
+    dirty_y0_ = dirty_y1_ = j;
+  } else {
+    dirty_x0_ = std::min(dirty_x0_, i);
+    dirty_x1_ = std::max(dirty_x1_, i);
+    dirty_y0_ = std::min(dirty_y0_, j);
+    dirty_y1_ = std::max(dirty_y1_, j);
+  }
+  return MosaicUpdate::kApplied;
+}
+
+ImageF GradientMosaic::gradient_u() const {
+  ImageF t(options_.height, options_.width);
+  for (size_t k = 0; k < state_.size(); ++k) t.data()[k] = static_cast<float>(state_[k].gu);
+  return t;
+}
+ImageF GradientMosaic::gradient_v() const {
+  ImageF t(options_.height, options_.width);
+  for (size_t k = 0; k < state_.size(); ++k) t.data()[k] = static_cast<float>(state_[k].gv);
+  return t;
+}
+ImageF GradientMosaic::covariance_trace() const {
+  ImageF t(options_.height, options_.width);
+  for (size_t k = 0; k < state_.size(); ++k) t.data()[k] = static_cast<float>(state_[k].puu + state_[k].pvv);
+  return t;
+}
+Eigen::Matrix<uint32_t, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> GradientMosaic::observation_count() const {
+  Eigen::Matrix<uint32_t, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> c(options_.height, options_.width);
+  for (size_t k = 0; k < state_.size(); ++k) c.data()[k] = state_[k].count;
+  return c;
+}
+MaskU8 GradientMosaic::seen_mask() const {
+  MaskU8 m(options_.height, options_.width);
+  const auto thr = static_cast<uint32_t>(options_.seen_min_observations);
+  for (size_t k = 0; k < state_.size(); ++k) m.data()[k] = state_[k].count >= thr ? 1 : 0;
+  return m;
+}
+
+void GradientMosaic::update_edges(int x0, int y0, int w, int h) {
+  const int W = options_.width, H = options_.height;
+  const bool periodic = options_.poisson.boundary == PoissonBoundary::kPeriodicU;
+  const auto thr = static_cast<uint32_t>(options_.seen_min_observations);
+  auto edge = [](bool s0, double g0, bool s1, double g1) {
+    if (s0 && s1) return 0.5 * (g0 + g1);
+    if (s0) return g0;
+    if (s1) return g1;
+    return 0.0;
+  };
+  for (int j = std::max(y0, 0); j < std::min(y0 + h, H); ++j) {
+    for (int t = 0; t < w; ++t) {
+      int i = x0 + t;
+      i = ((i % W) + W) % W;
+      const PixelState& p = state_[index(i, j)];
+      const bool s = p.count >= thr;
+      if (i + 1 < W || periodic) {
+        const PixelState& r = state_[index((i + 1) % W, j)];
+        edge_gu_(j, i) = edge(s, p.gu, r.count >= thr, r.gu);
+      } else {
+        edge_gu_(j, i) = 0.0;
+      }
+      if (j + 1 < H) {
+        const PixelState& d = state_[index(i, j + 1)];
+        edge_gv_(j, i) = edge(s, p.gv, d.count >= thr, d.gv);
+      } else {
+        edge_gv_(j, i) = 0.0;
+      }
+    }
+  }
+}
+
+MosaicReconstruction GradientMosaic::reconstruct(ReconstructMode mode) {
+  const int W = options_.width, H = options_.height;
+  const bool periodic = options_.poisson.boundary == PoissonBoundary::kPeriodicU;
+  MosaicReconstruction out;
+  const bool dirty = dirty_x1_ >= dirty_x0_;
+  bool full = mode == ReconstructMode::kFull || !solved_once_;
+  PixelRect rect;
+  if (!full && dirty) {
+    // Changed pixels' edges touch the box grown by one pixel on every side.
+    int x0 = dirty_x0_ - 1, x1 = dirty_x1_ + 1;
+    if (!periodic) x0 = std::max(x0, 0), x1 = std::min(x1, W - 1);
+    rect.x = x0;
+    rect.width = std::min(x1 - x0 + 1, W);
+    rect.y = std::max(dirty_y0_ - 1, 0);
+    rect.height = std::min(dirty_y1_ + 1, H - 1) - rect.y + 1;
+    const int side = std::max(rect.width, rect.height);
+    if (mode == ReconstructMode::kAuto && side > options_.poisson.max_region_side) full = true;
+  }
+  if (full) {
+    update_edges(0, 0, W, H);
+    solver_.solve(edge_gu_, edge_gv_, &log_intensity_);
+    solved_once_ = true;
+    out.full_solve = true;
+    out.region = PixelRect{0, 0, W, H};
+  } else if (dirty) {
+    update_edges(rect.x - 1, rect.y - 1, rect.width + 1, rect.height + 1);
+    solver_.solve_region(edge_gu_, edge_gv_, rect, &log_intensity_);
+    out.full_solve = (rect.width == W && rect.height == H) ||
+                     std::max(rect.width, rect.height) > options_.poisson.max_region_side;  // solver fell back
+    out.region = rect;
+  } else {
+    out.full_solve = false;
+    out.region = PixelRect{0, 0, 0, 0};
+  }
+  dirty_x0_ = dirty_y0_ = 0;
+  dirty_x1_ = dirty_y1_ = -1;
+  out.log_intensity = log_intensity_.cast<float>();
+  out.seen = seen_mask();
+  return out;
+}
+
+Eigen::Vector2d mosaic_pixel_velocity(const calib::Equirectangular& projection, const Eigen::Matrix3d& R_w_c,
+                                      const Eigen::Vector3d& omega_w, const Eigen::Vector3d& bearing_c,
+                                      Eigen::Vector2d* uv_out) {
+  const Eigen::Vector3d d_w = R_w_c * bearing_c;
+  Eigen::Matrix<double, 2, 3> J;
+  const Eigen::Vector2d uv = projection.project(d_w, &J);
+  if (uv_out) *uv_out = uv;
+  return J * omega_w.cross(d_w);
+}
+
+}  // namespace evio::mapping

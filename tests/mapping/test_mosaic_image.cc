@@ -1,0 +1,184 @@
+// Log-intensity image output and quality (mapping/mosaic_image.h): display mapping (percentiles,
+// gamma, unseen pixels), PNG 8/16 and float TIFF files read back, and PSNR / SSIM after the affine
+// fit with known answers.
+#include <cmath>
+#include <cstdio>
+#include <random>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
+
+#include "evio/calib/error.h"
+#include "evio/mapping/mosaic_image.h"
+#include "evio_test/temp_dir.h"
+
+namespace {
+
+using evio::mapping::compare_images;
+using evio::mapping::ImageF;
+using evio::mapping::ImageQualityOptions;
+using evio::mapping::LogImageDisplayOptions;
+using evio::mapping::MaskU8;
+
+// 0..n-1 ramp in row-major order (values distinct, easy percentiles).
+ImageF ramp(int W, int H) {
+  ImageF L(H, W);
+  for (int k = 0; k < W * H; ++k) L.data()[k] = static_cast<float>(k);
+  return L;
+}
+
+ImageF smooth(int W, int H) {
+  ImageF L(H, W);
+  for (int j = 0; j < H; ++j)
+    for (int i = 0; i < W; ++i)
+      L(j, i) = static_cast<float>(std::sin(0.07 * i + 0.3) * std::cos(0.05 * j) + 0.5 * std::sin(0.011 * i * j / 4.0));
+  return L;
+}
+
+TEST(MosaicImage, DisplayMappingPercentilesGammaUnseen) {
+  const int W = 10, H = 11;  // 110 values 0..109: 1st percentile rank round(1.09) = 1, 99th round(107.91) = 108
+  const ImageF L = ramp(W, H);
+  LogImageDisplayOptions o;
+  ImageF t = evio::mapping::log_image_to_display(L, nullptr, o);
+  EXPECT_FLOAT_EQ(t.data()[0], 0.0f);   // below the 1st percentile: clipped
+  EXPECT_FLOAT_EQ(t.data()[1], 0.0f);   // the 1st percentile
+  EXPECT_FLOAT_EQ(t.data()[108], 1.0f);
+  EXPECT_FLOAT_EQ(t.data()[109], 1.0f);
+  EXPECT_NEAR(t.data()[50], (50.0 - 1.0) / 107.0, 1e-6);
+  o.gamma = 2.0;
+  t = evio::mapping::log_image_to_display(L, nullptr, o);
+  EXPECT_NEAR(t.data()[50], std::sqrt((50.0 - 1.0) / 107.0), 1e-6);
+  // Unseen pixels: black, and left out of the percentiles.
+  MaskU8 seen = MaskU8::Ones(H, W);
+  seen.data()[109] = 0;
+  seen.data()[108] = 0;
+  o.gamma = 1.0;
+  o.high_percentile = 100.0;
+  t = evio::mapping::log_image_to_display(L, &seen, o);
+  EXPECT_EQ(t.data()[109], 0.0f);
+  EXPECT_FLOAT_EQ(t.data()[107], 1.0f);
+  // Linear intensity: exp(L) percentiles.
+  ImageF L2(1, 3);
+  L2 << 0.0f, std::log(2.0f), std::log(3.0f);
+  LogImageDisplayOptions lin;
+  lin.linear_intensity = true;
+  lin.low_percentile = 0;
+  lin.high_percentile = 100;
+  t = evio::mapping::log_image_to_display(L2, nullptr, lin);
+  EXPECT_NEAR(t(0, 1), 0.5, 1e-6);  // (2 - 1) / (3 - 1)
+  // Flat image: mid grey.
+  t = evio::mapping::log_image_to_display(ImageF::Constant(4, 4, 2.0f), nullptr, {});
+  EXPECT_FLOAT_EQ(t(2, 2), 0.5f);
+  LogImageDisplayOptions bad;
+  bad.high_percentile = 0.5;
+  EXPECT_THROW(evio::mapping::log_image_to_display(L, nullptr, bad), std::invalid_argument);
+}
+
+TEST(MosaicImage, FilesReadBack) {
+  evio_test::TempDir dir;
+  const int W = 64, H = 32;
+  const ImageF L = smooth(W, H);
+  MaskU8 seen = MaskU8::Ones(H, W);
+  seen.block(0, 0, 4, W).setZero();
+  const ImageF t = evio::mapping::log_image_to_display(L, &seen, {});
+
+  evio::mapping::write_log_image_png8(dir.file("m8.png"), L, &seen);
+  const cv::Mat p8 = cv::imread(dir.file("m8.png"), cv::IMREAD_UNCHANGED);
+  ASSERT_EQ(p8.type(), CV_8UC1);
+  ASSERT_EQ(p8.rows, H);
+  ASSERT_EQ(p8.cols, W);
+  evio::mapping::write_log_image_png16(dir.file("m16.png"), L, &seen);
+  const cv::Mat p16 = cv::imread(dir.file("m16.png"), cv::IMREAD_UNCHANGED);
+  ASSERT_EQ(p16.type(), CV_16UC1);
+  evio::mapping::write_log_image_tiff(dir.file("m.tif"), L, &seen);
+  const cv::Mat tf = cv::imread(dir.file("m.tif"), cv::IMREAD_UNCHANGED);
+  ASSERT_EQ(tf.type(), CV_32FC1);
+  int dark = 0, bright = 0;
+  for (int j = 0; j < H; ++j)
+    for (int i = 0; i < W; ++i) {
+      EXPECT_EQ(p8.at<uint8_t>(j, i), std::lround(255.0 * t(j, i)));
+      EXPECT_EQ(p16.at<uint16_t>(j, i), std::lround(65535.0 * t(j, i)));
+      if (seen(j, i)) {
+        EXPECT_EQ(tf.at<float>(j, i), L(j, i));
+        dark += p8.at<uint8_t>(j, i) == 0;
+        bright += p8.at<uint8_t>(j, i) == 255;
+      } else {
+        EXPECT_TRUE(std::isnan(tf.at<float>(j, i)));
+        EXPECT_EQ(p8.at<uint8_t>(j, i), 0);
+      }
+    }
+  // ~1 % of the 1792 seen pixels at each end.
+  EXPECT_GE(dark, 10);
+  EXPECT_LE(dark, 30);
+  EXPECT_GE(bright, 10);
+  EXPECT_LE(bright, 30);
+  EXPECT_THROW(evio::mapping::write_log_image_png8(dir.file("no/such/dir/x.png"), L, &seen), evio::InputError);
+}
+
+TEST(MosaicImage, QualityIdenticalAndAffineCopy) {
+  const int W = 96, H = 64;
+  const ImageF ref = smooth(W, H);
+  auto q = compare_images(ref, ref, nullptr);
+  std::printf("identical: PSNR %.1f dB, SSIM %.12f\n", q.psnr_db, q.ssim);
+  EXPECT_GT(q.psnr_db, 120.0);
+  EXPECT_NEAR(q.ssim, 1.0, 1e-9);
+  EXPECT_NEAR(q.scale, 1.0, 1e-9);
+  EXPECT_NEAR(q.offset, 0.0, 1e-9);
+  EXPECT_EQ(q.pixels, W * H);
+  // Affine copy (what an unknown C and offset do to log intensity): same answer.
+  const ImageF est = (2.5f * ref.array() - 3.0f).matrix();
+  q = compare_images(est, ref, nullptr);
+  std::printf("affine copy: PSNR %.1f dB, SSIM %.12f, a %.6f, b %.6f\n", q.psnr_db, q.ssim, q.scale, q.offset);
+  EXPECT_GT(q.psnr_db, 100.0);
+  EXPECT_NEAR(q.ssim, 1.0, 1e-9);
+  EXPECT_NEAR(q.scale, 0.4, 1e-6);
+  EXPECT_NEAR(q.offset, 1.2, 1e-6);
+  // Offset-only fit cannot absorb the scale.
+  ImageQualityOptions off;
+  off.fit_scale = false;
+  q = compare_images(est, ref, nullptr, off);
+  EXPECT_LT(q.psnr_db, 20.0);
+  EXPECT_LT(q.ssim, 0.9);
+  // Offset-only fit with a pure offset: exact again.
+  q = compare_images(ImageF((ref.array() + 7.0f).matrix()), ref, nullptr, off);
+  EXPECT_GT(q.psnr_db, 100.0);
+}
+
+TEST(MosaicImage, QualityNoiseMatchesPsnrFormulaAndMaskIsRespected) {
+  const int W = 256, H = 128;
+  const ImageF ref = smooth(W, H);
+  const double peak = ref.maxCoeff() - ref.minCoeff();
+  std::mt19937 rng(4);
+  double prev_ssim = 1.0;
+  for (double sigma : {0.01, 0.03, 0.1}) {
+    std::normal_distribution<float> N(0.0f, static_cast<float>(sigma));
+    ImageF est = ref;
+    for (int k = 0; k < est.size(); ++k) est.data()[k] += N(rng);
+    const auto q = compare_images(est, ref, nullptr);
+    const double expected = 20.0 * std::log10(peak / sigma);
+    std::printf("noise sigma %.2f: PSNR %.2f dB (20 log10(peak/sigma) = %.2f), SSIM %.4f\n", sigma, q.psnr_db,
+                expected, q.ssim);
+    EXPECT_NEAR(q.psnr_db, expected, 0.2);
+    EXPECT_LT(q.ssim, prev_ssim);
+    prev_ssim = q.ssim;
+  }
+  // Garbage outside the mask changes nothing.
+  MaskU8 mask = MaskU8::Ones(H, W);
+  mask.block(0, 0, 20, W).setZero();
+  ImageF est = (0.5f * ref.array() + 1.0f).matrix();
+  const auto clean = compare_images(est, ref, &mask);
+  est.block(0, 0, 20, W).setConstant(1e6f);
+  est(0, 0) = NAN;
+  const auto dirty = compare_images(est, ref, &mask);
+  EXPECT_EQ(clean.pixels, (H - 20) * W);
+  EXPECT_EQ(dirty.pixels, clean.pixels);
+  EXPECT_DOUBLE_EQ(dirty.ssim, clean.ssim);
+  EXPECT_NEAR(dirty.ssim, 1.0, 1e-9);
+  // Unmasked, the garbage is seen.
+  est(0, 0) = 0.0f;
+  EXPECT_LT(compare_images(est, ref, nullptr).ssim, 0.95);
+  EXPECT_THROW(compare_images(ImageF::Zero(H, W), ref, nullptr), std::invalid_argument);
+  EXPECT_THROW(compare_images(ref, ImageF::Zero(H, W + 1), nullptr), std::invalid_argument);
+}
+
+}  // namespace
