@@ -1,0 +1,261 @@
+// Rotation tracking against a log-intensity panorama with a particle filter on SO(3): the tracking
+// half of Kim, Handa, Benosman, Ieng, Davison, "Simultaneous Mosaicing and Tracking with an Event
+// Camera" (BMVC 2014). The camera only rotates and the scene is at infinity; the mosaic
+// (equirectangular, calib/equirectangular.h convention, log intensity) is built elsewhere and only
+// read here through LogIntensityMapView.
+//
+// Model and conventions (ARCHITECTURE.md): the state is R_w_c (camera -> world/mosaic frame), one
+// unit quaternion per particle with a log-weight. Perturbations are right-multiplicative in the
+// camera frame: R <- R * Exp(delta).
+//  - Motion: R <- R * dR * Exp(n), n ~ N(0, sigma^2 dt I_3), dt the time step in s. Without gyro,
+//    dR = I (random walk, sigma = motion_noise_rad_per_sqrt_s) or, with kConstantVelocity,
+//    dR = Exp(w_hat_c dt) with the filter's own smoothed angular-velocity estimate. With gyro
+//    samples (add_gyro, camera-frame rates), dR is the piecewise-constant integral of the rates and
+//    sigma = gyro_noise_rad_per_sqrt_s.
+//  - Measurement (Kim et al.): an event at pixel x (unit bearing b(x) in the camera frame) with
+//    polarity p says the log intensity seen by x changed by p*C since x's previous event. With
+//    L the mosaic sampled bilinearly at the equirectangular projection pi(.), and R_prev(x) the
+//    filter's mean rotation stored when x last fired,
+//       z_i = L(pi(R_i b(x))) - L(pi(R_prev(x) b(x))),
+//       p(z_i) = (1 - eps) N(z_i; p C, sigma_C^2) + eps / outlier_range,
+//    evaluated as a max-mixture (Olson and Agarwal, RSS 2012): log p ~ max(log of the Gaussian
+//    term, log of the outlier term), which is within log 2 of the sum and needs no exp/log per
+//    event and particle. A batch multiplies the likelihoods of its events (log-weights add).
+//  - Resampling: systematic (one seeded uniform) when the effective sample size 1 / sum w^2 falls
+//    below resample_ess_fraction * N.
+//  - Estimate: the weighted chordal mean of the particles' quaternions, each sign-aligned with the
+//    best particle, normalised. For concentrated clouds it equals the quaternion eigen-mean up to
+//    fourth order in the spread, and it is exact for sets symmetric about a rotation.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <deque>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include "evio/sensors/measurements.h"
+
+namespace evio::frontend {
+
+class EventUndistorter;
+
+namespace detail {
+// atan2 with a degree-11 odd minimax polynomial for atan on [0, 1]: |error| < 1e-5 rad (tested
+// against std::atan2), no library call; used per event and particle for the projection.
+inline float fast_atan2(float y, float x) {
+  constexpr float kPiF = 3.14159265358979323846f;
+  const float ax = x < 0 ? -x : x, ay = y < 0 ? -y : y;
+  const float mx = ax > ay ? ax : ay, mn = ax > ay ? ay : ax;
+  const float a = mn / (mx + 1e-30f);
+  const float s = a * a;
+  float r = ((((-0.01172120f * s + 0.05265332f) * s - 0.11643287f) * s + 0.19354346f) * s - 0.33262347f) * s * a +
+            0.99997726f * a;
+  r = ay > ax ? 0.5f * kPiF - r : r;
+  r = x < 0 ? kPiF - r : r;
+  return y < 0 ? -r : r;
+}
+}  // namespace detail
+
+// A read-only view of an equirectangular log-intensity mosaic (calib::Equirectangular
+// convention: u = (lon + pi) / (2 pi) * width wraps around, v = (pi/2 - lat) / pi * height with
+// row 0 up, +z; texel (i, j) has its centre at (i + 0.5, j + 0.5)). Not owned: the memory must
+// outlive every update() call that uses the view.
+struct LogIntensityMapView {
+  int width = 0;              // texels, >= 2
+  int height = 0;             // texels, >= 2
+  const float* data = nullptr;  // row-major width*height log intensities; NaN = unknown texel
+  bool valid() const { return width >= 2 && height >= 2 && data != nullptr; }
+  // Bilinear sample at continuous (u, v) (texel centres at +0.5), u wrapping with period width, v
+  // clamped to the centres of the first and last rows. NaN when any of the four texels is unknown.
+  float sample(float u, float v) const;
+};
+
+enum class RotationMotionModel {
+  kRandomWalk,        // dR = I between measurements (Kim et al.)
+  kConstantVelocity,  // dR = Exp(w_hat_c dt), w_hat_c the filter's smoothed angular velocity
+};
+const char* rotation_motion_model_name(RotationMotionModel m);  // "random_walk", "constant_velocity"
+
+struct RotationParticleFilterOptions {
+  // Particles, >= 1. Default 100: on the known-map test sequences (0.2-1.3 M events/s) more
+  // particles did not lower the error without gyro (the likelihood compares with the filter's own
+  // past estimates, so the error behaves like odometry drift), and cost grows linearly.
+  int num_particles = 100;
+  // Events per measurement update, >= 1 (default 10). Particles are predicted once per batch, to
+  // the time of its last event; larger batches amortise prediction, weighting and resampling.
+  int batch_size = 10;
+  // A batch is closed early when the next event is more than this after its first event, ns, > 0
+  // (default 1 ms), so sparse streams are not held back.
+  int64_t max_batch_duration_ns = 1'000'000;
+  // Motion model when no gyro sample is available.
+  RotationMotionModel motion_model = RotationMotionModel::kRandomWalk;
+  // Random-walk noise density without gyro, rad/sqrt(s), > 0 (default 0.3: 1 mrad of spread per
+  // 10 us batch; 0.1..1 were tried on the known-map sequences, 0.3 was best at 150 deg/s).
+  double motion_noise_rad_per_sqrt_s = 0.3;
+  // Noise density with gyro-driven prediction, rad/sqrt(s), > 0 (default 0.03; 0.03/0.1/0.3 gave
+  // 1.0/2.6/10.9 mrad RMS at 150 deg/s). Covers the gyro's white noise, residual bias and the
+  // camera-IMU time alignment, so it is far above a real gyro's noise density (~0.003 rad/s/sqrt(Hz)).
+  double gyro_noise_rad_per_sqrt_s = 0.03;
+  // Gyro samples older than this (relative to the prediction time) are not used, ns, > 0 (default
+  // 20 ms): the filter falls back to motion_model.
+  int64_t gyro_max_age_ns = 20'000'000;
+  // Event contrast threshold C, log-intensity units, > 0 (default 0.2).
+  double contrast_threshold = 0.2;
+  // Standard deviation sigma_C of z around p*C, log-intensity units, > 0 (default 0.1): event
+  // generation noise plus mosaic and interpolation error.
+  double likelihood_std = 0.1;
+  // Outlier probability eps, in (0, 1) (default 0.1), and the width of the uniform outlier
+  // density, log-intensity units, > 0 (default 2.0). The outlier floor must lie below the
+  // Gaussian's peak (checked by Validate).
+  double outlier_probability = 0.1;
+  double outlier_range = 2.0;
+  // Resample when ESS < fraction * N; fraction in [0, 1] (default 0.5; 0 never, 1 always).
+  double resample_ess_fraction = 0.5;
+  // Standard deviation of the initial spread around reset()'s rotation, rad, >= 0 (default 0: all
+  // particles at the given rotation).
+  double initial_spread_rad = 0.0;
+  // Angular velocity from the mean rotation: w = Log(R(t0)^T R(t1)) / (t1 - t0) over windows of at
+  // least velocity_window_ns (ns, > 0, default 2 ms), smoothed exponentially with weight
+  // velocity_smoothing (in (0, 1], default 0.5) on each new window.
+  int64_t velocity_window_ns = 2'000'000;
+  double velocity_smoothing = 0.5;
+  uint64_t seed = 1;  // seed of every random choice (process noise, resampling)
+
+  bool Validate(std::string* why) const;
+};
+
+struct RotationParticleFilterStats {
+  int64_t events = 0;                  // events passed to update()
+  int64_t events_used = 0;             // events that weighted the particles
+  int64_t skipped_no_previous = 0;     // the pixel had no earlier event since reset()
+  int64_t skipped_unknown_map = 0;     // the mosaic is unknown at the previous position
+  int64_t skipped_repeat_in_batch = 0; // the pixel already fired earlier in the same batch
+  int64_t skipped_invalid = 0;         // outside the sensor, or a pixel without a bearing
+  int64_t batches = 0;
+  int64_t resamples = 0;
+  int64_t gyro_predictions = 0;        // predictions driven (at least partly) by the gyro
+};
+
+class RotationParticleFilter {
+ public:
+  // bearings: unit bearing (camera frame) of every sensor pixel, row-major width*height; a
+  // non-finite or zero entry marks a pixel whose events are ignored. Throws std::invalid_argument
+  // on invalid options or a size mismatch.
+  RotationParticleFilter(int sensor_width, int sensor_height, std::vector<Eigen::Vector3f> bearings,
+                         const RotationParticleFilterOptions& options = {});
+  // Bearings from the undistortion lookup table (invalid pixels ignored).
+  RotationParticleFilter(const EventUndistorter& undistorter, const RotationParticleFilterOptions& options = {});
+
+  // All particles at R_w_c (plus initial_spread_rad), equal weights, time t_ns; forgets every
+  // pixel's previous event, pending events, gyro samples and the angular-velocity estimate.
+  void reset(const Eigen::Quaterniond& R_w_c, int64_t t_ns);
+
+  // Camera-frame angular velocity sample, rad/s, at t_ns (camera clock): the caller converts an
+  // IMU sample as omega_c = R_c_b * (gyro_b - bias_b) and shifts its time to the camera clock
+  // (see camera_rate_from_imu). Samples must come in time order; predictions integrate them as
+  // piecewise constant (each rate holds from its time until the next sample), so add each sample
+  // before the events that follow it.
+  void add_gyro(int64_t t_ns, const Eigen::Vector3d& omega_c_rad_s);
+  static Eigen::Vector3d camera_rate_from_imu(const ImuSample& imu, const Eigen::Quaterniond& R_c_b,
+                                              const Eigen::Vector3d& gyro_bias_b = Eigen::Vector3d::Zero());
+
+  // Moves the particles to t_ns with the motion model (gyro when fresh samples exist). Times
+  // before the filter's time are ignored (no backward prediction).
+  void predict(int64_t t_ns);
+
+  // Adds events (time-ordered up to small disorder) to the pending batch and processes every
+  // complete batch against `map`. Events of an incomplete batch stay pending for the next call
+  // (flush() processes them), so results do not depend on how the stream is chunked. Returns
+  // false (and processes nothing) when the map view is invalid.
+  bool update(const Event* events, size_t n, const LogIntensityMapView& map);
+  bool update(const std::vector<Event>& events, const LogIntensityMapView& map) {
+    return update(events.data(), events.size(), map);
+  }
+  // Processes the pending events as a (short) batch.
+  bool flush(const LogIntensityMapView& map);
+
+  // Estimate at time(): weighted mean rotation R_w_c.
+  Eigen::Quaterniond mean() const { return mean_; }
+  int64_t time_ns() const { return t_ns_; }
+  // Angular velocity, rad/s: with a fresh gyro sample the latest camera-frame rate given to
+  // add_gyro; otherwise the smoothed difference of mean rotations (velocity_window_ns). The world
+  // version is mean() * angular_velocity_c() (a mapper's mosaic pixel velocity of an event with
+  // world bearing d is d(pi)/d(d) * (omega_w x d)).
+  Eigen::Vector3d angular_velocity_c() const;
+  Eigen::Vector3d angular_velocity_w() const { return mean_ * angular_velocity_c(); }
+  double effective_sample_size() const;
+  const RotationParticleFilterStats& stats() const { return stats_; }
+  const RotationParticleFilterOptions& options() const { return options_; }
+
+  // Particle access (tests, diagnostics). Weights are normalised (sum 1).
+  const std::vector<Eigen::Quaterniond>& particles() const { return particles_; }
+  std::vector<double> weights() const;
+  // Replaces the particle set (weights >= 0 with a positive sum, normalised here; sizes must
+  // match, any count >= 1) and recomputes the mean; throws std::invalid_argument otherwise.
+  void set_particles(const std::vector<Eigen::Quaterniond>& particles, const std::vector<double>& weights);
+  // Systematic resampling now, regardless of the ESS.
+  void resample();
+
+ private:
+  struct PendingEvent {
+    int64_t t_ns;
+    uint32_t pixel;
+    int8_t polarity;
+  };
+  void process_batch(const LogIntensityMapView& map);
+  void normalize_weights();
+  void compute_mean();
+  void update_velocity();
+  Eigen::Quaterniond gyro_increment(int64_t t0, int64_t t1);
+  bool gyro_fresh(int64_t t_ns) const;
+  float normal();
+  uint64_t next_u64();
+
+  int width_, height_;
+  RotationParticleFilterOptions options_;
+  std::vector<float> bx_, by_, bz_;  // bearings per pixel (SoA); NaN where invalid
+  double neg_half_inv_var_ = 0;      // -1 / (2 sigma_C^2)
+  double floor_loglik_ = 0;          // outlier log-likelihood relative to the Gaussian peak (< 0)
+
+  std::vector<Eigen::Quaterniond> particles_;
+  std::vector<double> log_w_;  // normalised log-weights
+  std::vector<double> w_;      // normalised weights
+  Eigen::Quaterniond mean_ = Eigen::Quaterniond::Identity();
+  int64_t t_ns_ = 0;
+
+  // Per pixel: equirectangular position (u / width, v / height, so independent of the map's
+  // resolution) of the pixel's direction under the mean at its previous event (NaN: none since
+  // reset), that event's time, and the batch stamp for repeats.
+  std::vector<float> prev_u_, prev_v_;
+  std::vector<int64_t> prev_t_;
+  std::vector<uint32_t> stamp_;
+  uint32_t batch_id_ = 0;
+
+  std::vector<PendingEvent> pending_;
+  // Scratch of the batch being processed (SoA of the events that weight the particles).
+  std::vector<float> sbx_, sby_, sbz_, starget_;
+  std::vector<float> rot_;  // per-particle float rotation matrices, 9 floats each
+
+  std::deque<std::pair<int64_t, Eigen::Vector3d>> gyro_;
+  Eigen::Vector3d omega_gyro_c_ = Eigen::Vector3d::Zero();
+  int64_t gyro_last_t_ns_ = 0;
+  bool have_gyro_ = false;
+
+  Eigen::Vector3d omega_hat_c_ = Eigen::Vector3d::Zero();
+  Eigen::Quaterniond vel_ref_q_ = Eigen::Quaterniond::Identity();
+  int64_t vel_ref_t_ns_ = 0;
+  bool have_velocity_ = false;
+
+  uint64_t rng_state_ = 0;
+  std::vector<float> gauss_table_;  // N(0,1) samples indexed by the RNG
+  uint64_t gauss_bits_ = 0;
+  int gauss_left_ = 0;
+
+  RotationParticleFilterStats stats_;
+};
+
+}  // namespace evio::frontend

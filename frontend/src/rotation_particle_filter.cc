@@ -1,0 +1,510 @@
+#include "evio/frontend/rotation_particle_filter.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <random>
+#include <stdexcept>
+
+#include "evio/calib/geometry.h"
+#include "evio/frontend/event_filters.h"
+
+namespace evio::frontend {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr float kPiF = 3.14159265358979323846f;
+constexpr int kGaussTableBits = 12;
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+
+using detail::fast_atan2;
+
+// Bilinear sample at texel-index coordinates (texel centres at integers): x wraps with period W
+// (x must be in [-W, 2W)), y is clamped to [0, H-1]. NaN if any texel used is NaN.
+inline float sample_index(const float* data, int W, int H, float x, float y) {
+  y = std::min(std::max(y, 0.0f), static_cast<float>(H - 1));
+  int iy = static_cast<int>(y);
+  iy = iy > H - 2 ? H - 2 : iy;
+  const float fy = y - static_cast<float>(iy);
+  int ix = static_cast<int>(x + static_cast<float>(W)) - W;  // floor for x > -W
+  const float fx = x - static_cast<float>(ix);
+  ix = ix < 0 ? ix + W : (ix >= W ? ix - W : ix);
+  const int ix1 = ix + 1 == W ? 0 : ix + 1;
+  const float* r0 = data + static_cast<size_t>(iy) * static_cast<size_t>(W);
+  const float* r1 = r0 + W;
+  const float a = r0[ix] + fx * (r0[ix1] - r0[ix]);
+  const float b = r1[ix] + fx * (r1[ix1] - r1[ix]);
+  return a + fy * (b - a);
+}
+
+// Equirectangular position of direction (x, y, z) as fractions (u / W in [0, 1], v / H in [0, 1]).
+inline void project_fraction(float x, float y, float z, float* un, float* vn) {
+  const float lon = fast_atan2(y, x);
+  const float polar = fast_atan2(std::sqrt(x * x + y * y), z);
+  *un = (lon + kPiF) * (0.5f / kPiF);
+  *vn = polar * (1.0f / kPiF);
+}
+
+// Exp of a rotation vector as a unit quaternion; Taylor branch for small angles (the usual case:
+// one prediction step), calib::so3_exp_quat otherwise.
+inline Eigen::Quaterniond exp_quat(const Eigen::Vector3d& phi) {
+  const double t2 = phi.squaredNorm();
+  if (t2 < 1e-4) {
+    const double w = 1.0 - t2 / 8.0 + t2 * t2 / 384.0;
+    const double s = 0.5 - t2 / 48.0 + t2 * t2 / 3840.0;
+    return Eigen::Quaterniond(w, s * phi.x(), s * phi.y(), s * phi.z());
+  }
+  return calib::so3_exp_quat(phi);
+}
+
+bool fail(std::string* why, const std::string& msg) {
+  if (why) *why = msg;
+  return false;
+}
+
+}  // namespace
+
+float LogIntensityMapView::sample(float u, float v) const {
+  if (!valid() || !std::isfinite(u) || !std::isfinite(v)) return kNaN;
+  float x = std::fmod(u - 0.5f, static_cast<float>(width));
+  if (x < 0) x += static_cast<float>(width);
+  return sample_index(data, width, height, x, v - 0.5f);
+}
+
+const char* rotation_motion_model_name(RotationMotionModel m) {
+  switch (m) {
+    case RotationMotionModel::kRandomWalk: return "random_walk";
+    case RotationMotionModel::kConstantVelocity: return "constant_velocity";
+  }
+  return "unknown";
+}
+
+bool RotationParticleFilterOptions::Validate(std::string* why) const {
+  auto num = [](double v) { return std::to_string(v); };
+  if (num_particles < 1) return fail(why, "num_particles " + std::to_string(num_particles) + " (expected >= 1)");
+  if (batch_size < 1) return fail(why, "batch_size " + std::to_string(batch_size) + " (expected >= 1 events)");
+  if (max_batch_duration_ns <= 0)
+    return fail(why, "max_batch_duration_ns " + std::to_string(max_batch_duration_ns) + " (expected > 0 ns)");
+  if (motion_model != RotationMotionModel::kRandomWalk && motion_model != RotationMotionModel::kConstantVelocity)
+    return fail(why, "motion_model (expected random_walk or constant_velocity)");
+  if (!(motion_noise_rad_per_sqrt_s > 0) || !std::isfinite(motion_noise_rad_per_sqrt_s))
+    return fail(why, "motion_noise_rad_per_sqrt_s " + num(motion_noise_rad_per_sqrt_s) + " (expected > 0 rad/sqrt(s))");
+  if (!(gyro_noise_rad_per_sqrt_s > 0) || !std::isfinite(gyro_noise_rad_per_sqrt_s))
+    return fail(why, "gyro_noise_rad_per_sqrt_s " + num(gyro_noise_rad_per_sqrt_s) + " (expected > 0 rad/sqrt(s))");
+  if (gyro_max_age_ns <= 0) return fail(why, "gyro_max_age_ns " + std::to_string(gyro_max_age_ns) + " (expected > 0 ns)");
+  if (!(contrast_threshold > 0) || !std::isfinite(contrast_threshold))
+    return fail(why, "contrast_threshold " + num(contrast_threshold) + " (expected > 0, log intensity)");
+  if (!(likelihood_std > 0) || !std::isfinite(likelihood_std))
+    return fail(why, "likelihood_std " + num(likelihood_std) + " (expected > 0, log intensity)");
+  if (!(outlier_probability > 0 && outlier_probability < 1))
+    return fail(why, "outlier_probability " + num(outlier_probability) + " (expected in (0, 1))");
+  if (!(outlier_range > 0) || !std::isfinite(outlier_range))
+    return fail(why, "outlier_range " + num(outlier_range) + " (expected > 0, log intensity)");
+  const double peak = std::log((1.0 - outlier_probability) / (std::sqrt(2.0 * kPi) * likelihood_std));
+  const double floor = std::log(outlier_probability / outlier_range);
+  if (!(floor < peak))
+    return fail(why, "outlier density eps/outlier_range " + num(outlier_probability / outlier_range) +
+                         " is not below the Gaussian peak (1-eps)/(sqrt(2 pi) likelihood_std) " + num(std::exp(peak)) +
+                         ": every event would be an outlier");
+  if (!(resample_ess_fraction >= 0 && resample_ess_fraction <= 1))
+    return fail(why, "resample_ess_fraction " + num(resample_ess_fraction) + " (expected in [0, 1])");
+  if (!(initial_spread_rad >= 0) || !std::isfinite(initial_spread_rad))
+    return fail(why, "initial_spread_rad " + num(initial_spread_rad) + " (expected >= 0 rad)");
+  if (velocity_window_ns <= 0)
+    return fail(why, "velocity_window_ns " + std::to_string(velocity_window_ns) + " (expected > 0 ns)");
+  if (!(velocity_smoothing > 0 && velocity_smoothing <= 1))
+    return fail(why, "velocity_smoothing " + num(velocity_smoothing) + " (expected in (0, 1])");
+  return true;
+}
+
+RotationParticleFilter::RotationParticleFilter(int sensor_width, int sensor_height,
+                                               std::vector<Eigen::Vector3f> bearings,
+                                               const RotationParticleFilterOptions& options)
+    : width_(sensor_width), height_(sensor_height), options_(options) {
+  std::string why;
+  if (!options.Validate(&why)) throw std::invalid_argument("rotation particle filter options: " + why);
+  if (sensor_width <= 0 || sensor_height <= 0 || sensor_width > 65536 || sensor_height > 65536)
+    throw std::invalid_argument("rotation particle filter: sensor size " + std::to_string(sensor_width) + "x" +
+                                std::to_string(sensor_height) + " (expected 1..65536 x 1..65536 pixels)");
+  const size_t n = static_cast<size_t>(sensor_width) * static_cast<size_t>(sensor_height);
+  if (bearings.size() != n)
+    throw std::invalid_argument("rotation particle filter: " + std::to_string(bearings.size()) +
+                                " bearings for a " + std::to_string(sensor_width) + "x" +
+                                std::to_string(sensor_height) + " sensor (expected one per pixel, row-major)");
+  bx_.resize(n);
+  by_.resize(n);
+  bz_.resize(n);
+  for (size_t i = 0; i < n; ++i) {
+    Eigen::Vector3f b = bearings[i];
+    const float norm = b.norm();
+    if (!std::isfinite(norm) || norm < 1e-6f) {
+      bx_[i] = by_[i] = bz_[i] = kNaN;
+      continue;
+    }
+    b /= norm;
+    bx_[i] = b.x();
+    by_[i] = b.y();
+    bz_[i] = b.z();
+  }
+  const double peak = std::log((1.0 - options.outlier_probability) / (std::sqrt(2.0 * kPi) * options.likelihood_std));
+  floor_loglik_ = std::log(options.outlier_probability / options.outlier_range) - peak;
+  neg_half_inv_var_ = -0.5 / (options.likelihood_std * options.likelihood_std);
+
+  // The Gaussian table: N(0,1) draws from the seed, standardised to zero mean and unit variance.
+  gauss_table_.resize(size_t{1} << kGaussTableBits);
+  std::mt19937_64 gen(options.seed ^ 0x9e3779b97f4a7c15ULL);
+  std::normal_distribution<double> nd(0.0, 1.0);
+  std::vector<double> g(gauss_table_.size());
+  double mean = 0, var = 0;
+  for (double& x : g) mean += (x = nd(gen));
+  mean /= static_cast<double>(g.size());
+  for (double& x : g) var += (x - mean) * (x - mean);
+  const double inv_std = 1.0 / std::sqrt(var / static_cast<double>(g.size()));
+  for (size_t i = 0; i < g.size(); ++i) gauss_table_[i] = static_cast<float>((g[i] - mean) * inv_std);
+
+  prev_u_.assign(n, kNaN);
+  prev_v_.assign(n, kNaN);
+  prev_t_.assign(n, std::numeric_limits<int64_t>::min());
+  stamp_.assign(n, 0);
+  reset(Eigen::Quaterniond::Identity(), 0);
+}
+
+namespace {
+std::vector<Eigen::Vector3f> undistorter_bearings(const EventUndistorter& u) {
+  std::vector<Eigen::Vector3f> b(static_cast<size_t>(u.width()) * static_cast<size_t>(u.height()));
+  for (int y = 0; y < u.height(); ++y)
+    for (int x = 0; x < u.width(); ++x)
+      b[static_cast<size_t>(y) * u.width() + x] =
+          u.valid(x, y) ? u.bearing(x, y) : Eigen::Vector3f::Constant(std::numeric_limits<float>::quiet_NaN());
+  return b;
+}
+}  // namespace
+
+RotationParticleFilter::RotationParticleFilter(const EventUndistorter& undistorter,
+                                               const RotationParticleFilterOptions& options)
+    : RotationParticleFilter(undistorter.width(), undistorter.height(), undistorter_bearings(undistorter), options) {}
+
+uint64_t RotationParticleFilter::next_u64() {  // SplitMix64 (Steele, Lea, Flood 2014)
+  uint64_t z = (rng_state_ += 0x9e3779b97f4a7c15ULL);
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+  return z ^ (z >> 31);
+}
+
+// A standard normal draw: a uniformly chosen entry of the 4096-entry table (12 random bits, five
+// draws per 64-bit word). Summed over prediction steps the process noise is Gaussian to within
+// the table's resolution; the table costs one load instead of a log/sqrt/sin per draw.
+float RotationParticleFilter::normal() {
+  if (gauss_left_ == 0) {
+    gauss_bits_ = next_u64();
+    gauss_left_ = 64 / kGaussTableBits;
+  }
+  const float g = gauss_table_[gauss_bits_ & ((uint64_t{1} << kGaussTableBits) - 1)];
+  gauss_bits_ >>= kGaussTableBits;
+  --gauss_left_;
+  return g;
+}
+
+void RotationParticleFilter::reset(const Eigen::Quaterniond& R_w_c, int64_t t_ns) {
+  rng_state_ = options_.seed;
+  gauss_left_ = 0;
+  const int n = options_.num_particles;
+  const Eigen::Quaterniond q = R_w_c.normalized();
+  particles_.assign(static_cast<size_t>(n), q);
+  for (int i = 1; i < n && options_.initial_spread_rad > 0; ++i) {
+    const Eigen::Vector3d d(normal(), normal(), normal());
+    particles_[static_cast<size_t>(i)] = (q * exp_quat(options_.initial_spread_rad * d)).normalized();
+  }
+  log_w_.assign(static_cast<size_t>(n), -std::log(static_cast<double>(n)));
+  w_.assign(static_cast<size_t>(n), 1.0 / n);
+  t_ns_ = t_ns;
+  std::fill(prev_u_.begin(), prev_u_.end(), kNaN);
+  std::fill(prev_v_.begin(), prev_v_.end(), kNaN);
+  std::fill(prev_t_.begin(), prev_t_.end(), std::numeric_limits<int64_t>::min());
+  std::fill(stamp_.begin(), stamp_.end(), 0u);
+  batch_id_ = 0;
+  pending_.clear();
+  gyro_.clear();
+  have_gyro_ = false;
+  omega_gyro_c_.setZero();
+  omega_hat_c_.setZero();
+  have_velocity_ = false;
+  vel_ref_t_ns_ = t_ns;
+  compute_mean();
+  vel_ref_q_ = mean_;
+  stats_ = RotationParticleFilterStats();
+}
+
+Eigen::Vector3d RotationParticleFilter::camera_rate_from_imu(const ImuSample& imu, const Eigen::Quaterniond& R_c_b,
+                                                             const Eigen::Vector3d& gyro_bias_b) {
+  return R_c_b * (imu.gyro - gyro_bias_b);
+}
+
+void RotationParticleFilter::add_gyro(int64_t t_ns, const Eigen::Vector3d& omega_c_rad_s) {
+  if (!omega_c_rad_s.allFinite()) return;
+  if (!gyro_.empty() && t_ns < gyro_.back().first) return;  // out of order: ignored
+  gyro_.emplace_back(t_ns, omega_c_rad_s);
+}
+
+bool RotationParticleFilter::gyro_fresh(int64_t t_ns) const {
+  return !gyro_.empty() && t_ns - gyro_.back().first <= options_.gyro_max_age_ns;
+}
+
+// Piecewise-constant integral of the gyro rates over [t0, t1]: each sample's rate holds from its
+// time to the next sample's (the first sample's rate also before it). Drops samples no longer
+// needed and remembers the rate at t1.
+Eigen::Quaterniond RotationParticleFilter::gyro_increment(int64_t t0, int64_t t1) {
+  while (gyro_.size() >= 2 && gyro_[1].first <= t0) gyro_.pop_front();
+  Eigen::Quaterniond dq = Eigen::Quaterniond::Identity();
+  int64_t s = t0;
+  size_t k = 0;
+  while (s < t1) {
+    const int64_t seg_end = k + 1 < gyro_.size() ? std::min(t1, gyro_[k + 1].first) : t1;
+    if (seg_end > s) dq = dq * exp_quat(gyro_[k].second * (1e-9 * static_cast<double>(seg_end - s)));
+    s = seg_end;
+    if (k + 1 < gyro_.size() && gyro_[k + 1].first <= s) ++k;
+  }
+  while (gyro_.size() >= 2 && gyro_[1].first <= t1) gyro_.pop_front();
+  omega_gyro_c_ = gyro_.front().second;
+  have_gyro_ = true;
+  return dq.normalized();
+}
+
+void RotationParticleFilter::predict(int64_t t_ns) {
+  if (t_ns <= t_ns_) return;
+  const double dt = 1e-9 * static_cast<double>(t_ns - t_ns_);
+  Eigen::Quaterniond dR = Eigen::Quaterniond::Identity();
+  double sigma = options_.motion_noise_rad_per_sqrt_s;
+  if (gyro_fresh(t_ns)) {
+    dR = gyro_increment(t_ns_, t_ns);
+    sigma = options_.gyro_noise_rad_per_sqrt_s;
+    ++stats_.gyro_predictions;
+  } else {
+    have_gyro_ = false;
+    if (options_.motion_model == RotationMotionModel::kConstantVelocity && have_velocity_)
+      dR = exp_quat(omega_hat_c_ * dt);
+  }
+  const double s = sigma * std::sqrt(dt);
+  const bool drift = dR.vec().squaredNorm() > 0;
+  for (Eigen::Quaterniond& q : particles_) {
+    const Eigen::Vector3d n(s * normal(), s * normal(), s * normal());
+    q = drift ? q * dR * exp_quat(n) : q * exp_quat(n);
+    q.normalize();
+  }
+  t_ns_ = t_ns;
+  compute_mean();
+}
+
+bool RotationParticleFilter::update(const Event* events, size_t n, const LogIntensityMapView& map) {
+  if (!map.valid()) return false;
+  for (size_t k = 0; k < n; ++k) {
+    const Event& e = events[k];
+    ++stats_.events;
+    if (e.x >= width_ || e.y >= height_) {
+      ++stats_.skipped_invalid;
+      continue;
+    }
+    const uint32_t pixel = static_cast<uint32_t>(e.y) * static_cast<uint32_t>(width_) + e.x;
+    if (std::isnan(bx_[pixel])) {
+      ++stats_.skipped_invalid;
+      continue;
+    }
+    if (!pending_.empty() && e.t_ns - pending_.front().t_ns > options_.max_batch_duration_ns) process_batch(map);
+    pending_.push_back({e.t_ns, pixel, static_cast<int8_t>(e.polarity >= 0 ? 1 : -1)});
+    if (static_cast<int>(pending_.size()) >= options_.batch_size) process_batch(map);
+  }
+  return true;
+}
+
+bool RotationParticleFilter::flush(const LogIntensityMapView& map) {
+  if (!map.valid()) return false;
+  if (!pending_.empty()) process_batch(map);
+  return true;
+}
+
+void RotationParticleFilter::process_batch(const LogIntensityMapView& map) {
+  int64_t t_batch = pending_.front().t_ns;
+  for (const PendingEvent& e : pending_) t_batch = std::max(t_batch, e.t_ns);
+  predict(t_batch);
+  ++stats_.batches;
+  if (++batch_id_ == 0) {  // stamp wrap-around: clear and start again
+    std::fill(stamp_.begin(), stamp_.end(), 0u);
+    batch_id_ = 1;
+  }
+
+  // Events that weight the particles: previous position known, mosaic known there.
+  sbx_.clear();
+  sby_.clear();
+  sbz_.clear();
+  starget_.clear();
+  const float C = static_cast<float>(options_.contrast_threshold);
+  const int W = map.width, H = map.height;
+  for (const PendingEvent& e : pending_) {
+    if (stamp_[e.pixel] == batch_id_) {
+      ++stats_.skipped_repeat_in_batch;
+      continue;
+    }
+    stamp_[e.pixel] = batch_id_;
+    if (std::isnan(prev_u_[e.pixel])) {
+      ++stats_.skipped_no_previous;
+      continue;
+    }
+    const float l_prev = sample_index(map.data, W, H, prev_u_[e.pixel] * static_cast<float>(W) - 0.5f,
+                                      prev_v_[e.pixel] * static_cast<float>(H) - 0.5f);
+    if (std::isnan(l_prev)) {
+      ++stats_.skipped_unknown_map;
+      continue;
+    }
+    sbx_.push_back(bx_[e.pixel]);
+    sby_.push_back(by_[e.pixel]);
+    sbz_.push_back(bz_[e.pixel]);
+    starget_.push_back(l_prev + static_cast<float>(e.polarity) * C);
+  }
+
+  const size_t m = starget_.size();
+  if (m > 0) {
+    stats_.events_used += static_cast<int64_t>(m);
+    const size_t np = particles_.size();
+    rot_.resize(9 * np);
+    for (size_t i = 0; i < np; ++i) {
+      const Eigen::Matrix3f R = particles_[i].toRotationMatrix().cast<float>();
+      for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) rot_[9 * i + 3 * r + c] = R(r, c);
+    }
+    const float ku = static_cast<float>(W) * (0.5f / kPiF);
+    const float kv = static_cast<float>(H) * (1.0f / kPiF);
+    const float u_off = 0.5f * static_cast<float>(W) - 0.5f;  // (lon + pi) ku - 0.5
+    const float nhiv = static_cast<float>(neg_half_inv_var_);
+    const float floor_ll = static_cast<float>(floor_loglik_);
+    const float* bx = sbx_.data();
+    const float* by = sby_.data();
+    const float* bz = sbz_.data();
+    const float* target = starget_.data();
+    const float* data = map.data;
+    for (size_t i = 0; i < np; ++i) {
+      const float* R = &rot_[9 * i];
+      const float r00 = R[0], r01 = R[1], r02 = R[2], r10 = R[3], r11 = R[4], r12 = R[5], r20 = R[6], r21 = R[7],
+                  r22 = R[8];
+      float acc = 0;
+      for (size_t j = 0; j < m; ++j) {
+        const float dx = r00 * bx[j] + r01 * by[j] + r02 * bz[j];
+        const float dy = r10 * bx[j] + r11 * by[j] + r12 * bz[j];
+        const float dz = r20 * bx[j] + r21 * by[j] + r22 * bz[j];
+        const float lon = fast_atan2(dy, dx);
+        const float polar = fast_atan2(std::sqrt(dx * dx + dy * dy), dz);
+        const float L = sample_index(data, W, H, lon * ku + u_off, polar * kv - 0.5f);
+        const float r = L - target[j];
+        const float ll = nhiv * r * r;
+        acc += ll > floor_ll ? ll : floor_ll;  // max-mixture; an unknown texel (NaN) gives the floor
+      }
+      log_w_[i] += static_cast<double>(acc);
+    }
+    normalize_weights();
+    compute_mean();
+    if (effective_sample_size() < options_.resample_ess_fraction * static_cast<double>(particles_.size())) resample();
+  }
+
+  // Every event of the batch, used or not, stores its pixel's position under the mean.
+  const Eigen::Matrix3f Rm = mean_.toRotationMatrix().cast<float>();
+  for (const PendingEvent& e : pending_) {
+    const Eigen::Vector3f d = Rm * Eigen::Vector3f(bx_[e.pixel], by_[e.pixel], bz_[e.pixel]);
+    project_fraction(d.x(), d.y(), d.z(), &prev_u_[e.pixel], &prev_v_[e.pixel]);
+    prev_t_[e.pixel] = e.t_ns;
+  }
+  pending_.clear();
+  update_velocity();
+}
+
+void RotationParticleFilter::normalize_weights() {
+  double mx = -std::numeric_limits<double>::infinity();
+  for (double l : log_w_) mx = std::max(mx, l);
+  double sum = 0;
+  for (size_t i = 0; i < log_w_.size(); ++i) sum += (w_[i] = std::exp(log_w_[i] - mx));
+  const double log_sum = std::log(sum);
+  for (size_t i = 0; i < log_w_.size(); ++i) {
+    log_w_[i] -= mx + log_sum;
+    w_[i] /= sum;
+  }
+}
+
+void RotationParticleFilter::compute_mean() {
+  size_t best = 0;
+  for (size_t i = 1; i < w_.size(); ++i)
+    if (w_[i] > w_[best]) best = i;
+  const Eigen::Vector4d ref = particles_[best].coeffs();
+  Eigen::Vector4d sum = Eigen::Vector4d::Zero();
+  for (size_t i = 0; i < particles_.size(); ++i) {
+    const Eigen::Vector4d c = particles_[i].coeffs();
+    sum += (c.dot(ref) < 0 ? -w_[i] : w_[i]) * c;
+  }
+  const double norm = sum.norm();
+  mean_ = norm > 1e-12 ? Eigen::Quaterniond(sum / norm) : particles_[best];
+}
+
+void RotationParticleFilter::update_velocity() {
+  const int64_t dt_ns = t_ns_ - vel_ref_t_ns_;
+  if (dt_ns < options_.velocity_window_ns) return;
+  const Eigen::Vector3d w = calib::so3_log(vel_ref_q_.conjugate() * mean_) / (1e-9 * static_cast<double>(dt_ns));
+  omega_hat_c_ = have_velocity_ ? Eigen::Vector3d(omega_hat_c_ + options_.velocity_smoothing * (w - omega_hat_c_)) : w;
+  have_velocity_ = true;
+  vel_ref_q_ = mean_;
+  vel_ref_t_ns_ = t_ns_;
+}
+
+Eigen::Vector3d RotationParticleFilter::angular_velocity_c() const {
+  if (have_gyro_) return omega_gyro_c_;
+  return have_velocity_ ? omega_hat_c_ : Eigen::Vector3d::Zero();
+}
+
+double RotationParticleFilter::effective_sample_size() const {
+  double s = 0;
+  for (double w : w_) s += w * w;
+  return s > 0 ? 1.0 / s : 0.0;
+}
+
+std::vector<double> RotationParticleFilter::weights() const { return w_; }
+
+void RotationParticleFilter::set_particles(const std::vector<Eigen::Quaterniond>& particles,
+                                           const std::vector<double>& weights) {
+  if (particles.empty() || particles.size() != weights.size())
+    throw std::invalid_argument("set_particles: " + std::to_string(particles.size()) + " particles and " +
+                                std::to_string(weights.size()) + " weights (expected equal counts >= 1)");
+  double sum = 0;
+  for (double w : weights) {
+    if (!(w >= 0) || !std::isfinite(w)) throw std::invalid_argument("set_particles: weight not finite and >= 0");
+    sum += w;
+  }
+  if (!(sum > 0)) throw std::invalid_argument("set_particles: weights sum to zero");
+  particles_.resize(particles.size());
+  for (size_t i = 0; i < particles.size(); ++i) particles_[i] = particles[i].normalized();
+  w_.resize(weights.size());
+  log_w_.resize(weights.size());
+  for (size_t i = 0; i < weights.size(); ++i) {
+    w_[i] = weights[i] / sum;
+    log_w_[i] = std::log(w_[i]);  // -inf for zero weights: such particles never come back
+  }
+  compute_mean();
+}
+
+// Systematic resampling (Kitagawa 1996): one uniform offset, N evenly spaced pointers into the
+// cumulative weights.
+void RotationParticleFilter::resample() {
+  const size_t n = particles_.size();
+  const double step = 1.0 / static_cast<double>(n);
+  double u = step * static_cast<double>(next_u64() >> 11) * (1.0 / 9007199254740992.0);
+  std::vector<Eigen::Quaterniond> out(n);
+  double cum = w_[0];
+  size_t k = 0;
+  for (size_t i = 0; i < n; ++i) {
+    while (u > cum && k + 1 < n) cum += w_[++k];
+    out[i] = particles_[k];
+    u += step;
+  }
+  particles_.swap(out);
+  std::fill(w_.begin(), w_.end(), step);
+  std::fill(log_w_.begin(), log_w_.end(), std::log(step));
+  ++stats_.resamples;
+  compute_mean();
+}
+
+}  // namespace evio::frontend
