@@ -17,6 +17,7 @@
 #include "evio/sensors/time.h"
 #include "info_command.h"
 #include "simulate_command.h"
+#include "mosaic_command.h"
 #include "vio_command.h"
 
 namespace {
@@ -286,6 +287,30 @@ int main(int argc, char** argv) {
                       "Ground truth (TUM or csv): evaluate at the end (SE3 alignment on the first 5 s) into eval.json");
   add_dataset_options(vio_cmd, &vio.dataset_options, &vio_format, &vio_unit, &vio_bad);
 
+  evio::apps::MosaicArgs mosaic;
+  std::string mosaic_format = "auto", mosaic_unit = "auto", mosaic_bad = "error";
+  CLI::App* mosaic_cmd = app.add_subcommand(
+      "mosaic", "Rotational tracking and panorama mosaicing (particle filter on SO(3), gradient EKF, Poisson): events "
+                "-> rotation.tum, panorama.png, stats.json (and eval.json with --gt)");
+  mosaic_cmd->add_option("DATASET", mosaic.dataset, "Dataset with events (IMU for --use-imu; any format evio reads)")->required();
+  mosaic_cmd->add_option("-o,--out", mosaic.out, "Output folder (created)")->required();
+  mosaic_cmd->add_option("--config", mosaic.config, "Mosaic config YAML (README.md; example datasets/mosaic/simulator.yaml)");
+  mosaic_cmd->add_option("--calib", mosaic.calib,
+                         "Calibration: Kalibr camchain .yaml or ECD calib.txt; default: the dataset folder's calib.yaml, "
+                         "else the dataset's calibration");
+  mosaic_cmd->add_flag("--use-imu", mosaic.use_imu, "Drive the particles and the bootstrap with the gyro");
+  mosaic_cmd->add_option("--particles", mosaic.particles, "Particles (overrides tracker.particles)")->check(CLI::PositiveNumber);
+  mosaic_cmd->add_option("--batch", mosaic.batch, "Events per particle-filter update (overrides tracker.batch_size)")
+      ->check(CLI::PositiveNumber);
+  mosaic_cmd->add_option("--width", mosaic.width, "Mosaic width in px; height = width / 2 (overrides mosaic.width)")
+      ->check(CLI::Range(8, 32768));
+  mosaic_cmd->add_option("--snapshots-every", mosaic.snapshot_s, "Write snapshots/panorama_NNNNNN.png every this many s")
+      ->check(CLI::NonNegativeNumber);
+  mosaic_cmd->add_option("--gt", mosaic.gt,
+                         "Ground truth (TUM or csv): rotation error after aligning the initial orientation into eval.json "
+                         "(and PSNR/SSIM against the true panorama of a simulated dataset)");
+  add_dataset_options(mosaic_cmd, &mosaic.dataset_options, &mosaic_format, &mosaic_unit, &mosaic_bad);
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -316,6 +341,11 @@ int main(int argc, char** argv) {
       apply_dataset_strings(vio_format, vio_unit, vio_bad, &vio.dataset_options);
       vio.progress = !quiet;
       return evio::apps::run_vio(vio, std::cout);
+    }
+    if (mosaic_cmd->parsed()) {
+      apply_dataset_strings(mosaic_format, mosaic_unit, mosaic_bad, &mosaic.dataset_options);
+      mosaic.progress = !quiet;
+      return evio::apps::run_mosaic(mosaic, std::cout);
     }
     if (corners_cmd->parsed()) {
       apply_dataset_strings(corners_format, corners_unit, corners_bad, &corners.dataset_options);

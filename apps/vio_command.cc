@@ -21,6 +21,7 @@
 #include "evio/mapping/landmark_map.h"
 #include "evio/sensors/time.h"
 #include "json_util.h"
+#include "dataset_calibration.h"
 #include "progress.h"
 #include "yaml_config.h"
 
@@ -287,26 +288,17 @@ int run_vio(const VioArgs& args, std::ostream& out) {
   }
   auto reader = open_dataset(args.dataset, args.dataset_options);
   // Calibration: --calib, else the dataset folder's calib.yaml (camchain + imu0), else the reader's.
-  std::optional<calib::CameraCalibration> cal;
-  std::string calib_yaml = args.calib;
-  if (calib_yaml.empty()) {
-    const fs::path p = fs::is_directory(args.dataset) ? fs::path(args.dataset) / "calib.yaml" : fs::path(args.dataset).parent_path() / "calib.yaml";
-    if (fs::exists(p)) calib_yaml = p.string();
-  }
+  const DatasetCalibration found = find_dataset_calibration(args.dataset, args.calib, *reader);
+  std::optional<calib::CameraCalibration> cal = found.camera;
   calib::ImuNoise noise = cfg.imu_noise;
   std::string noise_source = args.config.empty() ? "defaults" : args.config;
-  if (!calib_yaml.empty() && (fs::path(calib_yaml).extension() == ".yaml" || fs::path(calib_yaml).extension() == ".yml")) {
-    cal = calib::load_kalibr_camchain(calib_yaml).front();
+  if (!found.kalibr_yaml.empty()) {
     try {
-      noise = calib::load_kalibr_imu(calib_yaml);
-      noise_source = calib_yaml;
+      noise = calib::load_kalibr_imu(found.kalibr_yaml);
+      noise_source = found.kalibr_yaml;
     } catch (const InputError&) {
       // no imu0 section: keep the config's densities
     }
-  } else if (!calib_yaml.empty()) {
-    cal = calib::load_ecd_calib(calib_yaml);
-  } else {
-    cal = reader->read_calibration();
   }
   if (!cal) throw InputError(args.dataset, 0, "no camera calibration", "--calib FILE (Kalibr camchain YAML or ECD calib.txt)");
   if (!cal->has_T_c_b) log_warning("camera-IMU extrinsics unknown: T_c_b = identity");
