@@ -81,17 +81,8 @@ TrackLengths summarise(const std::vector<frontend::CornerTrack>& tracks) {
 
 CornersConfig load_corners_config(const std::string& path) {
   const std::string expected = "a corners config YAML (see README.md, `evio corners`)";
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw InputError(path, 0, "cannot open the config file", expected);
-  std::stringstream text;
-  text << in.rdbuf();
   CornersConfig c;
-  YAML::Node root;
-  try {
-    root = YAML::Load(text.str());
-  } catch (const YAML::Exception& e) {
-    throw InputError(path, static_cast<int64_t>(e.mark.line) + 1, "YAML error: " + e.msg, expected);
-  }
+  const YAML::Node root = load_yaml_file(path, expected);
   if (root.IsNull()) return c;
   const Parser parser(path, {});
   if (!root.IsMap()) parser.fail(root, "", "is not a map", expected);

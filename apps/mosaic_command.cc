@@ -70,16 +70,7 @@ std::string config_yaml(const MosaicConfig& c) {
 MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_yaml) {
   MosaicConfig c = default_mosaic_config();
   const std::string expected = "a mosaic config YAML (see README.md, `evio mosaic`)";
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw InputError(path, 0, "cannot open the config file", expected);
-  std::stringstream text;
-  text << in.rdbuf();
-  YAML::Node root;
-  try {
-    root = YAML::Load(text.str());
-  } catch (const YAML::Exception& e) {
-    throw InputError(path, static_cast<int64_t>(e.mark.line) + 1, "YAML error: " + e.msg, expected);
-  }
+  const YAML::Node root = load_yaml_file(path, expected);
   const Parser parser(path, {});
   if (!root.IsNull()) {
     if (!root.IsMap()) parser.fail(root, "", "is not a map", expected);

@@ -113,16 +113,7 @@ VioConfig default_vio_config() {
 VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
   VioConfig c = default_vio_config();
   const std::string expected = "a VIO config YAML (see README.md, `evio vio`)";
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw InputError(path, 0, "cannot open the config file", expected);
-  std::stringstream text;
-  text << in.rdbuf();
-  YAML::Node root;
-  try {
-    root = YAML::Load(text.str());
-  } catch (const YAML::Exception& e) {
-    throw InputError(path, static_cast<int64_t>(e.mark.line) + 1, "YAML error: " + e.msg, expected);
-  }
+  const YAML::Node root = load_yaml_file(path, expected);
   const Parser parser(path, {});
   if (!root.IsNull()) {
     if (!root.IsMap()) parser.fail(root, "", "is not a map", expected);

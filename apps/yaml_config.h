@@ -10,6 +10,8 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
+#include <fstream>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -30,6 +32,20 @@ using Eigen::Vector2d;
 using Eigen::Vector3d;
 
 // ---- seeds ----------------------------------------------------------------------------------------
+
+// Reads and parses a YAML file; an unreadable file or a syntax error is an evio::InputError
+// naming the file (and line) with `expected`, the form the command wanted.
+inline YAML::Node load_yaml_file(const std::string& path, const std::string& expected) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError(path, 0, "cannot open the config file", expected);
+  std::stringstream text;
+  text << in.rdbuf();
+  try {
+    return YAML::Load(text.str());
+  } catch (const YAML::Exception& e) {
+    throw InputError(path, static_cast<int64_t>(e.mark.line) + 1, "YAML error: " + e.msg, expected);
+  }
+}
 
 inline uint64_t splitmix64(uint64_t x) {
   x += 0x9E3779B97F4A7C15ull;
