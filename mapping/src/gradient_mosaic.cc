@@ -28,6 +28,9 @@ bool GradientMosaicOptions::Validate(std::string* why) const {
   if (!pos(min_gradient_std) || min_gradient_std >= initial_gradient_std)
     return fail("min_gradient_std must be > 0 and < initial_gradient_std (log units/px)");
   if (seen_min_observations < 1) return fail("seen_min_observations must be >= 1");
+  if (!pos(max_path_px)) return fail("max_path_px must be > 0 (mosaic px)");
+  if (!(seen_max_gradient_std >= 0) || !std::isfinite(seen_max_gradient_std))
+    return fail("seen_max_gradient_std must be >= 0 (0 = no covariance test)");
   std::string w;
   if (!poisson.Validate(&w)) return fail("poisson: " + w);
   return true;
@@ -148,6 +151,26 @@ MosaicUpdate GradientMosaic::update_status(const Eigen::Vector2d& uv, const Eige
   return MosaicUpdate::kApplied;
 }
 
+MosaicUpdate GradientMosaic::update_segment(const Eigen::Vector2d& uv_from, const Eigen::Vector2d& uv_to, double tau_s,
+                                            int polarity) {
+  if (!uv_from.allFinite() || !uv_to.allFinite() || !std::isfinite(tau_s)) {
+    ++stats_.non_finite;
+    return MosaicUpdate::kNonFinite;
+  }
+  Eigen::Vector2d d = uv_to - uv_from;
+  const double W = options_.width;
+  d.x() -= W * std::round(d.x() / W);
+  if (d.squaredNorm() > options_.max_path_px * options_.max_path_px) {
+    ++stats_.path_too_long;
+    return MosaicUpdate::kPathTooLong;
+  }
+  if (tau_s < options_.min_tau_s) {  // also keeps d / tau finite
+    ++stats_.tau_too_small;
+    return MosaicUpdate::kTauTooSmall;
+  }
+  return update_status(uv_to - 0.5 * d, d / tau_s, tau_s, polarity);
+}
+
 ImageF GradientMosaic::gradient_u() const {
   ImageF t(options_.height, options_.width);
   for (size_t k = 0; k < state_.size(); ++k) t.data()[k] = static_cast<float>(state_[k].gu);
@@ -168,17 +191,24 @@ Eigen::Matrix<uint32_t, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> Gradien
   for (size_t k = 0; k < state_.size(); ++k) c.data()[k] = state_[k].count;
   return c;
 }
+bool GradientMosaic::is_seen(const PixelState& p) const {
+  if (p.count < static_cast<uint32_t>(options_.seen_min_observations)) return false;
+  if (options_.seen_max_gradient_std <= 0) return true;
+  // Largest eigenvalue of the 2x2 covariance: both gradient components must be known.
+  const double mean = 0.5 * (p.puu + p.pvv), half_diff = 0.5 * (p.puu - p.pvv);
+  const double l_max = mean + std::sqrt(half_diff * half_diff + p.puv * p.puv);
+  return l_max <= options_.seen_max_gradient_std * options_.seen_max_gradient_std;
+}
+
 MaskU8 GradientMosaic::seen_mask() const {
   MaskU8 m(options_.height, options_.width);
-  const auto thr = static_cast<uint32_t>(options_.seen_min_observations);
-  for (size_t k = 0; k < state_.size(); ++k) m.data()[k] = state_[k].count >= thr ? 1 : 0;
+  for (size_t k = 0; k < state_.size(); ++k) m.data()[k] = is_seen(state_[k]) ? 1 : 0;
   return m;
 }
 
 void GradientMosaic::update_edges(int x0, int y0, int w, int h) {
   const int W = options_.width, H = options_.height;
   const bool periodic = options_.poisson.boundary == PoissonBoundary::kPeriodicU;
-  const auto thr = static_cast<uint32_t>(options_.seen_min_observations);
   auto edge = [](bool s0, double g0, bool s1, double g1) {
     if (s0 && s1) return 0.5 * (g0 + g1);
     if (s0) return g0;
@@ -190,16 +220,16 @@ void GradientMosaic::update_edges(int x0, int y0, int w, int h) {
       int i = x0 + t;
       i = ((i % W) + W) % W;
       const PixelState& p = state_[index(i, j)];
-      const bool s = p.count >= thr;
+      const bool s = is_seen(p);
       if (i + 1 < W || periodic) {
         const PixelState& r = state_[index((i + 1) % W, j)];
-        edge_gu_(j, i) = edge(s, p.gu, r.count >= thr, r.gu);
+        edge_gu_(j, i) = edge(s, p.gu, is_seen(r), r.gu);
       } else {
         edge_gu_(j, i) = 0.0;
       }
       if (j + 1 < H) {
         const PixelState& d = state_[index(i, j + 1)];
-        edge_gv_(j, i) = edge(s, p.gv, d.count >= thr, d.gv);
+        edge_gv_(j, i) = edge(s, p.gv, is_seen(d), d.gv);
       } else {
         edge_gv_(j, i) = 0.0;
       }

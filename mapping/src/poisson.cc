@@ -3,6 +3,10 @@
 #include "evio/mapping/poisson.h"
 
 #include <algorithm>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <tuple>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -72,18 +76,28 @@ Eigen::MatrixXd axis_operator(int n_domain, bool periodic, int start, int len) {
   return T;
 }
 
+// Eigenbasis of a symmetric 1-D operator.
+struct AxisBasis {
+  Eigen::MatrixXd Q;   // eigenvectors (columns)
+  Eigen::VectorXd lam;  // eigenvalues
+};
+
+AxisBasis axis_basis(const Eigen::MatrixXd& T) {
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> e(T);
+  if (e.info() != Eigen::Success)
+    throw std::runtime_error("Poisson solver: eigen-decomposition of the region Laplacian failed");
+  return {e.eigenvectors(), e.eigenvalues()};
+}
+
 // Solves Ty X + X Tx = R (Ty: h x h, Tx: w x w, symmetric, negative semi-definite) in the
 // separable eigenbasis; modes whose eigenvalue sum vanishes (the constant of a pure Neumann /
 // periodic problem) are set to zero.
-Eigen::MatrixXd separable_solve(const Eigen::MatrixXd& Ty, const Eigen::MatrixXd& Tx, const Eigen::MatrixXd& R) {
-  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> ey(Ty), ex(Tx);
-  if (ey.info() != Eigen::Success || ex.info() != Eigen::Success)
-    throw std::runtime_error("Poisson solver: eigen-decomposition of the region Laplacian failed");
-  const Eigen::MatrixXd& Qy = ey.eigenvectors();
-  const Eigen::MatrixXd& Qx = ex.eigenvectors();
+Eigen::MatrixXd separable_solve(const AxisBasis& by, const AxisBasis& bx, const Eigen::MatrixXd& R) {
+  const Eigen::MatrixXd& Qy = by.Q;
+  const Eigen::MatrixXd& Qx = bx.Q;
   Eigen::MatrixXd X = Qy.transpose() * R * Qx;
-  const Eigen::VectorXd& ly = ey.eigenvalues();
-  const Eigen::VectorXd& lx = ex.eigenvalues();
+  const Eigen::VectorXd& ly = by.lam;
+  const Eigen::VectorXd& lx = bx.lam;
   for (Eigen::Index l = 0; l < X.rows(); ++l) {
     for (Eigen::Index k = 0; k < X.cols(); ++k) {
       const double lam = ly(l) + lx(k);
@@ -157,7 +171,8 @@ void dense_solve(const Image<T>& gx, const Image<T>& gy, const Image<T>* weight,
   Image<T> div(H, W);
   divergence_into<T>(gx, gy, weight, periodic, div.data());
   const Eigen::MatrixXd X =
-      separable_solve(axis_operator(H, false, 0, H), axis_operator(W, periodic, 0, W), div.template cast<double>());
+      separable_solve(axis_basis(axis_operator(H, false, 0, H)), axis_basis(axis_operator(W, periodic, 0, W)),
+                      div.template cast<double>());
   *L = X.cast<T>();
 }
 
@@ -220,8 +235,29 @@ ImageD laplacian(const ImageD& L, PoissonBoundary boundary) {
   return divergence(gx, gy, boundary);
 }
 
+// Eigenbases of restricted 1-D operators. A restriction of len pixels is determined by len,
+// whether it starts at the domain's first pixel, whether it ends at its last, and (periodic) whether
+// it is the whole ring.
+struct PoissonSolver::EigenCache {
+  std::mutex mutex;
+  std::map<std::tuple<int, bool, bool, bool>, std::shared_ptr<const AxisBasis>> bases;
+
+  std::shared_ptr<const AxisBasis> get(int n_domain, bool periodic, int start, int len) {
+    const bool ring = periodic && len == n_domain;
+    const auto key = std::make_tuple(len, !periodic && start == 0, !periodic && start + len == n_domain, ring);
+    {
+      std::lock_guard<std::mutex> lock(mutex);
+      const auto it = bases.find(key);
+      if (it != bases.end()) return it->second;
+    }
+    auto basis = std::make_shared<const AxisBasis>(axis_basis(axis_operator(n_domain, periodic, start, len)));
+    std::lock_guard<std::mutex> lock(mutex);
+    return bases.emplace(key, std::move(basis)).first->second;
+  }
+};
+
 PoissonSolver::PoissonSolver(int width, int height, const PoissonOptions& options)
-    : width_(width), height_(height), options_(options) {
+    : width_(width), height_(height), options_(options), cache_(std::make_shared<EigenCache>()) {
   std::string why;
   if (!options_.Validate(&why)) throw std::invalid_argument("PoissonOptions: " + why);
   if (width < 2 || height < 2)
@@ -251,7 +287,7 @@ void PoissonSolver::solve_region(const ImageD& gx, const ImageD& gy, const Pixel
   if (rect.width <= 0 || rect.height <= 0)
     throw std::invalid_argument("Poisson solve_region: empty rectangle " + rect_text);
   if (rect.width > W) throw std::invalid_argument("Poisson solve_region: rectangle " + rect_text + " wider than the image");
-  const int y0 = std::max(rect.y, 0);
+  int y0 = std::max(rect.y, 0);
   const int y1 = std::min(rect.y + rect.height, H);
   if (y1 <= y0) throw std::invalid_argument("Poisson solve_region: rectangle " + rect_text + " has no rows in the image");
   int x0 = rect.x;
@@ -261,7 +297,13 @@ void PoissonSolver::solve_region(const ImageD& gx, const ImageD& gy, const Pixel
     throw std::invalid_argument("Poisson solve_region: rectangle " + rect_text +
                                 " leaves the image (u does not wrap with kNeumann)");
   }
-  const int w = rect.width, h = y1 - y0;
+  // Grow the sides to multiples of 16 px inside the image (cached eigenbases); a larger rectangle
+  // is still an exact solve on it.
+  constexpr int kQuantum = 16;
+  int w = std::min(W, (rect.width + kQuantum - 1) / kQuantum * kQuantum);
+  if (!periodic && x0 + w > W) x0 = W - w;
+  int h = std::min(H, (y1 - y0 + kQuantum - 1) / kQuantum * kQuantum);
+  y0 = std::min(y0, H - h);
   if ((w == W && h == H) || w > options_.max_region_side || h > options_.max_region_side) {
     solve(gx, gy, L, weight);
     return;
@@ -295,7 +337,7 @@ void PoissonSolver::solve_region(const ImageD& gx, const ImageD& gy, const Pixel
   }
   // The rectangle's Laplacian (Dirichlet to the pixels outside) is the Kronecker sum of the two
   // restricted 1-D operators: solve lap_rect(delta) = r and add delta.
-  const Eigen::MatrixXd delta = separable_solve(axis_operator(H, false, y0, h), axis_operator(W, periodic, x0, w), r);
+  const Eigen::MatrixXd delta = separable_solve(*cache_->get(H, false, y0, h), *cache_->get(W, periodic, x0, w), r);
   for (int tj = 0; tj < h; ++tj)
     for (int ti = 0; ti < w; ++ti) (*L)(y0 + tj, col(ti)) += delta(tj, ti);
 }

@@ -212,11 +212,12 @@ TEST(Poisson, RegionSolveMatchesFullSolve) {
     s.solve_region(gxb, gyb, c.rect, &Lb_region);
     const double err = max_abs_diff_up_to_offset(Lb_region, Lb_full);
     EXPECT_LT(err, 1e-9) << c.name;
-    // Outside the rectangle nothing moved.
+    // Outside the rectangle nothing moved beyond rounding: the solver grows the rectangle to sides
+    // of multiples of 16 px, and there the exact solution is the old one.
     ImageD moved = (Lb_region - La).cwiseAbs();
     for (int j = y0; j < y1; ++j)
       for (int t = 0; t < c.rect.width; ++t) moved(j, ((c.rect.x + t) % W + W) % W) = 0;
-    EXPECT_EQ(moved.maxCoeff(), 0.0) << c.name;
+    EXPECT_LT(moved.maxCoeff(), 1e-12) << c.name;
     std::printf("region %-34s max error vs full solve (up to offset) %.3g\n", c.name, err);
   }
 }

@@ -19,6 +19,7 @@
 // with the (0,0) mode (the constant) set to zero: the full solve's result has zero mean.
 #pragma once
 
+#include <memory>
 #include <string>
 
 #include "evio/mapping/image.h"
@@ -85,13 +86,18 @@ class PoissonSolver {
   // a full solve (zero mean) when the rectangle covers the whole image or a side exceeds
   // options.max_region_side. Throws std::invalid_argument for an empty rectangle, one outside the
   // image (kNeumann), wider than W, or size mismatches. Double precision only.
+  // The rectangle is grown to sides that are multiples of 16 px (within the image) so that the
+  // eigenbases of its 1-D operators can be cached and reused (thread-safe cache shared by copies
+  // of the solver).
   void solve_region(const ImageD& gx, const ImageD& gy, const PixelRect& rect, ImageD* L,
                     const ImageD* weight = nullptr) const;
 
  private:
+  struct EigenCache;
   int width_;
   int height_;
   PoissonOptions options_;
+  std::shared_ptr<EigenCache> cache_;
 };
 
 }  // namespace evio::mapping
