@@ -79,14 +79,27 @@ const char* rotation_motion_model_name(RotationMotionModel m) {
   return "unknown";
 }
 
+const char* rotation_measurement_model_name(RotationMeasurementModel m) {
+  switch (m) {
+    case RotationMeasurementModel::kPreviousMean: return "previous_mean";
+    case RotationMeasurementModel::kRelativeMotion: return "relative_motion";
+    case RotationMeasurementModel::kAuto: return "auto";
+  }
+  return "unknown";
+}
+
 bool RotationParticleFilterOptions::Validate(std::string* why) const {
   auto num = [](double v) { return std::to_string(v); };
   if (num_particles < 1) return fail(why, "num_particles " + std::to_string(num_particles) + " (expected >= 1)");
   if (batch_size < 1) return fail(why, "batch_size " + std::to_string(batch_size) + " (expected >= 1 events)");
+  if (event_stride < 1) return fail(why, "event_stride " + std::to_string(event_stride) + " (expected >= 1)");
   if (max_batch_duration_ns <= 0)
     return fail(why, "max_batch_duration_ns " + std::to_string(max_batch_duration_ns) + " (expected > 0 ns)");
   if (motion_model != RotationMotionModel::kRandomWalk && motion_model != RotationMotionModel::kConstantVelocity)
     return fail(why, "motion_model (expected random_walk or constant_velocity)");
+  if (measurement_model != RotationMeasurementModel::kPreviousMean &&
+      measurement_model != RotationMeasurementModel::kRelativeMotion && measurement_model != RotationMeasurementModel::kAuto)
+    return fail(why, "measurement_model (expected previous_mean, relative_motion or auto)");
   if (!(motion_noise_rad_per_sqrt_s > 0) || !std::isfinite(motion_noise_rad_per_sqrt_s))
     return fail(why, "motion_noise_rad_per_sqrt_s " + num(motion_noise_rad_per_sqrt_s) + " (expected > 0 rad/sqrt(s))");
   if (!(gyro_noise_rad_per_sqrt_s > 0) || !std::isfinite(gyro_noise_rad_per_sqrt_s))
@@ -165,6 +178,7 @@ RotationParticleFilter::RotationParticleFilter(int sensor_width, int sensor_heig
   prev_u_.assign(n, kNaN);
   prev_v_.assign(n, kNaN);
   prev_t_.assign(n, std::numeric_limits<int64_t>::min());
+  prev_ref_.assign(n, Eigen::Vector4f::Constant(kNaN));
   stamp_.assign(n, 0);
   reset(Eigen::Quaterniond::Identity(), 0);
 }
@@ -221,8 +235,10 @@ void RotationParticleFilter::reset(const Eigen::Quaterniond& R_w_c, int64_t t_ns
   std::fill(prev_u_.begin(), prev_u_.end(), kNaN);
   std::fill(prev_v_.begin(), prev_v_.end(), kNaN);
   std::fill(prev_t_.begin(), prev_t_.end(), std::numeric_limits<int64_t>::min());
+  std::fill(prev_ref_.begin(), prev_ref_.end(), Eigen::Vector4f::Constant(kNaN));
   std::fill(stamp_.begin(), stamp_.end(), 0u);
   batch_id_ = 0;
+  stride_counter_ = 0;
   pending_.clear();
   gyro_.clear();
   have_gyro_ = false;
@@ -231,6 +247,7 @@ void RotationParticleFilter::reset(const Eigen::Quaterniond& R_w_c, int64_t t_ns
   have_velocity_ = false;
   vel_ref_t_ns_ = t_ns;
   compute_mean();
+  ref_ = mean_;
   vel_ref_q_ = mean_;
   stats_ = RotationParticleFilterStats();
 }
@@ -277,6 +294,7 @@ void RotationParticleFilter::predict(int64_t t_ns) {
   double sigma = options_.motion_noise_rad_per_sqrt_s;
   if (gyro_fresh(t_ns)) {
     dR = gyro_increment(t_ns_, t_ns);
+    ref_ = (ref_ * dR).normalized();
     sigma = options_.gyro_noise_rad_per_sqrt_s;
     ++stats_.gyro_predictions;
   } else {
@@ -337,33 +355,54 @@ void RotationParticleFilter::process_batch(const LogIntensityMapView& map) {
   sby_.clear();
   sbz_.clear();
   starget_.clear();
+  sb2x_.clear();
+  sb2y_.clear();
+  sb2z_.clear();
   const float C = static_cast<float>(options_.contrast_threshold);
   const int W = map.width, H = map.height;
+  const bool relative = options_.measurement_model == RotationMeasurementModel::kRelativeMotion ||
+                        (options_.measurement_model == RotationMeasurementModel::kAuto && have_gyro_);
+  const Eigen::Quaternionf ref_now_inv = ref_.conjugate().cast<float>();
   for (const PendingEvent& e : pending_) {
     if (stamp_[e.pixel] == batch_id_) {
       ++stats_.skipped_repeat_in_batch;
       continue;
     }
     stamp_[e.pixel] = batch_id_;
+    if (options_.event_stride > 1 && (stride_counter_++ % static_cast<uint64_t>(options_.event_stride)) != 0) {
+      ++stats_.skipped_stride;
+      continue;
+    }
     if (std::isnan(prev_u_[e.pixel])) {
       ++stats_.skipped_no_previous;
       continue;
     }
-    const float l_prev = sample_index(map.data, W, H, prev_u_[e.pixel] * static_cast<float>(W) - 0.5f,
-                                      prev_v_[e.pixel] * static_cast<float>(H) - 0.5f);
-    if (std::isnan(l_prev)) {
-      ++stats_.skipped_unknown_map;
-      continue;
+    const Eigen::Vector3f b(bx_[e.pixel], by_[e.pixel], bz_[e.pixel]);
+    if (relative) {
+      // dR b = R_ref(t)^T R_ref(t_prev) b: the pixel's bearing at its previous event, in the
+      // camera frame of now.
+      const Eigen::Vector4f& c = prev_ref_[e.pixel];
+      const Eigen::Vector3f b2 = ref_now_inv * (Eigen::Quaternionf(c[3], c[0], c[1], c[2]) * b);
+      sb2x_.push_back(b2.x());
+      sb2y_.push_back(b2.y());
+      sb2z_.push_back(b2.z());
+      starget_.push_back(static_cast<float>(e.polarity) * C);
+    } else {
+      const float l_prev = sample_index(map.data, W, H, prev_u_[e.pixel] * static_cast<float>(W) - 0.5f,
+                                        prev_v_[e.pixel] * static_cast<float>(H) - 0.5f);
+      if (std::isnan(l_prev)) {
+        ++stats_.skipped_unknown_map;
+        continue;
+      }
+      starget_.push_back(l_prev + static_cast<float>(e.polarity) * C);
     }
-    sbx_.push_back(bx_[e.pixel]);
-    sby_.push_back(by_[e.pixel]);
-    sbz_.push_back(bz_[e.pixel]);
-    starget_.push_back(l_prev + static_cast<float>(e.polarity) * C);
+    sbx_.push_back(b.x());
+    sby_.push_back(b.y());
+    sbz_.push_back(b.z());
   }
 
   const size_t m = starget_.size();
   if (m > 0) {
-    stats_.events_used += static_cast<int64_t>(m);
     const size_t np = particles_.size();
     rot_.resize(9 * np);
     for (size_t i = 0; i < np; ++i) {
@@ -380,23 +419,62 @@ void RotationParticleFilter::process_batch(const LogIntensityMapView& map) {
     const float* by = sby_.data();
     const float* bz = sbz_.data();
     const float* target = starget_.data();
+    const float* b2x = sb2x_.data();
+    const float* b2y = sb2y_.data();
+    const float* b2z = sb2z_.data();
     const float* data = map.data;
+    // ll_[i * m + j]: log-likelihood of event j under particle i (max-mixture), NaN where the
+    // particle looks at an unknown texel.
+    ll_.resize(np * m);
     for (size_t i = 0; i < np; ++i) {
       const float* R = &rot_[9 * i];
       const float r00 = R[0], r01 = R[1], r02 = R[2], r10 = R[3], r11 = R[4], r12 = R[5], r20 = R[6], r21 = R[7],
                   r22 = R[8];
-      float acc = 0;
+      float* ll_i = &ll_[i * m];
       for (size_t j = 0; j < m; ++j) {
         const float dx = r00 * bx[j] + r01 * by[j] + r02 * bz[j];
         const float dy = r10 * bx[j] + r11 * by[j] + r12 * bz[j];
         const float dz = r20 * bx[j] + r21 * by[j] + r22 * bz[j];
         const float lon = fast_atan2(dy, dx);
         const float polar = fast_atan2(std::sqrt(dx * dx + dy * dy), dz);
-        const float L = sample_index(data, W, H, lon * ku + u_off, polar * kv - 0.5f);
+        float L = sample_index(data, W, H, lon * ku + u_off, polar * kv - 0.5f);
+        if (relative) {  // minus the mosaic at the particle's direction of the previous event
+          const float ex = r00 * b2x[j] + r01 * b2y[j] + r02 * b2z[j];
+          const float ey = r10 * b2x[j] + r11 * b2y[j] + r12 * b2z[j];
+          const float ez = r20 * b2x[j] + r21 * b2y[j] + r22 * b2z[j];
+          L -= sample_index(data, W, H, fast_atan2(ey, ex) * ku + u_off,
+                            fast_atan2(std::sqrt(ex * ex + ey * ey), ez) * kv - 0.5f);
+        }
         const float r = L - target[j];
         const float ll = nhiv * r * r;
-        acc += ll > floor_ll ? ll : floor_ll;  // max-mixture; an unknown texel (NaN) gives the floor
+        ll_i[j] = ll < floor_ll ? floor_ll : ll;  // max-mixture; NaN (unknown texel) stays NaN
       }
+    }
+    // An unknown texel says nothing about the particle: it gets the mean log-likelihood of the
+    // particles that see a known texel for the same event (neutral), so the cloud is not pulled
+    // towards the mapped part of the mosaic while the camera explores. An event no particle can
+    // evaluate weights nobody.
+    for (size_t j = 0; j < m; ++j) {
+      float sum = 0;
+      int known = 0;
+      for (size_t i = 0; i < np; ++i) {
+        const float v = ll_[i * m + j];
+        if (!std::isnan(v)) {
+          sum += v;
+          ++known;
+        }
+      }
+      if (known > 0) ++stats_.events_used;
+      if (known == static_cast<int>(np)) continue;
+      const float fill = known > 0 ? sum / static_cast<float>(known) : 0.0f;
+      if (known == 0) ++stats_.skipped_unknown_map;
+      for (size_t i = 0; i < np; ++i)
+        if (std::isnan(ll_[i * m + j])) ll_[i * m + j] = fill;
+    }
+    for (size_t i = 0; i < np; ++i) {
+      const float* ll_i = &ll_[i * m];
+      float acc = 0;
+      for (size_t j = 0; j < m; ++j) acc += ll_i[j];
       log_w_[i] += static_cast<double>(acc);
     }
     normalize_weights();
@@ -404,12 +482,16 @@ void RotationParticleFilter::process_batch(const LogIntensityMapView& map) {
     if (effective_sample_size() < options_.resample_ess_fraction * static_cast<double>(particles_.size())) resample();
   }
 
-  // Every event of the batch, used or not, stores its pixel's position under the mean.
+  // Every event of the batch, used or not, stores its pixel's position under the mean and the
+  // reference rotation (which follows the mean unless the gyro drove this prediction).
+  if (!have_gyro_) ref_ = mean_;
   const Eigen::Matrix3f Rm = mean_.toRotationMatrix().cast<float>();
+  const Eigen::Vector4f ref_now = ref_.coeffs().cast<float>();
   for (const PendingEvent& e : pending_) {
     const Eigen::Vector3f d = Rm * Eigen::Vector3f(bx_[e.pixel], by_[e.pixel], bz_[e.pixel]);
     project_fraction(d.x(), d.y(), d.z(), &prev_u_[e.pixel], &prev_v_[e.pixel]);
     prev_t_[e.pixel] = e.t_ns;
+    prev_ref_[e.pixel] = ref_now;
   }
   pending_.clear();
   update_velocity();
