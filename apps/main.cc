@@ -302,6 +302,9 @@ int main(int argc, char** argv) {
   mosaic_cmd->add_option("--particles", mosaic.particles, "Particles (overrides tracker.particles)")->check(CLI::PositiveNumber);
   mosaic_cmd->add_option("--batch", mosaic.batch, "Events per particle-filter update (overrides tracker.batch_size)")
       ->check(CLI::PositiveNumber);
+  mosaic_cmd->add_option("--stride", mosaic.stride,
+                         "One event in this many weighs the particles (overrides tracker.event_stride)")
+      ->check(CLI::PositiveNumber);
   mosaic_cmd->add_option("--width", mosaic.width, "Mosaic width in px; height = width / 2 (overrides mosaic.width)")
       ->check(CLI::Range(8, 32768));
   mosaic_cmd->add_option("--snapshots-every", mosaic.snapshot_s, "Write snapshots/panorama_NNNNNN.png every this many s")

@@ -49,16 +49,19 @@ std::string config_yaml(const MosaicConfig& c) {
   y << "mosaic: {width: " << m.width << ", height: " << m.height << ", contrast_threshold: " << num(m.contrast_threshold)
     << ", initial_gradient_std: " << num(m.initial_gradient_std) << ", measurement_std_abs: " << num(m.measurement_std_abs)
     << ", measurement_relative_std: " << num(m.measurement_relative_std) << ", min_tau_ms: " << num(m.min_tau_s * 1e3)
-    << ", min_speed_px_s: " << num(m.min_speed_px_s) << ", reconstruct_ms: " << num(c.reconstruct_period_ns * 1e-6) << "}\n";
-  y << "tracker: {particles: " << t.num_particles << ", batch_size: " << t.batch_size
+    << ", min_speed_px_s: " << num(m.min_speed_px_s) << ", seen_min_observations: " << m.seen_min_observations
+    << ", seen_max_gradient_std: " << num(m.seen_max_gradient_std) << ", max_path_px: " << num(m.max_path_px) << ", reconstruct_ms: " << num(c.reconstruct_period_ns * 1e-6) << "}\n";
+  y << "tracker: {particles: " << t.num_particles << ", batch_size: " << t.batch_size << ", event_stride: " << t.event_stride
     << ", max_batch_ms: " << num(t.max_batch_duration_ns * 1e-6)
     << ", motion_model: " << frontend::rotation_motion_model_name(t.motion_model)
+    << ", measurement_model: " << frontend::rotation_measurement_model_name(t.measurement_model)
+    << ", contrast_threshold: " << num(t.contrast_threshold)
     << ", motion_noise_rad_per_sqrt_s: " << num(t.motion_noise_rad_per_sqrt_s)
     << ", gyro_noise_rad_per_sqrt_s: " << num(t.gyro_noise_rad_per_sqrt_s) << ", likelihood_std: " << num(t.likelihood_std)
     << ", outlier_probability: " << num(t.outlier_probability) << ", resample_ess_fraction: " << num(t.resample_ess_fraction)
     << ", seed: " << t.seed << "}\n";
   y << "bootstrap: {duration_ms: " << num(c.bootstrap_ns * 1e-6) << ", window_ms: " << num(c.bootstrap_window_ns * 1e-6)
-    << ", blur_px: " << num(c.cmax.blur_sigma_px) << "}\n";
+    << ", blur_px: " << num(c.cmax.blur_sigma_px) << ", calibrate_contrast: " << (c.calibrate_contrast ? "true" : "false") << "}\n";
   y << "output: {trajectory_ms: " << num(c.trajectory_period_ns * 1e-6) << ", snapshot_ms: " << num(c.snapshot_period_ns * 1e-6)
     << ", gamma: " << num(c.display.gamma) << ", low_percentile: " << num(c.display.low_percentile)
     << ", high_percentile: " << num(c.display.high_percentile) << "}\n";
@@ -79,7 +82,8 @@ MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_y
     if (top.has("mosaic")) {
       const Section s = top.child("mosaic", false, "a map");
       s.allow({"width", "height", "contrast_threshold", "initial_gradient_std", "measurement_std_abs",
-               "measurement_relative_std", "min_tau_ms", "min_speed_px_s", "reconstruct_ms"});
+               "measurement_relative_std", "min_tau_ms", "min_speed_px_s", "reconstruct_ms", "seen_min_observations",
+               "seen_max_gradient_std", "max_path_px"});
       auto& m = c.mosaic;
       m.width = s.integer("width", m.width, 8, 1 << 15);
       m.height = s.integer("height", m.width / 2, 4, 1 << 14);
@@ -90,21 +94,32 @@ MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_y
       m.min_tau_s = s.number("min_tau_ms", m.min_tau_s * 1e3, Range::kPositive, "ms") * 1e-3;
       m.min_speed_px_s = s.number("min_speed_px_s", m.min_speed_px_s, Range::kNonNegative, "px/s");
       c.reconstruct_period_ns = s.time_ns("reconstruct_ms", c.reconstruct_period_ns, Range::kPositive);
+      m.seen_min_observations = s.integer("seen_min_observations", m.seen_min_observations, 1, 1000000);
+      m.max_path_px = s.number("max_path_px", m.max_path_px, Range::kPositive, "mosaic px");
+      m.seen_max_gradient_std = s.number("seen_max_gradient_std", m.seen_max_gradient_std, Range::kNonNegative, "log units/px");
       std::string why;
       if (!m.Validate(&why)) s.fail("invalid mosaic settings: " + why, "consistent settings");
     }
+    c.tracker.contrast_threshold = c.mosaic.contrast_threshold;  // unless tracker.contrast_threshold says otherwise
     if (top.has("tracker")) {
       const Section s = top.child("tracker", false, "a map");
-      s.allow({"particles", "batch_size", "max_batch_ms", "motion_model", "motion_noise_rad_per_sqrt_s",
+      s.allow({"particles", "batch_size", "max_batch_ms", "motion_model", "measurement_model", "contrast_threshold", "event_stride", "motion_noise_rad_per_sqrt_s",
                "gyro_noise_rad_per_sqrt_s", "likelihood_std", "outlier_probability", "resample_ess_fraction", "seed"});
       auto& t = c.tracker;
       t.num_particles = s.integer("particles", t.num_particles, 1, 1000000);
+      t.contrast_threshold = s.number("contrast_threshold", c.mosaic.contrast_threshold, Range::kPositive, "log units");
       t.batch_size = s.integer("batch_size", t.batch_size, 1, 1000000);
+      c.event_stride = s.integer("event_stride", c.event_stride, 1, 1000000);
       t.max_batch_duration_ns = s.time_ns("max_batch_ms", t.max_batch_duration_ns, Range::kPositive);
       const std::string mm = s.string("motion_model", frontend::rotation_motion_model_name(t.motion_model),
                                       {"random_walk", "constant_velocity"});
       t.motion_model = mm == "random_walk" ? frontend::RotationMotionModel::kRandomWalk
                                            : frontend::RotationMotionModel::kConstantVelocity;
+      const std::string meas = s.string("measurement_model", frontend::rotation_measurement_model_name(t.measurement_model),
+                                        {"previous_mean", "relative_motion", "auto"});
+      t.measurement_model = meas == "previous_mean"     ? frontend::RotationMeasurementModel::kPreviousMean
+                            : meas == "relative_motion" ? frontend::RotationMeasurementModel::kRelativeMotion
+                                                        : frontend::RotationMeasurementModel::kAuto;
       t.motion_noise_rad_per_sqrt_s = s.number("motion_noise_rad_per_sqrt_s", t.motion_noise_rad_per_sqrt_s, Range::kPositive, "rad/sqrt(s)");
       t.gyro_noise_rad_per_sqrt_s = s.number("gyro_noise_rad_per_sqrt_s", t.gyro_noise_rad_per_sqrt_s, Range::kPositive, "rad/sqrt(s)");
       t.likelihood_std = s.number("likelihood_std", t.likelihood_std, Range::kPositive, "log units");
@@ -116,7 +131,8 @@ MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_y
     }
     if (top.has("bootstrap")) {
       const Section s = top.child("bootstrap", false, "a map");
-      s.allow({"duration_ms", "window_ms", "blur_px"});
+      s.allow({"duration_ms", "window_ms", "blur_px", "calibrate_contrast"});
+      c.calibrate_contrast = s.boolean("calibrate_contrast", c.calibrate_contrast);
       c.bootstrap_ns = s.time_ns("duration_ms", c.bootstrap_ns, Range::kNonNegative);
       c.bootstrap_window_ns = s.time_ns("window_ms", c.bootstrap_window_ns, Range::kPositive);
       c.cmax.blur_sigma_px = s.number("blur_px", c.cmax.blur_sigma_px, Range::kPositive, "px");
@@ -165,6 +181,8 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
   MosaicConfig cfg = args.config.empty() ? default_mosaic_config() : load_mosaic_config(args.config, &resolved);
   if (args.particles > 0) cfg.tracker.num_particles = args.particles;
   if (args.batch > 0) cfg.tracker.batch_size = args.batch;
+  if (args.stride > 0) cfg.event_stride = args.stride;
+  cfg.tracker.event_stride = cfg.event_stride > 0 ? cfg.event_stride : (args.use_imu ? 4 : 1);
   if (args.width > 0) {
     cfg.mosaic.width = args.width;
     cfg.mosaic.height = args.width / 2;
@@ -194,7 +212,6 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
   }
 
   const frontend::EventUndistorter undistorter(cal.camera);
-  frontend::RotationParticleFilter pf(undistorter, cfg.tracker);
   mapping::GradientMosaic mosaic(cfg.mosaic);
   const calib::Equirectangular proj(cfg.mosaic.width, cfg.mosaic.height);
   const Eigen::Quaterniond q_c_b(cal.T_c_b.rotation);
@@ -225,14 +242,32 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
   };
 
   uint64_t mapped = 0;
-  auto map_event = [&](const Event& e, const Eigen::Matrix3d& R_w_c, const Eigen::Vector3d& omega_w) {
+  // Bootstrap segments (every 8th mapped event) for the tracker's contrast calibration.
+  struct Segment {
+    Eigen::Vector2d from, to;
+    int polarity;
+  };
+  std::vector<Segment> boot_segments;
+  std::vector<Segment>* segments = cfg.calibrate_contrast ? &boot_segments : nullptr;
+  // Per sensor pixel: time and mosaic position of its previous event (the mapper's path start).
+  std::vector<Eigen::Vector2d> last_uv(static_cast<size_t>(W) * H);
+  // The event's direction is R_w_c (b + dt w_c x b): R_w_c at a nearby time, rotated to the
+  // event's time to first order (dt |w_c| is a few mrad at most within a particle-filter batch).
+  auto map_event = [&](const Event& e, const Eigen::Matrix3d& R_w_c, const Eigen::Vector3d& w_c, double dt) {
     const size_t p = static_cast<size_t>(e.y) * W + e.x;
+    if (!undistorter.valid(e.x, e.y)) return;
     const int64_t prev = last_t[p];
+    const Eigen::Vector3d b = undistorter.bearing(e.x, e.y).cast<double>();
+    const Eigen::Vector2d uv = proj.project(R_w_c * (b + dt * w_c.cross(b)));
     last_t[p] = e.t_ns;
-    if (prev == INT64_MIN || !undistorter.valid(e.x, e.y)) return;
-    Eigen::Vector2d uv;
-    const Eigen::Vector2d v = mapping::mosaic_pixel_velocity(proj, R_w_c, omega_w, undistorter.bearing(e.x, e.y).cast<double>(), &uv);
-    if (mosaic.update(uv, v, static_cast<double>(e.t_ns - prev) * 1e-9, e.polarity)) ++mapped;
+    const Eigen::Vector2d uv_prev = last_uv[p];
+    last_uv[p] = uv;
+    if (prev == INT64_MIN) return;
+    if (mosaic.update_segment(uv_prev, uv, static_cast<double>(e.t_ns - prev) * 1e-9, e.polarity) ==
+        mapping::MosaicUpdate::kApplied) {
+      ++mapped;
+      if (segments && (mapped % 8) == 0) segments->push_back({uv_prev, uv, e.polarity});
+    }
   };
 
   // ---- bootstrap: rotation from the gyro or from contrast-maximisation rates -------------------
@@ -273,7 +308,7 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
       const Event& e = events[k];
       const Eigen::Vector3d w_c = args.use_imu ? gyro_c_at(e.t_ns) : omega_c;
       const Eigen::Matrix3d R_e = R * calib::so3_exp(w_c * (static_cast<double>(e.t_ns - tw0) * 1e-9));
-      map_event(e, R_e, R_e * w_c);
+      map_event(e, R_e, Eigen::Vector3d::Zero(), 0.0);
     }
     // Advance R to the window's end (gyro: integrate the samples inside).
     if (args.use_imu) {
@@ -290,6 +325,33 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
   }
   mapping::MosaicReconstruction rec = mosaic.reconstruct(mapping::GradientMosaic::ReconstructMode::kFull);
   to_map(rec, &map);
+  segments = nullptr;
+  // The tracker's contrast: the mosaic's own log-intensity change along the bootstrap's event
+  // paths (poses from the gyro or CMax, not from the tracker). The reconstruction is smoother than
+  // the scene, so its change per event is below the sensor's C; tracking with the sensor's C
+  // against it makes the tracker over-rotate (previous_mean) until it matches.
+  double contrast_used = cfg.tracker.contrast_threshold;
+  int64_t contrast_samples = 0;
+  if (cfg.calibrate_contrast) {
+    const frontend::LogIntensityMapView v0{cfg.mosaic.width, cfg.mosaic.height, map.data()};
+    double sum = 0;
+    for (const Segment& sg : boot_segments) {
+      const float a = v0.sample(static_cast<float>(sg.to.x()), static_cast<float>(sg.to.y()));
+      const float b = v0.sample(static_cast<float>(sg.from.x()), static_cast<float>(sg.from.y()));
+      if (std::isnan(a) || std::isnan(b)) continue;
+      sum += sg.polarity * static_cast<double>(a - b);
+      ++contrast_samples;
+    }
+    if (contrast_samples >= 1000 && sum > 0) {
+      contrast_used = std::min(cfg.tracker.contrast_threshold, sum / static_cast<double>(contrast_samples));
+    } else {
+      log_warning("evio mosaic: too few bootstrap events (" + std::to_string(contrast_samples) +
+               ") to calibrate the tracker's contrast; using tracker.contrast_threshold " + num(contrast_used));
+    }
+  }
+  frontend::RotationParticleFilterOptions tracker_options = cfg.tracker;
+  tracker_options.contrast_threshold = contrast_used;
+  frontend::RotationParticleFilter pf(undistorter, tracker_options);
   const int64_t t_track0 = i < events.size() ? events[i].t_ns : t_last;
   pf.reset(Eigen::Quaterniond(R), t_track0);
   frontend::LogIntensityMapView view;
@@ -319,8 +381,7 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
     const Eigen::Vector3d w_c = pf.angular_velocity_c();
     const int64_t t_pf = pf.time_ns();
     for (size_t k = i; k < j; ++k) {
-      const Eigen::Matrix3d R_e = R_pf * calib::so3_exp(w_c * (static_cast<double>(events[k].t_ns - t_pf) * 1e-9));
-      map_event(events[k], R_e, R_e * w_c);
+      map_event(events[k], R_pf, w_c, static_cast<double>(events[k].t_ns - t_pf) * 1e-9);
     }
     record(t_pf, R_pf);
     const int64_t t_now = events[j - 1].t_ns;
@@ -363,11 +424,13 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
       << ",\n  \"real_time_factor\": " << num(duration_s > 0 ? processing_s / duration_s : 0)
       << ",\n  \"events_per_s\": " << num(processing_s > 0 ? events.size() / processing_s : 0)
       << ",\n  \"use_imu\": " << (args.use_imu ? "true" : "false") << ",\n  \"particles\": " << cfg.tracker.num_particles
-      << ",\n  \"batch_size\": " << cfg.tracker.batch_size << ",\n  \"mosaic_size\": [" << cfg.mosaic.width << ", "
+      << ",\n  \"batch_size\": " << cfg.tracker.batch_size << ",\n  \"event_stride\": " << cfg.tracker.event_stride
+      << ",\n  \"measurement_model\": \"" << frontend::rotation_measurement_model_name(cfg.tracker.measurement_model) << "\"" << ",\n  \"mosaic_size\": [" << cfg.mosaic.width << ", "
       << cfg.mosaic.height << "],\n  \"bootstrap\": {\"method\": \"" << (args.use_imu ? "gyro" : "contrast_maximisation")
-      << "\", \"duration_s\": " << num((t_track0 - t0) * 1e-9) << ", \"cmax_windows\": " << cmax_windows << "}"
+      << "\", \"duration_s\": " << num((t_track0 - t0) * 1e-9) << ", \"cmax_windows\": " << cmax_windows
+      << ", \"tracker_contrast\": " << num(contrast_used) << ", \"contrast_samples\": " << contrast_samples << "}"
       << ",\n  \"tracker\": {\"events_used\": " << st.events_used << ", \"skipped_no_previous\": " << st.skipped_no_previous
-      << ", \"skipped_unknown_map\": " << st.skipped_unknown_map << ", \"batches\": " << st.batches
+      << ", \"skipped_unknown_map\": " << st.skipped_unknown_map << ", \"skipped_stride\": " << st.skipped_stride << ", \"batches\": " << st.batches
       << ", \"resamples\": " << st.resamples << ", \"gyro_predictions\": " << st.gyro_predictions << "}"
       << ",\n  \"mapper\": {\"events_mapped\": " << mapped << ", \"reconstructions\": " << reconstructions
       << ", \"seen_pixels\": " << seen << ", \"seen_fraction\": " << num(static_cast<double>(seen) / static_cast<double>(rec.seen.size()))
@@ -420,7 +483,7 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
           }
         const mapping::ImageQuality q = mapping::compare_images(rec.log_intensity, ref, &rec.seen);
         quality_json = ",\n  \"mosaic_quality\": {\"psnr_db\": " + num(q.psnr_db) + ", \"ssim\": " + num(q.ssim) +
-                       ", \"rmse_log\": " + num(q.rmse) + ", \"pixels\": " + std::to_string(q.pixels) +
+                       ", \"rmse_log\": " + num(q.rmse) + ", \"contrast_gain\": " + num(q.scale) + ", \"pixels\": " + std::to_string(q.pixels) +
                        ", \"fit\": \"affine in log intensity over the seen pixels\"}";
         out << "mosaic vs true panorama: PSNR " << num(q.psnr_db) << " dB, SSIM " << num(q.ssim) << " over "
             << q.pixels << " seen pixels (affine log-intensity fit)\n";

@@ -62,9 +62,16 @@ TEST(MosaicCommand, ShortRotationWithAndWithoutGyro) {
     EXPECT_GT(json_value(stats, "real_time_factor"), 0);
     const double rms = json_value(ev, "rot_rms_deg"), mx = json_value(ev, "rot_max_deg");
     EXPECT_TRUE(std::isfinite(json_value(ev, "psnr_db"))) << ev;
-    // Measured (1 s, up to ~170 deg/s): see the closing note of issue 9; bounds guard regressions.
-    EXPECT_LT(rms, use_imu ? 5.0 : 15.0) << ev;
+    // Measured (1 s, up to ~200 deg/s): 0.23 deg RMS with the gyro, 2.0 deg events only; PSNR
+    // 27 / 20 dB against the true panorama. Bounds guard regressions.
+    EXPECT_LT(rms, use_imu ? 0.6 : 4.0) << ev;
     EXPECT_LE(rms, mx);
+    EXPECT_GT(json_value(ev, "psnr_db"), use_imu ? 24.0 : 17.0) << ev;
+    // The tracker's contrast is calibrated on the bootstrap mosaic: below the sensor's C.
+    const double c = json_value(stats, "tracker_contrast");
+    EXPECT_GT(c, 0.05) << stats;
+    EXPECT_LE(c, 0.2) << stats;
+    EXPECT_EQ(json_value(stats, "event_stride"), use_imu ? 4 : 1) << stats;
   }
 }
 
@@ -88,6 +95,24 @@ TEST(MosaicConfig, ErrorsNameFileLineAndKey) {
   EXPECT_EQ(c.mosaic.height, 256);
   EXPECT_EQ(c.tracker.num_particles, 300);
   EXPECT_NE(resolved.find("particles: 300"), std::string::npos) << resolved;
+  // The tracker's contrast follows the mosaic's unless given; model names are checked.
+  std::ofstream(p) << "mosaic: {contrast_threshold: 0.3, max_path_px: 4, seen_max_gradient_std: 0.1}\n"
+                      "tracker: {measurement_model: previous_mean, event_stride: 3}\nbootstrap: {calibrate_contrast: false}\n";
+  const MosaicConfig d = load_mosaic_config(p);
+  EXPECT_DOUBLE_EQ(d.tracker.contrast_threshold, 0.3);
+  EXPECT_DOUBLE_EQ(d.mosaic.max_path_px, 4.0);
+  EXPECT_DOUBLE_EQ(d.mosaic.seen_max_gradient_std, 0.1);
+  EXPECT_EQ(d.tracker.measurement_model, frontend::RotationMeasurementModel::kPreviousMean);
+  EXPECT_EQ(d.event_stride, 3);
+  EXPECT_FALSE(d.calibrate_contrast);
+  std::ofstream(p) << "tracker:\n  measurement_model: kim\n";
+  try {
+    load_mosaic_config(p);
+    FAIL() << "expected an error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("bad.yaml:2"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("previous_mean"), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace
