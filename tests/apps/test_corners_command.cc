@@ -14,16 +14,12 @@
 #include "evio/sensors/ecd.h"
 #include "evio_test/real_data.h"
 #include "evio_test/temp_dir.h"
+#include "evio_test/text_file.h"
 
 namespace evio::apps {
 namespace {
 
-std::string read(const std::string& p) {
-  std::ifstream f(p);
-  std::stringstream s;
-  s << f.rdbuf();
-  return s.str();
-}
+std::string read(const std::string& p) { return evio_test::read_text(p); }
 
 size_t data_lines(const std::string& text) {
   size_t n = 0;

@@ -13,23 +13,15 @@
 
 #include "evio/calib/error.h"
 #include "evio_test/temp_dir.h"
+#include "evio_test/text_file.h"
 #include "simulate_command.h"
 
 namespace evio::apps {
 namespace {
 
-std::string read(const std::string& p) {
-  std::ifstream f(p);
-  std::stringstream s;
-  s << f.rdbuf();
-  return s.str();
-}
+std::string read(const std::string& p) { return evio_test::read_text(p); }
 
-double json_value(const std::string& j, const std::string& key) {
-  std::smatch m;
-  if (!std::regex_search(j, m, std::regex("\"" + key + "\": ([-0-9.eE+]+)"))) return std::nan("");
-  return std::stod(m[1]);
-}
+double json_value(const std::string& j, const std::string& key) { return evio_test::json_number(j, key); }
 
 std::string simulate_rotation(const evio_test::TempDir& dir, double duration_s) {
   SimulateArgs sa;

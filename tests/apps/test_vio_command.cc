@@ -15,23 +15,15 @@
 #include "evio/sensors/ecd.h"
 #include "evio_test/real_data.h"
 #include "evio_test/temp_dir.h"
+#include "evio_test/text_file.h"
 #include "simulate_command.h"
 
 namespace evio::apps {
 namespace {
 
-std::string read(const std::string& p) {
-  std::ifstream f(p);
-  std::stringstream s;
-  s << f.rdbuf();
-  return s.str();
-}
+std::string read(const std::string& p) { return evio_test::read_text(p); }
 
-double json_value(const std::string& j, const std::string& key) {
-  std::smatch m;
-  if (!std::regex_search(j, m, std::regex("\"" + key + "\": ([-0-9.eE+]+)"))) return std::nan("");
-  return std::stod(m[1]);
-}
+double json_value(const std::string& j, const std::string& key) { return evio_test::json_number(j, key); }
 
 // Simulates `duration_s` of a datasets/ scene into dir/seq; returns the folder.
 std::string simulate(const evio_test::TempDir& dir, const std::string& scene, double duration_s) {
