@@ -58,7 +58,7 @@ std::string config_yaml(const MosaicConfig& c) {
     << ", max_batch_ms: " << num(t.max_batch_duration_ns * 1e-6)
     << ", motion_model: " << frontend::rotation_motion_model_name(t.motion_model)
     << ", measurement_model: " << frontend::rotation_measurement_model_name(t.measurement_model)
-    << ", contrast_threshold: " << num(t.contrast_threshold)
+    << ", contrast_threshold: " << num(t.contrast_threshold) << ", linearize_max_spread_rad: " << num(t.linearize_max_spread_rad)
     << ", motion_noise_rad_per_sqrt_s: " << num(t.motion_noise_rad_per_sqrt_s)
     << ", gyro_noise_rad_per_sqrt_s: " << num(t.gyro_noise_rad_per_sqrt_s) << ", likelihood_std: " << num(t.likelihood_std)
     << ", outlier_probability: " << num(t.outlier_probability) << ", resample_ess_fraction: " << num(t.resample_ess_fraction)
@@ -108,13 +108,14 @@ MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_y
     c.tracker.contrast_threshold = c.mosaic.contrast_threshold;  // unless tracker.contrast_threshold says otherwise
     if (top.has("tracker")) {
       const Section s = top.child("tracker", false, "a map");
-      s.allow({"particles", "batch_size", "max_batch_ms", "motion_model", "measurement_model", "contrast_threshold", "event_stride", "motion_noise_rad_per_sqrt_s",
+      s.allow({"particles", "batch_size", "max_batch_ms", "motion_model", "measurement_model", "contrast_threshold", "event_stride", "linearize_max_spread_rad", "motion_noise_rad_per_sqrt_s",
                "gyro_noise_rad_per_sqrt_s", "likelihood_std", "outlier_probability", "resample_ess_fraction", "seed"});
       auto& t = c.tracker;
       t.num_particles = s.integer("particles", t.num_particles, 1, 1000000);
       t.contrast_threshold = s.number("contrast_threshold", c.mosaic.contrast_threshold, Range::kPositive, "log units");
       t.batch_size = s.integer("batch_size", t.batch_size, 1, 1000000);
       c.event_stride = s.integer("event_stride", c.event_stride, 1, 1000000);
+      t.linearize_max_spread_rad = s.number("linearize_max_spread_rad", t.linearize_max_spread_rad, Range::kNonNegative, "rad");
       t.max_batch_duration_ns = s.time_ns("max_batch_ms", t.max_batch_duration_ns, Range::kPositive);
       const std::string mm = s.string("motion_model", frontend::rotation_motion_model_name(t.motion_model),
                                       {"random_walk", "constant_velocity"});
@@ -455,7 +456,7 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
       << ", \"tracker_contrast\": " << num(contrast_used) << ", \"contrast_samples\": " << contrast_samples << "}"
       << ",\n  \"tracker\": {\"events_used\": " << st.events_used << ", \"skipped_no_previous\": " << st.skipped_no_previous
       << ", \"skipped_unknown_map\": " << st.skipped_unknown_map << ", \"skipped_stride\": " << st.skipped_stride << ", \"batches\": " << st.batches
-      << ", \"resamples\": " << st.resamples << ", \"gyro_predictions\": " << st.gyro_predictions << "}"
+      << ", \"resamples\": " << st.resamples << ", \"linearized_batches\": " << st.linearized_batches << ", \"gyro_predictions\": " << st.gyro_predictions << "}"
       << ",\n  \"mapper\": {\"events_mapped\": " << mapped << ", \"reconstructions\": " << reconstructions
       << ", \"seen_pixels\": " << seen << ", \"seen_fraction\": " << num(static_cast<double>(seen) / static_cast<double>(rec.seen.size()))
       << "},\n  \"snapshots\": " << snapshots << "\n}\n";

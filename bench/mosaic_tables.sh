@@ -38,7 +38,7 @@ run() {  # seq out_name [args...]; prints "rms max events/s rtf psnr ssim"
   local seq=$1 name=$2; shift 2
   local o="$out/runs/$name"
   "$evio" -q mosaic "$seqs/$seq" --out "$o" --gt "$seqs/$seq/groundtruth.txt" "$@" > "$o.log" 2>&1
-  printf '%.3f %.3f %.0f %.2f %.1f %.3f' "$(json "$o/eval.json" rot_rms_deg)" "$(json "$o/eval.json" rot_max_deg)" \
+  printf '%.3f %.3f %.0f %.2f %.1f %.3f\n' "$(json "$o/eval.json" rot_rms_deg)" "$(json "$o/eval.json" rot_max_deg)" \
     "$(json "$o/stats.json" events_per_s)" "$(json "$o/stats.json" real_time_factor)" \
     "$(json "$o/eval.json" psnr_db)" "$(json "$o/eval.json" ssim)"
 }

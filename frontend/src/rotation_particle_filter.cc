@@ -123,6 +123,8 @@ bool RotationParticleFilterOptions::Validate(std::string* why) const {
     return fail(why, "resample_ess_fraction " + num(resample_ess_fraction) + " (expected in [0, 1])");
   if (!(initial_spread_rad >= 0) || !std::isfinite(initial_spread_rad))
     return fail(why, "initial_spread_rad " + num(initial_spread_rad) + " (expected >= 0 rad)");
+  if (!(linearize_max_spread_rad >= 0) || !std::isfinite(linearize_max_spread_rad))
+    return fail(why, "linearize_max_spread_rad " + num(linearize_max_spread_rad) + " (expected >= 0 rad; 0 = exact)");
   if (velocity_window_ns <= 0)
     return fail(why, "velocity_window_ns " + std::to_string(velocity_window_ns) + " (expected > 0 ns)");
   if (!(velocity_smoothing > 0 && velocity_smoothing <= 1))
@@ -426,6 +428,27 @@ void RotationParticleFilter::process_batch(const LogIntensityMapView& map) {
     // ll_[i * m + j]: log-likelihood of event j under particle i (max-mixture), NaN where the
     // particle looks at an unknown texel.
     ll_.resize(np * m);
+    if (linearize_batch(m, relative, W, H)) {
+      ++stats_.linearized_batches;
+      // Linearised: u_i = u0 + M delta_i per event and sample point (see linearize_batch).
+      const float* lin = lin_.data();
+      const size_t stride = relative ? 16 : 8;
+      for (size_t i = 0; i < np; ++i) {
+        const float ax = delta_[3 * i], ay = delta_[3 * i + 1], az = delta_[3 * i + 2];
+        float* ll_i = &ll_[i * m];
+        for (size_t j = 0; j < m; ++j) {
+          const float* a = lin + stride * j;
+          float L = sample_index(data, W, H, a[0] + a[2] * ax + a[3] * ay + a[4] * az,
+                                 a[1] + a[5] * ax + a[6] * ay + a[7] * az);
+          if (relative)
+            L -= sample_index(data, W, H, a[8] + a[10] * ax + a[11] * ay + a[12] * az,
+                              a[9] + a[13] * ax + a[14] * ay + a[15] * az);
+          const float r = L - target[j];
+          const float ll = nhiv * r * r;
+          ll_i[j] = ll < floor_ll ? floor_ll : ll;
+        }
+      }
+    } else {
     for (size_t i = 0; i < np; ++i) {
       const float* R = &rot_[9 * i];
       const float r00 = R[0], r01 = R[1], r02 = R[2], r10 = R[3], r11 = R[4], r12 = R[5], r20 = R[6], r21 = R[7],
@@ -449,6 +472,7 @@ void RotationParticleFilter::process_batch(const LogIntensityMapView& map) {
         const float ll = nhiv * r * r;
         ll_i[j] = ll < floor_ll ? floor_ll : ll;  // max-mixture; NaN (unknown texel) stays NaN
       }
+    }
     }
     // An unknown texel says nothing about the particle: it gets the mean log-likelihood of the
     // particles that see a known texel for the same event (neutral), so the cloud is not pulled
@@ -495,6 +519,59 @@ void RotationParticleFilter::process_batch(const LogIntensityMapView& map) {
   }
   pending_.clear();
   update_velocity();
+}
+
+// Every particle's projection linearised about the mean: with R_i = R_m Exp(delta_i), the
+// direction R_i b = R_m (b + delta_i x b) + O(|delta|^2), so a sample point's texel position is
+// (u0, v0) + M delta_i with M = -J_pi(R_m b) R_m [b]x. Per event: one exact projection and a
+// 2x3 matrix per sample point instead of one projection per particle. Refused (exact path) when
+// the cloud is wider than linearize_max_spread_rad or a direction is within ~18 deg of a pole,
+// where the equirectangular u is strongly curved. Fills lin_ (8 floats per sample point: u0, v0,
+// M row-major) and delta_ (3 per particle).
+bool RotationParticleFilter::linearize_batch(size_t m, bool relative, int W, int H) {
+  if (options_.linearize_max_spread_rad <= 0) return false;
+  const size_t np = particles_.size();
+  delta_.resize(3 * np);
+  const Eigen::Quaterniond mc = mean_.conjugate();
+  const double max_spread2 = options_.linearize_max_spread_rad * options_.linearize_max_spread_rad;
+  for (size_t i = 0; i < np; ++i) {
+    Eigen::Quaterniond q = mc * particles_[i];
+    if (q.w() < 0) q.coeffs() = -q.coeffs();
+    const double vn = q.vec().norm();
+    const Eigen::Vector3d d = vn > 1e-12 ? Eigen::Vector3d(q.vec() * (2.0 * std::atan2(vn, q.w()) / vn))
+                                         : Eigen::Vector3d(2.0 * q.vec());
+    if (d.squaredNorm() > max_spread2) return false;
+    delta_[3 * i] = static_cast<float>(d.x());
+    delta_[3 * i + 1] = static_cast<float>(d.y());
+    delta_[3 * i + 2] = static_cast<float>(d.z());
+  }
+  const Eigen::Matrix3f Rm = mean_.toRotationMatrix().cast<float>();
+  const float ku = static_cast<float>(W) * (0.5f / kPiF), kv = static_cast<float>(H) * (1.0f / kPiF);
+  const float u_off = 0.5f * static_cast<float>(W) - 0.5f;
+  const size_t points = relative ? 2 : 1;
+  lin_.resize(8 * points * m);
+  for (size_t j = 0; j < m; ++j) {
+    for (size_t k = 0; k < points; ++k) {
+      const Eigen::Vector3f b = k == 0 ? Eigen::Vector3f(sbx_[j], sby_[j], sbz_[j]) : Eigen::Vector3f(sb2x_[j], sb2y_[j], sb2z_[j]);
+      const Eigen::Vector3f d = Rm * b;
+      const float rxy2 = d.x() * d.x() + d.y() * d.y();
+      const float n2 = rxy2 + d.z() * d.z();
+      if (!(rxy2 > 0.1f * n2)) return false;  // within ~18 deg of a pole (or not finite)
+      const float rxy = std::sqrt(rxy2);
+      Eigen::Matrix<float, 2, 3> J;
+      J << -d.y() * ku / rxy2, d.x() * ku / rxy2, 0.0f,  //
+          d.x() * d.z() * kv / (rxy * n2), d.y() * d.z() * kv / (rxy * n2), -rxy * kv / n2;
+      Eigen::Matrix3f bx;
+      bx << 0.0f, -b.z(), b.y(), b.z(), 0.0f, -b.x(), -b.y(), b.x(), 0.0f;
+      const Eigen::Matrix<float, 2, 3> M = -J * (Rm * bx);
+      float* a = &lin_[8 * (points * j + k)];
+      a[0] = fast_atan2(d.y(), d.x()) * ku + u_off;
+      a[1] = fast_atan2(rxy, d.z()) * kv - 0.5f;
+      a[2] = M(0, 0), a[3] = M(0, 1), a[4] = M(0, 2);
+      a[5] = M(1, 0), a[6] = M(1, 1), a[7] = M(1, 2);
+    }
+  }
+  return true;
 }
 
 void RotationParticleFilter::normalize_weights() {

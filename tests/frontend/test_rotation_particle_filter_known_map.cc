@@ -90,3 +90,32 @@ TEST(RotationParticleFilterKnownMap, AngularVelocityFromMeanRotations) {
 
 }  // namespace
 }  // namespace evio::frontend
+
+namespace evio::frontend {
+namespace {
+
+// The linearised projection (default) against the exact per-particle projection: the same error
+// (measured 1.02 vs 0.99 mrad with the gyro, 7.98 vs 7.89 without) with most batches linearised
+// (the rest: cloud wider than linearize_max_spread_rad).
+TEST(RotationParticleFilterKnownMap, LinearisedProjectionMatchesExact) {
+  test::PanoramaScenarioConfig c;
+  c.peak_speed_deg_s = 150;
+  c.duration_s = 0.5;
+  const test::PanoramaScenario s = test::make_panorama_scenario(c);
+  for (bool gyro : {true, false}) {
+    RotationParticleFilterOptions o;
+    const test::PanoramaRunResult lin = test::run_panorama_filter(s, o, gyro);
+    o.linearize_max_spread_rad = 0;
+    const test::PanoramaRunResult exact = test::run_panorama_filter(s, o, gyro);
+    std::printf("[%s] linearised rms %.2f mrad (%.0f events/s, %lld of %lld batches), exact rms %.2f mrad (%.0f events/s)\n",
+                gyro ? "gyro" : "no gyro", 1e3 * lin.rms_rad, lin.events_per_s,
+                static_cast<long long>(lin.stats.linearized_batches), static_cast<long long>(lin.stats.batches),
+                1e3 * exact.rms_rad, exact.events_per_s);
+    EXPECT_EQ(exact.stats.linearized_batches, 0);
+    EXPECT_GT(lin.stats.linearized_batches, lin.stats.batches * 3 / 4);  // measured 97% (gyro), 79%
+    EXPECT_NEAR(lin.rms_rad, exact.rms_rad, gyro ? 0.001 : 0.005);
+  }
+}
+
+}  // namespace
+}  // namespace evio::frontend

@@ -114,6 +114,11 @@ struct RotationParticleFilterOptions {
   // carry nearly the same information, so a stride trades little accuracy for speed (the
   // particles' cost is linear in the events used).
   int event_stride = 1;
+  // Project each event once under the mean and move it to every particle with the projection's
+  // Jacobian (first order in the particle's offset from the mean) while every particle is within
+  // this angle of the mean, rad (default 0.02: second-order error below 0.03 texel at 1024 px
+  // width); 0 = always project exactly per particle. Directions near the poles use the exact path.
+  double linearize_max_spread_rad = 0.02;
   // A batch is closed early when the next event is more than this after its first event, ns, > 0
   // (default 1 ms), so sparse streams are not held back.
   int64_t max_batch_duration_ns = 1'000'000;
@@ -165,6 +170,7 @@ struct RotationParticleFilterStats {
   int64_t skipped_invalid = 0;         // outside the sensor, or a pixel without a bearing
   int64_t batches = 0;
   int64_t resamples = 0;
+  int64_t linearized_batches = 0;      // batches weighted through the linearised projection
   int64_t gyro_predictions = 0;        // predictions driven (at least partly) by the gyro
 };
 
@@ -235,6 +241,7 @@ class RotationParticleFilter {
     int8_t polarity;
   };
   void process_batch(const LogIntensityMapView& map);
+  bool linearize_batch(size_t m, bool relative, int W, int H);
   void normalize_weights();
   void compute_mean();
   void update_velocity();
@@ -275,6 +282,8 @@ class RotationParticleFilter {
   std::vector<float> sb2x_, sb2y_, sb2z_;  // kRelativeMotion: the bearing moved back, dR b
   std::vector<float> rot_;  // per-particle float rotation matrices, 9 floats each
   std::vector<float> ll_;   // per particle and used event log-likelihood of the batch
+  std::vector<float> lin_;    // linearised projections of the batch (linearize_batch)
+  std::vector<float> delta_;  // per particle Log(mean^T R_i)
 
   std::deque<std::pair<int64_t, Eigen::Vector3d>> gyro_;
   Eigen::Vector3d omega_gyro_c_ = Eigen::Vector3d::Zero();
