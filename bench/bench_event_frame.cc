@@ -15,6 +15,8 @@
 
 #include <benchmark/benchmark.h>
 
+#include "bench_reporter.h"
+
 #include "evio/calib/geometry.h"
 #include "evio/frontend/event_frame.h"
 
@@ -117,33 +119,11 @@ void BM_BuilderConstruction(benchmark::State& state) {
 }
 BENCHMARK(BM_BuilderConstruction)->Unit(benchmark::kMillisecond);
 
-class JsonLineReporter : public benchmark::ConsoleReporter {
- public:
-  JsonLineReporter() : ConsoleReporter(OO_Tabular) {}
-  void ReportRuns(const std::vector<Run>& runs) override {
-    ConsoleReporter::ReportRuns(runs);
-    for (const Run& r : runs) {
-      const auto ns = r.counters.find("ns_per_event");
-      const auto fps = r.counters.find("frames_per_s");
-      if (ns == r.counters.end() || fps == r.counters.end()) continue;
-      lines_.push_back("{\"benchmark\":\"" + r.benchmark_name() + "\",\"ns_per_event\":" + std::to_string(ns->second) +
-                       ",\"frames_per_s\":" + std::to_string(fps->second) + "}");
-    }
-  }
-  void Finalize() override {
-    ConsoleReporter::Finalize();
-    for (const auto& l : lines_) std::printf("%s\n", l.c_str());
-  }
-
- private:
-  std::vector<std::string> lines_;
-};
-
 }  // namespace
 
 int main(int argc, char** argv) {
   benchmark::Initialize(&argc, argv);
-  JsonLineReporter reporter;
+  evio::bench::JsonLinesReporter reporter({{"ns_per_event", "ns_per_event"}, {"frames_per_s", "frames_per_s"}});
   benchmark::RunSpecifiedBenchmarks(&reporter);
   benchmark::Shutdown();
   return 0;

@@ -10,6 +10,8 @@
 #include <vector>
 
 #include <benchmark/benchmark.h>
+
+#include "bench_reporter.h"
 #include <opencv2/core.hpp>
 
 #include "evio/mapping/gradient_mosaic.h"
@@ -113,35 +115,12 @@ void BM_EkfUpdate(benchmark::State& state) {
 }
 BENCHMARK(BM_EkfUpdate);
 
-class JsonLineReporter : public benchmark::ConsoleReporter {
- public:
-  JsonLineReporter() : ConsoleReporter(OO_Tabular) {}
-  void ReportRuns(const std::vector<Run>& runs) override {
-    ConsoleReporter::ReportRuns(runs);
-    for (const Run& r : runs) {
-      for (const char* key : {"ms_per_solve", "ns_per_event"}) {
-        const auto it = r.counters.find(key);
-        if (it == r.counters.end()) continue;
-        lines_.push_back("{\"benchmark\":\"" + r.benchmark_name() + "\",\"" + key + "\":" + std::to_string(it->second) +
-                         "}");
-      }
-    }
-  }
-  void Finalize() override {
-    ConsoleReporter::Finalize();
-    for (const auto& l : lines_) std::printf("%s\n", l.c_str());
-  }
-
- private:
-  std::vector<std::string> lines_;
-};
-
 }  // namespace
 
 int main(int argc, char** argv) {
   cv::setNumThreads(1);  // one core, as stated above
   benchmark::Initialize(&argc, argv);
-  JsonLineReporter reporter;
+  evio::bench::JsonLinesReporter reporter({{"ms_per_solve", "ms_per_solve"}, {"ns_per_event", "ns_per_event"}});
   benchmark::RunSpecifiedBenchmarks(&reporter);
   benchmark::Shutdown();
   return 0;

@@ -13,6 +13,8 @@
 
 #include <benchmark/benchmark.h>
 
+#include "bench_reporter.h"
+
 #include "panorama_rotation_scenario.h"
 
 namespace {
@@ -64,33 +66,11 @@ BENCHMARK(BM_Update)
 // The default options (N = 100, batch 10), repeated for a stable events/s.
 BENCHMARK(BM_Update)->Args({100, 10})->ArgNames({"N", "batch"})->Unit(benchmark::kMillisecond)->MinTime(2.0);
 
-class JsonLineReporter : public benchmark::ConsoleReporter {
- public:
-  JsonLineReporter() : ConsoleReporter(OO_Tabular) {}
-  void ReportRuns(const std::vector<Run>& runs) override {
-    ConsoleReporter::ReportRuns(runs);
-    for (const Run& r : runs) {
-      const auto ns = r.counters.find("ns_per_event_particle");
-      const auto ips = r.counters.find("items_per_second");
-      if (ns == r.counters.end() || ips == r.counters.end()) continue;
-      lines_.push_back("{\"benchmark\":\"" + r.benchmark_name() + "\",\"ns_per_event_particle\":" +
-                       std::to_string(ns->second) + ",\"events_per_s\":" + std::to_string(ips->second) + "}");
-    }
-  }
-  void Finalize() override {
-    ConsoleReporter::Finalize();
-    for (const auto& l : lines_) std::printf("%s\n", l.c_str());
-  }
-
- private:
-  std::vector<std::string> lines_;
-};
-
 }  // namespace
 
 int main(int argc, char** argv) {
   benchmark::Initialize(&argc, argv);
-  JsonLineReporter reporter;
+  evio::bench::JsonLinesReporter reporter({{"ns_per_event_particle", "ns_per_event_particle"}, {"items_per_second", "events_per_s"}});
   benchmark::RunSpecifiedBenchmarks(&reporter);
   benchmark::Shutdown();
   return 0;
