@@ -380,6 +380,21 @@ std::string PlanarScene::describe() const {
   return s.str();
 }
 
+std::optional<double> PlanarScene::intersect(const Eigen::Vector3d& origin_w, const Eigen::Vector3d& dir_w) const {
+  std::optional<double> best;
+  if (!origin_w.allFinite() || !dir_w.allFinite() || dir_w.squaredNorm() == 0) return best;
+  for (const TexturedPlane& p : planes_) {
+    const Eigen::Vector3d n = p.axis_u_w.cross(p.axis_v_w);
+    const double den = n.dot(dir_w);
+    if (std::abs(den) < 1e-12 * dir_w.norm()) continue;  // parallel to the plane
+    const double s = n.dot(p.center_w - origin_w) / den;
+    if (!(s > 0) || (best && s >= *best)) continue;
+    const Eigen::Vector3d d = origin_w + s * dir_w - p.center_w;
+    if (std::abs(d.dot(p.axis_u_w)) <= 0.5 * p.width_m && std::abs(d.dot(p.axis_v_w)) <= 0.5 * p.height_m) best = s;
+  }
+  return best;
+}
+
 void PlanarScene::render(const CameraState& camera, const PixelRays& rays, const RenderRequest& request,
                          RenderedView* out) const {
   prepare_view(camera, rays, request, out);

@@ -4,6 +4,8 @@
 #include <cstring>
 #include <random>
 
+#include <utility>
+
 #include <gtest/gtest.h>
 #include <opencv2/core.hpp>
 
@@ -335,6 +337,17 @@ TEST(PlanarScene, NearerPlaneOccludesFartherLabelsAndBackground) {
     EXPECT_EQ(v.label.at<uint16_t>(24, 0), 0);
     EXPECT_TRUE(std::isinf(v.depth.at<float>(24, 0)));
     EXPECT_NEAR(v.intensity.at<float>(24, 0), 0.05, 1e-7);
+    // intersect agrees with the rendered depth (nearest hit, unit-free direction), misses outside.
+    const Eigen::Vector3d o = Eigen::Vector3d::Zero();
+    for (const auto& [x, y] : {std::pair<int, int>{32, 24}, {60, 24}, {45, 10}}) {
+      const Eigen::Vector3d d = 2.5 * rays.centre(x, y);
+      const auto s_hit = scene.intersect(o, d);
+      ASSERT_TRUE(s_hit.has_value()) << x << "," << y;
+      EXPECT_NEAR((*s_hit * d).z(), v.depth.at<float>(y, x), 1e-5) << x << "," << y;
+    }
+    EXPECT_FALSE(scene.intersect(o, rays.centre(0, 24)).has_value());
+    EXPECT_FALSE(scene.intersect(o, -rays.centre(32, 24)).has_value());  // behind the origin
+    EXPECT_FALSE(scene.intersect(o, Eigen::Vector3d::UnitX()).has_value());  // parallel to the planes
   }
 }
 

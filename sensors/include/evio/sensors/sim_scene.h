@@ -7,6 +7,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -155,6 +156,10 @@ class PlanarScene final : public Scene {
               RenderedView* out) const override;
   std::string describe() const override;
   const std::vector<TexturedPlane>& planes() const { return planes_; }
+  // Nearest hit of the ray origin_w + s dir_w (s > 0, dir_w need not be unit) with a plane's
+  // rectangle, in double precision: the ray parameter s of the hit (the point is origin_w + s
+  // dir_w), nullopt when no plane is hit. Ground truth for feature-track evaluation.
+  std::optional<double> intersect(const Eigen::Vector3d& origin_w, const Eigen::Vector3d& dir_w) const;
 
  private:
   std::vector<TexturedPlane> planes_;

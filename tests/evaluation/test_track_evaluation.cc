@@ -1,0 +1,154 @@
+// Feature-track evaluation against ground truth: exact tracks score zero, a known per-frame drift
+// shows up as an error growing linearly with age (anchored) and is partly absorbed when
+// triangulated, gross errors are counted apart, tracks that end with their landmark in view are
+// counted as lost while visible, and tracks that leave the view are not.
+#include "evio/evaluation/track_evaluation.h"
+
+#include <cmath>
+#include <random>
+
+#include <gtest/gtest.h>
+
+namespace evio::evaluation {
+namespace {
+
+// A wall x = 2 m (world), camera looking along +x (camera z = world x, camera x = -world y,
+// camera y = -world z), body = camera, moving sideways along world y at 0.5 m/s; 50 frames at
+// 20 Hz.
+struct Scenario {
+  calib::CameraCalibration camera;
+  Trajectory gt;
+  std::vector<Eigen::Vector3d> points;
+  RayCaster cast = [](const Eigen::Vector3d& o, const Eigen::Vector3d& d) -> std::optional<double> {
+    if (!(d.x() > 1e-12)) return std::nullopt;
+    return (2.0 - o.x()) / d.x();
+  };
+  Scenario() {
+    calib::CameraIntrinsics K;
+    K.width = 240;
+    K.height = 180;
+    K.fx = K.fy = 200;
+    K.cx = 120;
+    K.cy = 90;
+    camera.camera = calib::PinholeCamera(K);
+    camera.has_T_c_b = true;
+    Eigen::Matrix3d R_w_c;
+    R_w_c << 0, 0, 1, -1, 0, 0, 0, -1, 0;
+    std::vector<StampedPose> poses;
+    for (int i = 0; i <= 300; ++i) {
+      const int64_t t = static_cast<int64_t>(i) * 10'000'000;
+      poses.push_back({t, calib::SE3(R_w_c, Eigen::Vector3d(0, 0.5 * 1e-9 * static_cast<double>(t), 0))});
+    }
+    gt = Trajectory(poses);
+    std::mt19937 rng(5);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    for (int i = 0; i < 200; ++i) points.push_back({2.0, 0.6 + 1.2 * u(rng), 0.8 * u(rng)});
+  }
+  // Observations of every point in view at frames 0..n-1 (50 ms apart); drift_px per frame of age
+  // added along the image y axis (across the motion: no depth explains it); a track ends after max_len frames (new id when re-observed).
+  std::vector<FeatureObservations> frames(int n, double drift_px, int max_len) const {
+    std::vector<FeatureObservations> out;
+    std::vector<int> age(points.size(), -1);
+    std::vector<int64_t> id(points.size(), 0);
+    int64_t next_id = 0;
+    for (int k = 0; k < n; ++k) {
+      FeatureObservations f;
+      f.t_ns = k * 50'000'000LL;
+      f.frame_id = k;
+      const calib::SE3 T_c_w = gt.interpolate(f.t_ns)->inverse();
+      for (size_t i = 0; i < points.size(); ++i) {
+        const Eigen::Vector3d p = T_c_w * points[i];
+        Eigen::Vector2d px;
+        const bool in = p.z() > 0 && camera.camera.project(p, &px) && px.x() > 8 && px.x() < 231 && px.y() > 8 && px.y() < 171;
+        if (!in || age[i] + 1 >= max_len) {
+          age[i] = in ? -2 : -1;  // -2: waits one frame out of the tracker before a new track
+          continue;
+        }
+        if (age[i] < 0) {
+          if (age[i] == -2) {
+            age[i] = -1;
+            continue;
+          }
+          id[i] = next_id++;
+        }
+        ++age[i];
+        px.y() += drift_px * age[i];
+        Eigen::Vector3d b;
+        EXPECT_TRUE(camera.camera.unproject(px, &b));
+        f.observations.push_back({id[i], b});
+      }
+      out.push_back(f);
+    }
+    return out;
+  }
+};
+
+TEST(TrackEvaluation, ExactTracksScoreZero) {
+  const Scenario s;
+  const auto frames = s.frames(40, 0.0, 1000);
+  const TrackEvaluation e = evaluate_tracks(frames, s.gt, s.camera, s.cast);
+  EXPECT_EQ(e.frames, 40);
+  EXPECT_GT(e.tracks, 50);
+  EXPECT_EQ(e.tracks_scored, e.tracks);
+  EXPECT_LT(e.median_px, 1e-6);
+  EXPECT_LT(e.p90_px, 1e-6);
+  EXPECT_EQ(e.gross_errors, 0);
+  // Points leave the view through the side: none of them is lost while visible.
+  EXPECT_GT(e.ended, 10);
+  EXPECT_EQ(e.lost_while_visible, 0);
+  TrackEvaluationOptions tri;
+  tri.reference = TrackReference::kTriangulated;
+  const TrackEvaluation t = evaluate_tracks(frames, s.gt, s.camera, {}, tri);
+  EXPECT_GT(t.tracks_scored, 0.8 * t.tracks);
+  EXPECT_LT(t.median_px, 1e-6);
+}
+
+TEST(TrackEvaluation, DriftGrowsWithAgeWhenAnchored) {
+  const Scenario s;
+  const double drift = 0.1;  // px per frame
+  const TrackEvaluation e = evaluate_tracks(s.frames(40, drift, 1000), s.gt, s.camera, s.cast);
+  for (int a : {1, 2, 5, 10, 20}) {
+    const TrackAgeBin& b = e.by_age[static_cast<size_t>(a - 1)];
+    ASSERT_GT(b.count, 10) << a;
+    EXPECT_NEAR(b.median_px, drift * a, 1e-6) << a;
+  }
+  // Triangulated: the point absorbs the mean of the drift, so the error stays below the anchored one.
+  TrackEvaluationOptions tri;
+  tri.reference = TrackReference::kTriangulated;
+  const TrackEvaluation t = evaluate_tracks(s.frames(40, drift, 1000), s.gt, s.camera, {}, tri);
+  EXPECT_GT(t.median_px, 0.01);
+  EXPECT_LT(t.by_age[19].median_px, 0.8 * e.by_age[19].median_px);
+}
+
+TEST(TrackEvaluation, GrossErrorsAndLostWhileVisible) {
+  const Scenario s;
+  TrackEvaluationOptions o;
+  o.gross_error_px = 1.0;
+  // Drift 0.3 px/frame: ages >= 4 are gross errors (> 1 px). Tracks cut after 5 observations
+  // while the point is still in view are lost while visible.
+  const TrackEvaluation e = evaluate_tracks(s.frames(30, 0.3, 5), s.gt, s.camera, s.cast, o);
+  EXPECT_GT(e.gross_errors, 0);
+  EXPECT_EQ(e.by_age[3].count, 0);
+  EXPECT_GT(e.by_age[2].count, 0);
+  EXPECT_GT(e.lost_while_visible, 0.5 * e.ended);
+  EXPECT_NEAR(e.median_lifetime_frames, 5, 1e-9);
+  EXPECT_NEAR(e.lost_fraction, static_cast<double>(e.lost_while_visible) / static_cast<double>(e.ended), 1e-12);
+}
+
+TEST(TrackEvaluation, BadOptionsAndMissingRayCaster) {
+  const Scenario s;
+  TrackEvaluationOptions o;
+  o.min_observations = 1;
+  std::string why;
+  EXPECT_FALSE(o.Validate(&why));
+  EXPECT_NE(why.find("min_observations"), std::string::npos);
+  EXPECT_THROW(evaluate_tracks({}, s.gt, s.camera, s.cast, o), std::invalid_argument);
+  EXPECT_THROW(evaluate_tracks({}, s.gt, s.camera, {}), std::invalid_argument);
+  const TrackEvaluation empty = evaluate_tracks({}, s.gt, s.camera, s.cast);
+  EXPECT_EQ(empty.frames, 0);
+  EXPECT_TRUE(std::isnan(empty.median_px));
+  EXPECT_FALSE(track_evaluation_json(empty).empty());
+}
+
+}  // namespace
+}  // namespace evio::evaluation
