@@ -6,15 +6,13 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
-#include <map>
-#include <memory>
+#include <optional>
 #include <ostream>
 #include <sstream>
 
 #include <yaml-cpp/yaml.h>
 
 #include "eval_command.h"
-#include "evio/backend/imu_preintegration.h"
 #include "evio/calib/calibration_io.h"
 #include "evio/calib/error.h"
 #include "evio/calib/log.h"
@@ -39,6 +37,11 @@ std::string num(double v) {
   return b;
 }
 
+// YAML names of the pipeline's choices: init.method `groundtruth` is the pipeline's `given`.
+const char* init_name(pipeline::VioInitMethod m) {
+  return m == pipeline::VioInitMethod::kGiven ? "groundtruth" : pipeline::to_string(m);
+}
+
 std::string loss_name(backend::RobustLoss l) {
   return l == backend::RobustLoss::kHuber ? "huber" : l == backend::RobustLoss::kCauchy ? "cauchy" : "none";
 }
@@ -47,7 +50,7 @@ std::string loss_name(backend::RobustLoss l) {
 std::string config_yaml(const VioConfig& c) {
   std::ostringstream y;
   y << "# evio vio configuration (resolved: every key with the value used)\n";
-  y << "frontend: " << c.frontend << "\n";
+  y << "frontend: " << pipeline::to_string(c.frontend) << "\n";
   y << "filters:\n  refractory: {enabled: " << (c.refractory_enabled ? "true" : "false")
     << ", period_ms: " << num(ns_to_ms(c.refractory.period_ns)) << "}\n";
   y << "  background_activity: {enabled: " << (c.background_activity_enabled ? "true" : "false")
@@ -89,26 +92,13 @@ std::string config_yaml(const VioConfig& c) {
     << ", accelerometer_random_walk: " << num(n.accelerometer_random_walk)
     << ", gyroscope_noise_density: " << num(n.gyroscope_noise_density)
     << ", gyroscope_random_walk: " << num(n.gyroscope_random_walk) << ", update_rate_hz: " << num(n.update_rate_hz) << "}\n";
-  y << "init: {method: " << c.init << ", window_ms: " << num(ns_to_ms(c.init_window_ns)) << "}\n";
+  y << "init: {method: " << init_name(c.init) << ", window_ms: " << num(ns_to_ms(c.init_window_ns)) << "}\n";
   return y.str();
 }
 
 }  // namespace
 
-VioConfig default_vio_config() {
-  VioConfig c;
-  // IMU densities of the simulator's default (an MPU-6150-class DAVIS IMU).
-  c.imu_noise.accelerometer_noise_density = 0.004;
-  c.imu_noise.accelerometer_random_walk = 0.0004;
-  c.imu_noise.gyroscope_noise_density = 0.00017;
-  c.imu_noise.gyroscope_random_walk = 2e-5;
-  c.imu_noise.update_rate_hz = 1000;
-  // Frames of at least 10 ms: at high event rates (fast motion) frames hold more events instead of
-  // coming faster than the tracker needs (poster_rotation at 3.2 M events/s: real-time factor
-  // 1.33 -> 0.91, orientation 1.30 -> 0.87 deg rms).
-  c.frames.min_window_ns = 10'000'000;
-  return c;
-}
+VioConfig default_vio_config() { return VioConfig{}; }
 
 VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
   VioConfig c = default_vio_config();
@@ -120,7 +110,9 @@ VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
     try {
       const Section top(&parser, root, "");
       top.allow({"frontend", "filters", "frames", "tracker", "efast", "corner_tracker", "window", "imu", "init", "description"});
-      c.frontend = top.string("frontend", c.frontend, {"frames", "corners"});
+      c.frontend = top.string("frontend", pipeline::to_string(c.frontend), {"frames", "corners"}) == "corners"
+                       ? pipeline::VioFrontEnd::kCorners
+                       : pipeline::VioFrontEnd::kFrames;
       if (top.has("frames")) {
         const Section s = top.child("frames", false, "a map");
         s.allow({"events_per_frame", "min_window_ms", "max_window_ms", "min_events", "motion_compensation", "use_depth", "clip_percentile"});
@@ -234,7 +226,11 @@ VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
       if (top.has("init")) {
         const Section s = top.child("init", false, "a map");
         s.allow({"method", "window_ms"});
-        c.init = s.string("method", c.init, {"auto", "static", "alignment", "groundtruth"});
+        const std::string m = s.string("method", init_name(c.init), {"auto", "static", "alignment", "groundtruth"});
+        c.init = m == "static"      ? pipeline::VioInitMethod::kStatic
+                 : m == "alignment" ? pipeline::VioInitMethod::kAlignment
+                 : m == "groundtruth" ? pipeline::VioInitMethod::kGiven
+                                      : pipeline::VioInitMethod::kAuto;
         c.init_window_ns = ms_to_ns(s.number("window_ms", ns_to_ms(c.init_window_ns), Range::kPositive, "ms"));
       }
     } catch (const YAML::Exception& e) {
@@ -262,10 +258,28 @@ void write_tum(const std::string& path, const std::vector<VioState>& states) {
   if (!f) throw InputError(path, 0, "write failed (disk full?)", "a writable output folder");
 }
 
-struct Segment {
-  int64_t t_begin_ns, t_end_ns;
-  std::string what;
-};
+// Init method `groundtruth` (diagnostic): pose at t and velocity by a central difference over
+// 10 ms of the ground truth, zero biases; nullopt where the ground truth does not cover t.
+std::optional<VioState> groundtruth_state(const Trajectory& gt, int64_t t_ns) {
+  constexpr int64_t kHalfStepNs = 5'000'000;
+  const auto a = gt.interpolate(t_ns - kHalfStepNs), b = gt.interpolate(t_ns + kHalfStepNs), c = gt.interpolate(t_ns);
+  if (!a || !b || !c) return std::nullopt;
+  VioState s;
+  s.t_ns = t_ns;
+  s.T_w_b = *c;
+  s.v_w = (b->translation - a->translation) / 0.01;  // over 0.01 s = 2 * kHalfStepNs
+  return s;
+}
+
+std::string init_description(pipeline::VioInitMethod m) {
+  switch (m) {
+    case pipeline::VioInitMethod::kStatic: return "static";
+    case pipeline::VioInitMethod::kAlignment: return "visual-inertial alignment";
+    case pipeline::VioInitMethod::kGiven: return "ground truth (diagnostic)";
+    case pipeline::VioInitMethod::kAuto: break;
+  }
+  return "auto";
+}
 
 }  // namespace
 
@@ -293,7 +307,6 @@ int run_vio(const VioArgs& args, std::ostream& out) {
   }
   if (!cal) throw InputError(args.dataset, 0, "no camera calibration", "--calib FILE (Kalibr camchain YAML or ECD calib.txt)");
   if (!cal->has_T_c_b) log_warning("camera-IMU extrinsics unknown: T_c_b = identity");
-  const int W = cal->camera.width(), H = cal->camera.height();
   std::vector<ImuSample> imu = reader->read_imu();
   if (imu.size() < 10) throw InputError(args.dataset, 0, "the dataset has no IMU samples", "a recording with IMU");
   fs::create_directories(args.out);
@@ -302,261 +315,57 @@ int run_vio(const VioArgs& args, std::ostream& out) {
     f << resolved;
   }
 
-  // Front-end (corners): undistortion validity, filters, eFAST, corner tracker.
-  const frontend::EventUndistorter undistorter(cal->camera);
-  frontend::RefractoryFilter refractory(W, H, cfg.refractory);
-  frontend::BackgroundActivityFilter background(W, H, cfg.background_activity);
-  frontend::EfastDetector detector(W, H, cfg.efast);
-  frontend::CornerTracker tracker(W, H, cfg.corner_tracker);
-  const int64_t shift = cal->time_shift_ns;  // t_imu = t_cam + shift
-  const bool use_frames = cfg.frontend == "frames";
-  std::unique_ptr<frontend::EventFrameBuilder> frame_builder;
-  std::unique_ptr<frontend::FeatureTracker> frame_tracker;
-  if (use_frames) {
-    frame_builder = std::make_unique<frontend::EventFrameBuilder>(*cal, cfg.frames);
-    for (const ImuSample& m : imu) frame_builder->add_imu(m);
-    calib::CameraIntrinsics ideal = cal->camera.intrinsics();
-    ideal.model = calib::DistortionModel::kNone;
-    ideal.distortion.clear();
-    frame_tracker = std::make_unique<frontend::FeatureTracker>(ideal, cfg.tracker);
-  }
-  std::vector<Event> filtered;
-  std::vector<frontend::EventFrame> built;
-  int64_t prev_frame_t = -1;
-
-  std::optional<Trajectory> gt_traj;
-  if (cfg.init == "groundtruth") {
+  pipeline::VioPipeline vio(cfg, *cal, noise);
+  if (cfg.init == pipeline::VioInitMethod::kGiven) {
     if (args.gt.empty()) throw InputError(args.config, 0, "init.method groundtruth needs --gt", "--gt GT.tum, or another init.method");
-    gt_traj = load_trajectory(args.gt);
+    vio.set_initial_state_provider([gt = load_trajectory(args.gt)](int64_t t_ns) { return groundtruth_state(gt, t_ns); });
   }
-  std::unique_ptr<backend::SlidingWindowEstimator> est;
-  std::vector<FeatureObservations> pending;  // frames before initialisation
-  std::vector<VioState> trajectory;
-  std::map<int64_t, Eigen::Vector3d> map_points;
-  std::vector<Segment> lost;
-  bool in_gap = false;
-  std::string init_method;
-  int64_t init_t = 0;
-  size_t next_imu = 0;
-  int64_t frame_id = 0;
-  int64_t few_since = -1;
-
-  auto feed = [&](const FeatureObservations& f) {
-    while (next_imu < imu.size() && imu[next_imu].t_ns <= f.t_ns + 10'000'000) est->add_imu(imu[next_imu++]);
-    const bool kf = est->add_frame(f);
-    // One pose per new state time (a frame the estimator skipped adds none).
-    const VioState& ls = est->latest_state();
-    if (trajectory.empty() || ls.t_ns > trajectory.back().t_ns) trajectory.push_back(ls);
-    if (kf) {
-      for (const auto& [id, p] : est->landmarks()) map_points[id] = p;
-    }
-  };
-  auto try_init = [&](bool final_attempt) {
-    if (pending.empty()) return;
-    const int64_t span = pending.back().t_ns - pending.front().t_ns;
-    if (span < cfg.init_window_ns && !final_attempt) return;
-    std::optional<VioState> s;
-    std::string why;
-    if (cfg.init == "groundtruth") {
-      // Diagnostic: pose and velocity (central difference over 10 ms) from --gt at the first frame.
-      const int64_t t0 = pending.front().t_ns;
-      const auto a = gt_traj->interpolate(t0 - 5'000'000), b = gt_traj->interpolate(t0 + 5'000'000), c = gt_traj->interpolate(t0);
-      if (a && b && c) {
-        s = VioState{};
-        s->t_ns = t0;
-        s->T_w_b = *c;
-        s->v_w = (b->translation - a->translation) / 0.01;
-        init_method = "ground truth (diagnostic)";
-      } else {
-        why = "ground truth does not cover " + format_seconds(t0) + " s";
-      }
-    }
-    if (cfg.init == "auto" || cfg.init == "static") {
-      s = backend::static_initialization(imu, pending.front().t_ns, noise, cfg.static_init, &why);
-      if (s) init_method = "static";
-    }
-    if (!s && (cfg.init == "auto" || cfg.init == "alignment")) {
-      std::vector<FeatureObservations> window;
-      for (const auto& f : pending)
-        if (f.t_ns - pending.front().t_ns <= cfg.init_window_ns) window.push_back(f);
-      s = backend::visual_inertial_initialization(window, imu, *cal, noise, Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(),
-                                                  cfg.vi_init, &why);
-      if (s) init_method = "visual-inertial alignment";
-    }
-    if (!s) {
-      log_debug("initialisation at " + format_seconds(pending.front().t_ns) + " s failed: " + why);
-      // Slide by a quarter of the window and retry with the next frames.
-      const int64_t drop_until = pending.front().t_ns + cfg.init_window_ns / 4;
-      pending.erase(pending.begin(), std::find_if(pending.begin(), pending.end(), [&](const auto& f) { return f.t_ns > drop_until; }));
-      return;
-    }
-    init_t = s->t_ns;
-    log_info("initialised at " + format_seconds(init_t) + " s by " + init_method);
-    est = std::make_unique<backend::SlidingWindowEstimator>(cfg.window, *cal, noise);
-    est->initialize(*s);
-    while (next_imu < imu.size() && imu[next_imu].t_ns < s->t_ns - 50'000'000) ++next_imu;
-    for (const auto& f : pending)
-      if (f.t_ns >= s->t_ns) feed(f);
-    pending.clear();
-  };
   std::ofstream obs_file((fs::path(args.out) / "observations.txt").string());
   obs_file << "# t[s] track_id bx by bz  (front-end observations: unit bearings in the camera frame, body clock)\n";
-  auto handle_frame = [&](FeatureObservations f) {
+  vio.set_observation_callback([&obs_file](const FeatureObservations& f) {
     for (const auto& o : f.observations) {
       char line[160];
       std::snprintf(line, sizeof(line), "%s %lld %.7f %.7f %.7f\n", format_seconds(f.t_ns).c_str(),
                     static_cast<long long>(o.track_id), o.bearing_c.x(), o.bearing_c.y(), o.bearing_c.z());
       obs_file << line;
     }
-    // Tracking-lost segments: fewer than 5 observed tracks.
-    if (in_gap) {
-      // counted as the event-rate drop
-    } else if (f.observations.size() < 5) {
-      if (few_since < 0) few_since = f.t_ns;
-    } else if (few_since >= 0) {
-      if (f.t_ns - few_since >= 500'000'000) lost.push_back({few_since, f.t_ns, "fewer than 5 tracks"});
-      few_since = -1;
-    }
-    if (est) {
-      feed(f);
-    } else {
-      pending.push_back(std::move(f));
-      try_init(false);
-    }
-  };
-  // Corners front-end: the active corner tracks sampled at t_cam.
-  auto emit_frame = [&](int64_t t_cam) {
-    FeatureObservations f;
-    f.t_ns = t_cam + shift;
-    f.frame_id = frame_id++;
-    tracker.predict_active(t_cam, cfg.observation_period_ns, cfg.min_track_age_ns, [&](int64_t id, const Eigen::Vector2d& px) {
-      Eigen::Vector3d b;
-      if (px.allFinite() && cal->camera.unproject(px, &b) && b.z() > 1e-3) f.observations.push_back({id, b});
-    });
-    handle_frame(std::move(f));
-  };
-  // Frames front-end: one observation frame per event frame, tracked with the IMU rotation prior.
-  auto track_event_frame = [&](const frontend::EventFrame& ef) {
-    // An event-rate drop: no frames for a while. Empty frames every max_window keep the IMU
-    // propagation (and the trajectory) going; the gap is flagged.
-    if (prev_frame_t >= 0 && ef.t_ns - prev_frame_t > 2 * cfg.frames.max_window_ns) {
-      lost.push_back({prev_frame_t + shift, ef.t_ns + shift, "no event frames (event-rate drop)"});
-      in_gap = true;  // these frames are the flagged gap, not a tracking loss
-      for (int64_t t = prev_frame_t + cfg.frames.max_window_ns; t < ef.t_ns; t += cfg.frames.max_window_ns) {
-        FeatureObservations empty;
-        empty.t_ns = t + shift;
-        empty.frame_id = frame_id++;
-        handle_frame(std::move(empty));
-      }
-      in_gap = false;
-    }
-    Eigen::Matrix3d R_cur_prev = Eigen::Matrix3d::Identity();
-    bool have_prior = false;
-    const Eigen::Vector3d bg = est ? est->latest_state().bias_gyro : Eigen::Vector3d::Zero();
-    if (prev_frame_t >= 0) {
-      try {
-        const auto pre = backend::ImuPreintegration::between(imu, prev_frame_t + shift, ef.t_ns + shift, bg, Eigen::Vector3d::Zero(), noise);
-        const Eigen::Matrix3d R_c_b = cal->T_c_b.rotation.toRotationMatrix();
-        R_cur_prev = R_c_b * pre.delta_R().transpose() * R_c_b.transpose();
-        have_prior = true;
-      } catch (const std::invalid_argument&) {
-        // no IMU around the frame: track without the rotation prior
-      }
-    }
-    prev_frame_t = ef.t_ns;
-    FeatureObservations f = frame_tracker->track(ef.t_ns + shift, ef.image, have_prior ? &R_cur_prev : nullptr);
-    f.frame_id = frame_id++;
-    if (est) {
-      const VioState st = est->latest_state();
-      frame_builder->set_gyro_bias(st.bias_gyro);
-      if (cfg.frames.use_depth) {
-        // Camera velocity and the median landmark depth for translation compensation.
-        const calib::SE3 T_c_w = cal->T_c_b * st.T_w_b.inverse();
-        std::vector<double> depth;
-        for (const auto& [id, p] : est->landmarks()) {
-          const double z = (T_c_w.rotation * p + T_c_w.translation).z();
-          if (z > 0) depth.push_back(z);
-        }
-        if (!depth.empty()) {
-          std::nth_element(depth.begin(), depth.begin() + static_cast<long>(depth.size() / 2), depth.end());
-          const Eigen::Vector3d v_c = cal->T_c_b.rotation * (st.T_w_b.rotation.conjugate() * st.v_w);
-          frame_builder->set_motion(v_c, depth[depth.size() / 2]);
-        }
-      }
-    }
-    handle_frame(std::move(f));
-  };
+  });
+  for (const ImuSample& m : imu) vio.add_imu(m);
+  imu = {};  // the pipeline keeps what it needs
 
   Progress progress("evio vio", args.progress, "events");
   EventBuffer chunk;
-  int64_t events = 0, corners = 0;
-  int64_t t_first = 0, t_last = 0, next_obs = 0;
-  bool first = true;
+  int64_t events = 0, t_first = 0, t_last = 0;
   const auto wall0 = std::chrono::steady_clock::now();
   for (;;) {
     chunk.clear();
     if (reader->read_events(&chunk, size_t{1} << 18) == 0) break;
-    filtered.clear();
-    for (const Event& e : chunk.span()) {
-      if (first) {
-        t_first = e.t_ns;
-        next_obs = t_first + cfg.observation_period_ns;
-        first = false;
-      }
-      if (!use_frames) {
-        while (e.t_ns >= next_obs) {
-          emit_frame(next_obs);
-          next_obs += cfg.observation_period_ns;
-        }
-      }
-      t_last = e.t_ns;
-      ++events;
-      if (e.x >= W || e.y >= H || !undistorter.valid(e.x, e.y)) continue;
-      if (cfg.refractory_enabled && !refractory.accept(e)) continue;
-      if (cfg.background_activity_enabled && !background.accept(e)) continue;
-      if (use_frames) {
-        filtered.push_back(e);
-        continue;
-      }
-      if (!detector.process(e)) continue;
-      ++corners;
-      tracker.add(e);
-    }
-    if (use_frames) {
-      built.clear();
-      frame_builder->add_events(EventSpan(filtered.data(), filtered.size()), &built);
-      for (const auto& ef : built) track_event_frame(ef);
-    }
+    const EventSpan span = chunk.span();
+    vio.add_events(span);
+    if (events == 0) t_first = span.front().t_ns;
+    t_last = span.back().t_ns;
+    events += static_cast<int64_t>(span.size());
     const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
     const double seq = static_cast<double>(t_last - t_first) * 1e-9;
     progress.update(reader->progress(), events, "real-time factor " + num(seq > 0 ? elapsed / seq : 0.0));
   }
-  // Event-rate drops at the end: frames up to the last IMU sample keep the state propagating.
-  if (use_frames) {
-    built.clear();
-    frame_builder->flush(&built);
-    for (const auto& ef : built) track_event_frame(ef);
-  }
-  const int64_t t_end_cam = std::min(imu.back().t_ns - shift, t_last);
-  while (!use_frames && !first && next_obs <= t_end_cam) {
-    emit_frame(next_obs);
-    next_obs += cfg.observation_period_ns;
-  }
-  if (!est) try_init(true);
-  if (few_since >= 0 && t_last + shift - few_since >= 500'000'000) lost.push_back({few_since, t_last + shift, "fewer than 5 tracks"});
+  const pipeline::VioResult r = vio.finish();
   const double processing_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
-  const double duration_s = static_cast<double>(t_last - t_first) * 1e-9;
-  if (!est) {
+  const pipeline::VioStats& vs = r.stats;
+  const double duration_s = static_cast<double>(vs.t_last_event_ns - vs.t_first_event_ns) * 1e-9;
+  if (!r.initialized) {
+    log_debug("vio: " + r.init_failure);
     throw InputError(args.dataset, 0, "could not initialise (no still start and the visual-inertial alignment failed)",
                      "a recording that starts still or moves with enough features in the first seconds");
   }
+  const std::string init_method = init_description(r.init_method);
 
   // Outputs.
-  write_tum((fs::path(args.out) / "trajectory.tum").string(), trajectory);
+  write_tum((fs::path(args.out) / "trajectory.tum").string(), r.trajectory);
   {
     std::ofstream f((fs::path(args.out) / "keyframes.txt").string());
     f << "# t[s] x y z qx qy qz qw vx vy vz bgx bgy bgz bax bay baz  (T_w_b, v_w m/s, biases rad/s and m/s^2)\n";
-    for (const VioState& s : est->keyframe_states()) {
+    for (const VioState& s : r.keyframes) {
       char line[512];
       const Eigen::Quaterniond& q = s.T_w_b.rotation;
       std::snprintf(line, sizeof(line), "%s %.9f %.9f %.9f %.9f %.9f %.9f %.9f %.6f %.6f %.6f %.7f %.7f %.7f %.6f %.6f %.6f\n",
@@ -567,50 +376,44 @@ int run_vio(const VioArgs& args, std::ostream& out) {
     }
   }
   std::vector<mapping::MapPoint> pts;
-  for (const auto& [id, p] : map_points) pts.push_back({p, static_cast<float>(id)});
+  for (const auto& [id, p] : r.landmarks) pts.push_back({p, static_cast<float>(id)});
   mapping::write_landmark_map((fs::path(args.out) / "map.ply").string(), pts);
 
-  // Motion-model segments from the keyframes' models.
-  std::vector<Segment> models;
-  for (const auto& [t, rot] : est->stats().motion_model) {
-    const std::string m = rot ? "rotation_only" : "6dof";
-    if (models.empty() || models.back().what != m) {
-      models.push_back({t, t, m});
-    } else {
-      models.back().t_end_ns = t;
-    }
-  }
-  const auto& st = est->stats();
+  const backend::SlidingWindowStats& st = vs.window;
   std::vector<double> solve = st.solve_time_s;
   std::sort(solve.begin(), solve.end());
   const double med = solve.empty() ? 0 : solve[solve.size() / 2];
+  const bool use_frames = cfg.frontend == pipeline::VioFrontEnd::kFrames;
   std::ostringstream j;
-  j << "{\n  \"dataset\": \"" << json_escape(args.dataset) << "\",\n  \"frontend\": \"" << cfg.frontend << "\",\n  \"events\": " << events
-    << ",\n  \"corners\": " << corners << ",\n  \"frames\": " << st.frames << ",\n  \"keyframes\": " << st.keyframes
-    << ",\n  \"landmarks\": " << pts.size() << ",\n  \"processing_time_s\": " << num(processing_s)
-    << ",\n  \"sequence_duration_s\": " << num(duration_s) << ",\n  \"real_time_factor\": "
-    << num(duration_s > 0 ? processing_s / duration_s : 0.0) << ",\n  \"solve_ms_median\": " << num(1e3 * med)
-    << ",\n  \"initialisation\": {\"method\": \"" << init_method << "\", \"t\": " << format_seconds(init_t)
-    << "},\n  \"imu_noise_from\": \"" << json_escape(noise_source) << "\",\n  \"motion_model_segments\": [";
-  for (size_t i = 0; i < models.size(); ++i) {
-    j << (i ? ", " : "") << "{\"t_begin\": " << format_seconds(models[i].t_begin_ns) << ", \"t_end\": "
-      << format_seconds(models[i].t_end_ns) << ", \"model\": \"" << models[i].what << "\"}";
+  j << "{\n  \"dataset\": \"" << json_escape(args.dataset) << "\",\n  \"frontend\": \"" << pipeline::to_string(cfg.frontend)
+    << "\",\n  \"events\": " << vs.events << ",\n  \"corners\": " << vs.corner_events << ",\n  \"frames\": " << st.frames
+    << ",\n  \"keyframes\": " << st.keyframes << ",\n  \"landmarks\": " << pts.size()
+    << ",\n  \"processing_time_s\": " << num(processing_s) << ",\n  \"sequence_duration_s\": " << num(duration_s)
+    << ",\n  \"real_time_factor\": " << num(duration_s > 0 ? processing_s / duration_s : 0.0)
+    << ",\n  \"solve_ms_median\": " << num(1e3 * med) << ",\n  \"initialisation\": {\"method\": \"" << init_method
+    << "\", \"t\": " << format_seconds(r.init_t_ns) << "},\n  \"imu_noise_from\": \"" << json_escape(noise_source)
+    << "\",\n  \"motion_model_segments\": [";
+  for (size_t i = 0; i < r.motion_models.size(); ++i) {
+    const pipeline::VioSegment& m = r.motion_models[i];
+    j << (i ? ", " : "") << "{\"t_begin\": " << format_seconds(m.t_begin_ns) << ", \"t_end\": " << format_seconds(m.t_end_ns)
+      << ", \"model\": \"" << m.what << "\"}";
   }
   j << "],\n  \"tracking_lost_segments\": [";
-  for (size_t i = 0; i < lost.size(); ++i) {
-    j << (i ? ", " : "") << "{\"t_begin\": " << format_seconds(lost[i].t_begin_ns) << ", \"t_end\": "
-      << format_seconds(lost[i].t_end_ns) << ", \"reason\": \"" << lost[i].what << "\"}";
+  for (size_t i = 0; i < r.tracking_lost.size(); ++i) {
+    const pipeline::VioSegment& l = r.tracking_lost[i];
+    j << (i ? ", " : "") << "{\"t_begin\": " << format_seconds(l.t_begin_ns) << ", \"t_end\": " << format_seconds(l.t_end_ns)
+      << ", \"reason\": \"" << l.what << "\"}";
   }
   j << "],\n  \"frontend_stats\": {";
   if (use_frames) {
-    const auto& ts = frame_tracker->stats();
-    const auto& fs_ = frame_builder->stats();
+    const auto& ts = vs.tracker;
+    const auto& fs_ = vs.event_frames;
     j << "\"event_frames\": " << fs_.frames_emitted << ", \"frames_uncompensated\": " << fs_.frames_uncompensated
       << ", \"frames_dropped_sparse\": " << fs_.frames_dropped_sparse << ", \"tracks_detected\": " << ts.detected
       << ", \"tracked\": " << ts.tracked << ", \"lost_klt\": " << ts.lost_klt << ", \"lost_forward_backward\": " << ts.lost_fb
       << ", \"rejected_ransac\": " << ts.rejected_ransac;
   } else {
-    j << "\"corner_events\": " << corners << ", \"corner_tracks_started\": " << tracker.stats().tracks_started;
+    j << "\"corner_events\": " << vs.corner_events << ", \"corner_tracks_started\": " << vs.corner_tracker.tracks_started;
   }
   j << "},\n  \"outliers_removed\": " << st.outliers_removed << ",\n  \"rotation_only_keyframes\": " << st.rotation_only_keyframes
     << "\n}\n";
@@ -623,14 +426,15 @@ int run_vio(const VioArgs& args, std::ostream& out) {
                 "events        %lld over %.2f s, %lld corner events, %lld frames, %lld keyframes, %zu landmarks\n"
                 "initialised   at %s s by %s\n"
                 "speed         %.2f s processing, real-time factor %.3f (one core), solve %.1f ms median\n",
-                static_cast<long long>(events), duration_s, static_cast<long long>(corners), static_cast<long long>(st.frames),
-                static_cast<long long>(st.keyframes), pts.size(), format_seconds(init_t).c_str(), init_method.c_str(),
-                processing_s, duration_s > 0 ? processing_s / duration_s : 0.0, 1e3 * med);
+                static_cast<long long>(vs.events), duration_s, static_cast<long long>(vs.corner_events),
+                static_cast<long long>(st.frames), static_cast<long long>(st.keyframes), pts.size(),
+                format_seconds(r.init_t_ns).c_str(), init_method.c_str(), processing_s,
+                duration_s > 0 ? processing_s / duration_s : 0.0, 1e3 * med);
   out << buf;
   out << "motion model  ";
-  for (const auto& m : models) out << m.what << " " << format_seconds(m.t_begin_ns) << ".." << format_seconds(m.t_end_ns) << "  ";
+  for (const auto& m : r.motion_models) out << m.what << " " << format_seconds(m.t_begin_ns) << ".." << format_seconds(m.t_end_ns) << "  ";
   out << "\n";
-  if (!lost.empty()) out << "tracking lost " << lost.size() << " segment(s), see stats.json\n";
+  if (!r.tracking_lost.empty()) out << "tracking lost " << r.tracking_lost.size() << " segment(s), see stats.json\n";
   if (!args.gt.empty()) {
     EvalArgs ea;
     ea.groundtruth = args.gt;
@@ -640,12 +444,12 @@ int run_vio(const VioArgs& args, std::ostream& out) {
     const auto results = evaluate_all(ea);
     std::ofstream f((fs::path(args.out) / "eval.json").string());
     f << results_json(ea, results);
-    const auto& r = results.front().result;
+    const auto& e = results.front().result;
     std::snprintf(buf, sizeof(buf),
                   "evaluation    ATE rmse %.4f m, mean position error %.3f%% of %.2f m, final yaw error %.2f deg, yaw drift "
                   "%.4f deg/m (SE3 on the first 5 s)\n",
-                  r.ate.trans_m.rmse, r.mean_position_error_percent, r.groundtruth_length_m, r.final_yaw_error_deg,
-                  r.yaw_drift_deg_per_m);
+                  e.ate.trans_m.rmse, e.mean_position_error_percent, e.groundtruth_length_m, e.final_yaw_error_deg,
+                  e.yaw_drift_deg_per_m);
     out << buf;
   }
   out << "wrote " << args.out << "/trajectory.tum, keyframes.txt, map.ply, observations.txt, stats.json, vio_config.yaml"

@@ -1,0 +1,184 @@
+// The event-based VIO chain as one synchronous library class: raw camera events are checked
+// against the undistortion table, filtered (refractory, background activity) and turned into
+// feature observations by one of two front-ends (motion-compensated event frames tracked with
+// FAST/KLT/RANSAC under the IMU rotation prior, after Rebecq et al., BMVC 2017; or eFAST corner
+// events with corner tracks sampled at a fixed period), the state is initialised (static start,
+// visual-inertial alignment, or a given state) and estimated by the keyframe sliding window.
+// Plain data in (IMU samples, event spans) and out (VioResult); no files, flags or threads.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "evio/backend/initialization.h"
+#include "evio/backend/sliding_window_estimator.h"
+#include "evio/calib/calibration_io.h"
+#include "evio/frontend/corner_tracker.h"
+#include "evio/frontend/efast.h"
+#include "evio/frontend/event_filters.h"
+#include "evio/frontend/event_frame.h"
+#include "evio/frontend/feature_tracker.h"
+#include "evio/sensors/event_buffer.h"
+#include "evio/sensors/measurements.h"
+#include "evio/sensors/vio_types.h"
+
+namespace evio::pipeline {
+
+// Which front-end turns events into feature observations.
+enum class VioFrontEnd {
+  kFrames,   // motion-compensated event frames + FAST / KLT / RANSAC (frontend::FeatureTracker)
+  kCorners,  // eFAST corner events + corner tracks sampled every observation_period_ns
+};
+
+// How the first state is found.
+enum class VioInitMethod {
+  kAuto,       // static start, else visual-inertial alignment
+  kStatic,     // static start only (backend::static_initialization)
+  kAlignment,  // visual-inertial alignment only (backend::visual_inertial_initialization)
+  kGiven,      // the state of VioPipeline::set_initial_state_provider at the first frame
+};
+
+// Names as written in configuration files and reports: "frames", "corners"; "auto", "static",
+// "alignment", "given". `option == "name"` compares with a name.
+const char* to_string(VioFrontEnd f);
+const char* to_string(VioInitMethod m);
+inline bool operator==(VioFrontEnd f, std::string_view name) { return name == to_string(f); }
+inline bool operator==(VioInitMethod m, std::string_view name) { return name == to_string(m); }
+inline bool operator!=(VioFrontEnd f, std::string_view name) { return !(f == name); }
+inline bool operator!=(VioInitMethod m, std::string_view name) { return !(m == name); }
+
+struct VioPipelineOptions {
+  VioFrontEnd frontend = VioFrontEnd::kFrames;
+
+  // Event filters, applied after the undistortion-validity check, before either front-end.
+  bool refractory_enabled = true;                                // drop events within period_ns of the pixel's last
+  frontend::RefractoryFilterOptions refractory;                  // period_ns (ns)
+  bool background_activity_enabled = true;                       // drop events without recent neighbours
+  frontend::BackgroundActivityFilterOptions background_activity; // window_ns (ns), radius (px), min_support (count)
+
+  // Frames front-end. Frames of at least 10 ms (min_window_ns): at high event rates (fast motion)
+  // frames hold more events instead of coming faster than the tracker needs (poster_rotation at
+  // 3.2 M events/s: real-time factor 1.33 -> 0.91, orientation 1.30 -> 0.87 deg rms).
+  frontend::EventFrameOptions frames = [] {
+    frontend::EventFrameOptions f;
+    f.min_window_ns = 10'000'000;
+    return f;
+  }();                                                           // events_per_frame, windows (ns), ...
+  frontend::FeatureTrackerOptions tracker;                       // grid, FAST, KLT (px), RANSAC (px)
+
+  // Corners front-end.
+  frontend::EfastOptions efast;                                  // filter_sae, filter_window_ns (ns)
+  frontend::CornerTrackerOptions corner_tracker;                 // max_distance_px (px), max_gap_ns (ns), ...
+  int64_t observation_period_ns = 50'000'000;                    // ns, > 0: one observation frame of the active tracks per period
+  int64_t min_track_age_ns = 20'000'000;                         // ns, >= 0: younger tracks are not observed
+  double corner_min_bearing_z = 1e-3;                            // unit-bearing z (cos of the angle to the axis), [0, 1): corners at or beyond 90 deg are dropped
+
+  // Back-end.
+  backend::SlidingWindowOptions window;                          // window size, solver, keyframe rules (see its header)
+
+  // Initialisation. Frames are collected until they span init_window_ns, then the method is
+  // tried on the first frame (alignment: on the frames within init_window_ns of it); on failure
+  // the frames of the first init_retry_slide_fraction * init_window_ns are dropped and it is
+  // tried again with the next frame. finish() makes a last attempt with what is left.
+  VioInitMethod init = VioInitMethod::kAuto;
+  backend::StaticInitOptions static_init;                        // window_ns (ns), stillness ratios, gravity (m/s^2)
+  backend::VisualInertialInitOptions vi_init;                    // frames, tracks (counts), gravity (m/s^2)
+  int64_t init_window_ns = 2'000'000'000;                        // ns, > 0
+  double init_retry_slide_fraction = 0.25;                       // of init_window_ns, (0, 1]
+  int64_t init_imu_history_ns = 50'000'000;                      // ns, >= 0: IMU before the initial state given to the estimator
+
+  // IMU.
+  int64_t imu_lookahead_ns = 10'000'000;                         // ns, >= 0: the estimator gets the IMU up to a frame's time + this
+  // ns, >= 0: events are processed once the IMU reaches their time + imu_lookahead_ns (IMU clock);
+  // events further than this ahead of the newest IMU sample are processed without waiting.
+  int64_t imu_wait_ns = 1'000'000'000;
+
+  // Reports.
+  int tracking_lost_min_tracks = 5;                              // count, >= 0: a frame with fewer observations counts as lost
+  int64_t tracking_lost_min_duration_ns = 500'000'000;           // ns, > 0: such frames for this long make a tracking-lost segment
+  // Frames front-end: a gap of more than this many frames.max_window_ns between event frames is
+  // an event-rate drop (count, >= 1); empty frames every max_window_ns keep the IMU propagation
+  // going through it, and it is reported as a segment (not as tracking lost).
+  int event_rate_drop_windows = 2;
+
+  bool Validate(std::string* why) const;
+};
+
+// A span of time with a reason, [t_begin_ns, t_end_ns] on the IMU (body) clock.
+struct VioSegment {
+  int64_t t_begin_ns = 0;
+  int64_t t_end_ns = 0;
+  std::string what;  // motion models: "6dof" | "rotation_only"; tracking lost: the reason
+};
+
+struct VioStats {
+  int64_t events = 0;                 // events given to add_events
+  int64_t corner_events = 0;          // corners front-end: eFAST corner events
+  int64_t frontend_frames = 0;        // observation frames the front-end produced (incl. empty gap frames)
+  int64_t t_first_event_ns = 0;       // camera clock; both 0 without events
+  int64_t t_last_event_ns = 0;
+  frontend::EventFrameStats event_frames;        // frames front-end
+  frontend::FeatureTrackerStats tracker;         // frames front-end
+  frontend::CornerTrackerStats corner_tracker;   // corners front-end
+  backend::SlidingWindowStats window;            // back-end (empty when not initialised)
+};
+
+struct VioResult {
+  bool initialized = false;
+  VioInitMethod init_method = VioInitMethod::kAuto;  // kStatic, kAlignment or kGiven when initialised
+  int64_t init_t_ns = 0;                             // the initial state's time (IMU clock)
+  std::string init_failure;                          // not initialised: the last attempt's reason
+  std::vector<VioState> trajectory;                  // one state per frame that advanced the estimate, time order
+  std::vector<VioState> keyframes;                   // the keyframes in the window at the end
+  std::map<int64_t, Eigen::Vector3d> landmarks;      // the window's landmarks after every keyframe (world, m), by track id, latest value
+  std::vector<VioSegment> motion_models;             // runs of keyframes with the same motion model
+  std::vector<VioSegment> tracking_lost;             // event-rate drops and runs with too few tracks
+  VioStats stats;
+};
+
+class VioPipeline {
+ public:
+  using InitialStateProvider = std::function<std::optional<VioState>(int64_t t_ns)>;
+  using ObservationCallback = std::function<void(const FeatureObservations&)>;
+
+  // Throws std::invalid_argument when the options or the IMU noise are invalid.
+  VioPipeline(const VioPipelineOptions& options, const calib::CameraCalibration& camera, const calib::ImuNoise& noise);
+  ~VioPipeline();
+  VioPipeline(const VioPipeline&) = delete;
+  VioPipeline& operator=(const VioPipeline&) = delete;
+
+  // For VioInitMethod::kGiven: the state at an IMU-clock time (pose, velocity; biases as given),
+  // or nullopt when it has none (initialisation then retries with later frames).
+  void set_initial_state_provider(InitialStateProvider provider);
+  // Called with every front-end frame (IMU clock), before the estimator sees it.
+  void set_observation_callback(ObservationCallback callback);
+
+  // IMU samples in time order (IMU clock; t_imu = t_cam + camera.time_shift_ns). They may all come
+  // first or be interleaved with add_events: events wait until the IMU covers them (imu_wait_ns).
+  void add_imu(const ImuSample& sample);
+  // Raw events in time order (camera clock), e.g. chunks as read. Event frames completed within one
+  // call are built before the estimate of the first of them feeds back (gyro bias, velocity and
+  // depth), so the results depend on the chunking (as for any streaming reader).
+  void add_events(EventSpan events);
+  // Processes everything buffered, makes a last initialisation attempt and returns the results.
+  // No input is accepted afterwards (std::logic_error).
+  VioResult finish();
+
+  bool initialized() const;
+  const VioPipelineOptions& options() const { return options_; }
+
+ private:
+  struct Impl;
+  VioPipelineOptions options_;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace evio::pipeline
