@@ -17,6 +17,7 @@
 #include "evio/calib/error.h"
 #include "evio/calib/log.h"
 #include "evio/mapping/landmark_map.h"
+#include "evio/sensors/ecd.h"
 #include "evio/sensors/time.h"
 #include "json_util.h"
 #include "dataset_calibration.h"
@@ -46,10 +47,45 @@ std::string loss_name(backend::RobustLoss l) {
   return l == backend::RobustLoss::kHuber ? "huber" : l == backend::RobustLoss::kCauchy ? "cauchy" : "none";
 }
 
+// One feature-tracker section (tracker, aps_tracker) of the resolved config.
+std::string tracker_yaml(const char* key, const frontend::FeatureTrackerOptions& tk) {
+  std::ostringstream y;
+  y << key << ": {grid_cols: " << tk.grid_cols << ", grid_rows: " << tk.grid_rows << ", max_features: " << tk.max_features
+    << ", max_per_cell: " << tk.max_per_cell << ", fast_threshold: " << tk.fast_threshold
+    << ", min_distance_px: " << tk.min_distance_px << ", klt_window_px: " << tk.klt_window_px
+    << ", klt_pyramid_levels: " << tk.klt_pyramid_levels << ", forward_backward_max_px: " << num(tk.forward_backward_max_px)
+    << ", ransac: " << frontend::ransac_model_name(tk.ransac)
+    << ", ransac_threshold_px: " << num(tk.ransac_threshold_px) << ", min_tracks_before_detection: " << tk.min_tracks_before_detection << "}\n";
+  return y.str();
+}
+
+// Reads a feature-tracker section over *t; fails with file:line on invalid settings.
+void parse_tracker(const Section& s, frontend::FeatureTrackerOptions* t) {
+  s.allow({"grid_cols", "grid_rows", "max_features", "max_per_cell", "fast_threshold", "min_distance_px",
+           "klt_window_px", "klt_pyramid_levels", "forward_backward_max_px", "ransac", "ransac_threshold_px",
+           "min_tracks_before_detection"});
+  t->grid_cols = s.integer("grid_cols", t->grid_cols, 1, 100);
+  t->grid_rows = s.integer("grid_rows", t->grid_rows, 1, 100);
+  t->max_features = s.integer("max_features", t->max_features, 1, 100000);
+  t->max_per_cell = s.integer("max_per_cell", t->max_per_cell, 1, 100000);
+  t->fast_threshold = s.integer("fast_threshold", t->fast_threshold, 1, 255);
+  t->min_distance_px = s.integer("min_distance_px", t->min_distance_px, 0, 1000);
+  t->klt_window_px = s.integer("klt_window_px", t->klt_window_px, 3, 255);
+  t->klt_pyramid_levels = s.integer("klt_pyramid_levels", t->klt_pyramid_levels, 0, 8);
+  t->forward_backward_max_px = s.number("forward_backward_max_px", t->forward_backward_max_px, Range::kPositive, "px");
+  const std::string r = s.string("ransac", frontend::ransac_model_name(t->ransac), {"two_point", "five_point", "none"});
+  t->ransac = r == "two_point" ? frontend::RansacModel::kTwoPoint : r == "five_point" ? frontend::RansacModel::kFivePoint : frontend::RansacModel::kNone;
+  t->ransac_threshold_px = s.number("ransac_threshold_px", t->ransac_threshold_px, Range::kPositive, "px");
+  t->min_tracks_before_detection = s.integer("min_tracks_before_detection", t->min_tracks_before_detection, 0, 100000);
+  std::string why;
+  if (!t->Validate(&why)) s.fail("invalid tracker settings: " + why, "consistent settings");
+}
+
 // The resolved config as YAML (every key, defaults included), readable by load_vio_config.
 std::string config_yaml(const VioConfig& c) {
   std::ostringstream y;
   y << "# evio vio configuration (resolved: every key with the value used)\n";
+  y << "inputs: " << pipeline::to_string(c.inputs) << "\n";
   y << "frontend: " << pipeline::to_string(c.frontend) << "\n";
   y << "filters:\n  refractory: {enabled: " << (c.refractory_enabled ? "true" : "false")
     << ", period_ms: " << num(ns_to_ms(c.refractory.period_ns)) << "}\n";
@@ -62,13 +98,9 @@ std::string config_yaml(const VioConfig& c) {
     << ", min_events: " << fr.min_events << ", motion_compensation: " << (fr.motion_compensation ? "true" : "false")
     << ", use_depth: " << (fr.use_depth ? "true" : "false")
     << ", clip_percentile: " << num(fr.clip_percentile) << "}\n";
-  const auto& tk = c.tracker;
-  y << "tracker: {grid_cols: " << tk.grid_cols << ", grid_rows: " << tk.grid_rows << ", max_features: " << tk.max_features
-    << ", max_per_cell: " << tk.max_per_cell << ", fast_threshold: " << tk.fast_threshold
-    << ", min_distance_px: " << tk.min_distance_px << ", klt_window_px: " << tk.klt_window_px
-    << ", klt_pyramid_levels: " << tk.klt_pyramid_levels << ", forward_backward_max_px: " << num(tk.forward_backward_max_px)
-    << ", ransac: " << (tk.ransac == frontend::RansacModel::kTwoPoint ? "two_point" : tk.ransac == frontend::RansacModel::kFivePoint ? "five_point" : "none")
-    << ", ransac_threshold_px: " << num(tk.ransac_threshold_px) << ", min_tracks_before_detection: " << tk.min_tracks_before_detection << "}\n";
+  y << tracker_yaml("tracker", c.tracker);
+  y << tracker_yaml("aps_tracker", c.aps_tracker);
+  y << "aps: {pixel_sigma: " << num(c.aps_pixel_sigma_px) << ", max_gap_ms: " << num(ns_to_ms(c.aps_max_gap_ns)) << "}\n";
   y << "efast: {filter_sae: " << (c.efast.filter_sae ? "true" : "false")
     << ", filter_window_ms: " << num(ns_to_ms(c.efast.filter_window_ns)) << "}\n";
   const auto& t = c.corner_tracker;
@@ -109,7 +141,10 @@ VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
     if (!root.IsMap()) parser.fail(root, "", "is not a map", expected);
     try {
       const Section top(&parser, root, "");
-      top.allow({"frontend", "filters", "frames", "tracker", "efast", "corner_tracker", "window", "imu", "init", "description"});
+      top.allow({"inputs", "frontend", "filters", "frames", "tracker", "aps_tracker", "aps", "efast", "corner_tracker", "window",
+                 "imu", "init", "description"});
+      const std::string in = top.string("inputs", pipeline::to_string(c.inputs), {"events", "aps", "events+aps"});
+      c.inputs = in == "aps" ? pipeline::VioInputs::kAps : in == "events+aps" ? pipeline::VioInputs::kEventsAndAps : pipeline::VioInputs::kEvents;
       c.frontend = top.string("frontend", pipeline::to_string(c.frontend), {"frames", "corners"}) == "corners"
                        ? pipeline::VioFrontEnd::kCorners
                        : pipeline::VioFrontEnd::kFrames;
@@ -127,27 +162,13 @@ VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
         std::string why;
         if (!f.Validate(&why)) s.fail("invalid frame settings: " + why, "consistent settings");
       }
-      if (top.has("tracker")) {
-        const Section s = top.child("tracker", false, "a map");
-        s.allow({"grid_cols", "grid_rows", "max_features", "max_per_cell", "fast_threshold", "min_distance_px",
-                 "klt_window_px", "klt_pyramid_levels", "forward_backward_max_px", "ransac", "ransac_threshold_px",
-                 "min_tracks_before_detection"});
-        auto& t = c.tracker;
-        t.grid_cols = s.integer("grid_cols", t.grid_cols, 1, 100);
-        t.grid_rows = s.integer("grid_rows", t.grid_rows, 1, 100);
-        t.max_features = s.integer("max_features", t.max_features, 1, 100000);
-        t.max_per_cell = s.integer("max_per_cell", t.max_per_cell, 1, 100000);
-        t.fast_threshold = s.integer("fast_threshold", t.fast_threshold, 1, 255);
-        t.min_distance_px = s.integer("min_distance_px", t.min_distance_px, 0, 1000);
-        t.klt_window_px = s.integer("klt_window_px", t.klt_window_px, 3, 255);
-        t.klt_pyramid_levels = s.integer("klt_pyramid_levels", t.klt_pyramid_levels, 0, 8);
-        t.forward_backward_max_px = s.number("forward_backward_max_px", t.forward_backward_max_px, Range::kPositive, "px");
-        const std::string r = s.string("ransac", "two_point", {"two_point", "five_point", "none"});
-        t.ransac = r == "two_point" ? frontend::RansacModel::kTwoPoint : r == "five_point" ? frontend::RansacModel::kFivePoint : frontend::RansacModel::kNone;
-        t.ransac_threshold_px = s.number("ransac_threshold_px", t.ransac_threshold_px, Range::kPositive, "px");
-        t.min_tracks_before_detection = s.integer("min_tracks_before_detection", t.min_tracks_before_detection, 0, 100000);
-        std::string why;
-        if (!t.Validate(&why)) s.fail("invalid tracker settings: " + why, "consistent settings");
+      if (top.has("tracker")) parse_tracker(top.child("tracker", false, "a map"), &c.tracker);
+      if (top.has("aps_tracker")) parse_tracker(top.child("aps_tracker", false, "a map"), &c.aps_tracker);
+      if (top.has("aps")) {
+        const Section s = top.child("aps", false, "a map");
+        s.allow({"pixel_sigma", "max_gap_ms"});
+        c.aps_pixel_sigma_px = s.number("pixel_sigma", c.aps_pixel_sigma_px, Range::kPositive, "px");
+        c.aps_max_gap_ns = ms_to_ns(s.number("max_gap_ms", ns_to_ms(c.aps_max_gap_ns), Range::kPositive, "ms"));
       }
       if (top.has("filters")) {
         const Section f = top.child("filters", false, "a map");
@@ -332,12 +353,26 @@ int run_vio(const VioArgs& args, std::ostream& out) {
   });
   for (const ImuSample& m : imu) vio.add_imu(m);
   imu = {};  // the pipeline keeps what it needs
+  const auto wall0 = std::chrono::steady_clock::now();
+  if (cfg.inputs != pipeline::VioInputs::kEvents) {
+    // Every APS frame before the events (the events+aps merge needs the frame times around each
+    // event frame); images are decoded one at a time.
+    std::vector<Frame> frames = reader->read_frames();
+    if (frames.empty()) {
+      throw InputError(args.dataset, 0, std::string("inputs: ") + pipeline::to_string(cfg.inputs) + " needs intensity (APS) frames and the recording has none",
+                       "inputs: events, or a recording with frames (ECD images.txt, AEDAT4 frames, ...)");
+    }
+    for (Frame& f : frames) {
+      if (f.image.empty()) load_frame_image(&f);
+      vio.add_frame(f);
+      f.image.release();
+    }
+  }
 
   Progress progress("evio vio", args.progress, "events");
   EventBuffer chunk;
   int64_t events = 0, t_first = 0, t_last = 0;
-  const auto wall0 = std::chrono::steady_clock::now();
-  for (;;) {
+  while (cfg.inputs != pipeline::VioInputs::kAps) {
     chunk.clear();
     if (reader->read_events(&chunk, size_t{1} << 18) == 0) break;
     const EventSpan span = chunk.span();
@@ -352,7 +387,9 @@ int run_vio(const VioArgs& args, std::ostream& out) {
   const pipeline::VioResult r = vio.finish();
   const double processing_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
   const pipeline::VioStats& vs = r.stats;
-  const double duration_s = static_cast<double>(vs.t_last_event_ns - vs.t_first_event_ns) * 1e-9;
+  const double duration_s =
+      static_cast<double>(cfg.inputs == pipeline::VioInputs::kAps ? vs.t_last_aps_ns - vs.t_first_aps_ns
+                                                                  : vs.t_last_event_ns - vs.t_first_event_ns) * 1e-9;
   if (!r.initialized) {
     log_debug("vio: " + r.init_failure);
     throw InputError(args.dataset, 0, "could not initialise (no still start and the visual-inertial alignment failed)",
@@ -385,7 +422,8 @@ int run_vio(const VioArgs& args, std::ostream& out) {
   const double med = solve.empty() ? 0 : solve[solve.size() / 2];
   const bool use_frames = cfg.frontend == pipeline::VioFrontEnd::kFrames;
   std::ostringstream j;
-  j << "{\n  \"dataset\": \"" << json_escape(args.dataset) << "\",\n  \"frontend\": \"" << pipeline::to_string(cfg.frontend)
+  j << "{\n  \"dataset\": \"" << json_escape(args.dataset) << "\",\n  \"inputs\": \"" << pipeline::to_string(cfg.inputs)
+    << "\",\n  \"frontend\": \"" << pipeline::to_string(cfg.frontend)
     << "\",\n  \"events\": " << vs.events << ",\n  \"corners\": " << vs.corner_events << ",\n  \"frames\": " << st.frames
     << ",\n  \"keyframes\": " << st.keyframes << ",\n  \"landmarks\": " << pts.size()
     << ",\n  \"processing_time_s\": " << num(processing_s) << ",\n  \"sequence_duration_s\": " << num(duration_s)
@@ -414,6 +452,12 @@ int run_vio(const VioArgs& args, std::ostream& out) {
       << ", \"rejected_ransac\": " << ts.rejected_ransac;
   } else {
     j << "\"corner_events\": " << vs.corner_events << ", \"corner_tracks_started\": " << vs.corner_tracker.tracks_started;
+  }
+  if (cfg.inputs != pipeline::VioInputs::kEvents) {
+    const auto& as = vs.aps_tracker;
+    j << ", \"aps_frames\": " << vs.aps_frames << ", \"aps_frames_dropped\": " << vs.aps_frames_dropped
+      << ", \"aps_tracks_detected\": " << as.detected << ", \"aps_tracked\": " << as.tracked << ", \"aps_lost_klt\": " << as.lost_klt
+      << ", \"aps_lost_forward_backward\": " << as.lost_fb << ", \"aps_rejected_ransac\": " << as.rejected_ransac;
   }
   j << "},\n  \"outliers_removed\": " << st.outliers_removed << ",\n  \"rotation_only_keyframes\": " << st.rotation_only_keyframes
     << "\n}\n";

@@ -241,6 +241,10 @@ void SlidingWindowEstimator::triangulate(int64_t track, Landmark* lm) {
   }
 }
 
+double SlidingWindowEstimator::sigma_of(const FeatureObservation& o) const {
+  return o.sigma_px > 0 && std::isfinite(o.sigma_px) ? o.sigma_px : options_.pixel_sigma;
+}
+
 bool SlidingWindowEstimator::add_frame(const FeatureObservations& frame) {
   if (!initial_ || frame.t_ns < initial_->t_ns) return false;
   if (imu_.empty() || imu_.back().t_ns < frame.t_ns || imu_.front().t_ns > frame.t_ns) return false;
@@ -293,7 +297,7 @@ bool SlidingWindowEstimator::add_frame(const FeatureObservations& frame) {
         const auto it = prev.obs.find(o.track_id);
         if (it == prev.obs.end() || !(o.bearing_c.z() > 1e-6)) continue;
         kf->rot[o.track_id] =
-            std::make_unique<RotationOnlyError>(it->second, o.bearing_c, camera_.T_c_b, focal_px_, options_.pixel_sigma);
+            std::make_unique<RotationOnlyError>(it->second, o.bearing_c, camera_.T_c_b, focal_px_, sigma_of(o));
       }
     }
     kf->pre = std::make_unique<ImuPreintegration>(
@@ -303,7 +307,7 @@ bool SlidingWindowEstimator::add_frame(const FeatureObservations& frame) {
   for (const FeatureObservation& o : frame.observations) {
     if (closed_tracks_.count(o.track_id) || !(o.bearing_c.z() > 1e-6)) continue;
     kf->obs[o.track_id] = o.bearing_c;
-    kf->reproj[o.track_id] = std::make_unique<ReprojectionError>(o.bearing_c, camera_.T_c_b, focal_px_, options_.pixel_sigma);
+    kf->reproj[o.track_id] = std::make_unique<ReprojectionError>(o.bearing_c, camera_.T_c_b, focal_px_, sigma_of(o));
   }
   const bool first = window_.empty();
   stats_.motion_model.emplace_back(kf->t_ns, kf->rotation_only);

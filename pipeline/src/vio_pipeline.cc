@@ -14,6 +14,15 @@ namespace evio::pipeline {
 
 const char* to_string(VioFrontEnd f) { return f == VioFrontEnd::kCorners ? "corners" : "frames"; }
 
+const char* to_string(VioInputs i) {
+  switch (i) {
+    case VioInputs::kAps: return "aps";
+    case VioInputs::kEventsAndAps: return "events+aps";
+    case VioInputs::kEvents: break;
+  }
+  return "events";
+}
+
 const char* to_string(VioInitMethod m) {
   switch (m) {
     case VioInitMethod::kStatic: return "static";
@@ -34,6 +43,11 @@ bool VioPipelineOptions::Validate(std::string* why) const {
   if (!background_activity.Validate(&w)) return fail("background_activity: " + w);
   if (!frames.Validate(&w)) return fail("frames: " + w);
   if (!tracker.Validate(&w)) return fail("tracker: " + w);
+  if (!aps_tracker.Validate(&w)) return fail("aps_tracker: " + w);
+  if (inputs != VioInputs::kEvents && inputs != VioInputs::kAps && inputs != VioInputs::kEventsAndAps)
+    return fail("inputs must be events, aps or events+aps");
+  if (!(aps_pixel_sigma_px > 0) || !std::isfinite(aps_pixel_sigma_px)) return fail("aps_pixel_sigma_px must be finite and > 0");
+  if (aps_max_gap_ns <= 0) return fail("aps_max_gap_ns must be > 0");
   if (!efast.Validate(&w)) return fail("efast: " + w);
   if (!corner_tracker.Validate(&w)) return fail("corner_tracker: " + w);
   if (!window.Validate(&w)) return fail("window: " + w);
@@ -74,20 +88,31 @@ struct VioPipeline::Impl {
         height(camera.camera.height()),
         shift(camera.time_shift_ns),
         use_frames(o.frontend == VioFrontEnd::kFrames),
+        use_events(o.inputs != VioInputs::kAps),
+        use_aps(o.inputs != VioInputs::kEvents),
         undistorter(camera.camera),
         refractory(width, height, o.refractory),
         background(width, height, o.background_activity) {
     if (use_frames) {
       frame_builder = std::make_unique<frontend::EventFrameBuilder>(cal, opt.frames);
       // The tracker works on the builder's undistorted pinhole images.
-      calib::CameraIntrinsics ideal = cal.camera.intrinsics();
-      ideal.model = calib::DistortionModel::kNone;
-      ideal.distortion.clear();
-      frame_tracker = std::make_unique<frontend::FeatureTracker>(ideal, opt.tracker);
+      frame_tracker = std::make_unique<frontend::FeatureTracker>(ideal_pinhole(), opt.tracker);
     } else {
       detector = std::make_unique<frontend::EfastDetector>(width, height, opt.efast);
       corner_tracker = std::make_unique<frontend::CornerTracker>(width, height, opt.corner_tracker);
     }
+    if (use_aps) {
+      aps_undistorter = std::make_unique<frontend::FrameUndistorter>(cal.camera);
+      aps_tracker = std::make_unique<frontend::FeatureTracker>(ideal_pinhole(), opt.aps_tracker);
+    }
+  }
+
+  // The undistorted pinhole of the event frames and the undistorted APS frames.
+  calib::CameraIntrinsics ideal_pinhole() const {
+    calib::CameraIntrinsics ideal = cal.camera.intrinsics();
+    ideal.model = calib::DistortionModel::kNone;
+    ideal.distortion.clear();
+    return ideal;
   }
 
   const VioPipelineOptions& opt;
@@ -96,6 +121,7 @@ struct VioPipeline::Impl {
   const int width, height;
   const int64_t shift;  // t_imu = t_cam + shift
   const bool use_frames;
+  const bool use_events, use_aps;
 
   InitialStateProvider initial_state;
   ObservationCallback on_observations;
@@ -122,6 +148,16 @@ struct VioPipeline::Impl {
   int64_t next_obs = 0;       // camera clock, next corner observation frame
   bool have_events = false;
   int64_t frame_id = 0;
+
+  // APS frames.
+  std::unique_ptr<frontend::FrameUndistorter> aps_undistorter;
+  std::unique_ptr<frontend::FeatureTracker> aps_tracker;
+  std::deque<Frame> waiting_frames;           // waiting for the IMU to cover them
+  int64_t prev_aps_t = -1;                    // camera clock, last tracked APS frame
+  std::vector<int64_t> aps_times;             // IMU clock, every APS frame added (events+aps)
+  std::deque<FeatureObservations> aps_ready;  // events+aps: tracked, waiting for the event frame after them
+  std::optional<FeatureObservations> last_event_obs;  // events+aps: the latest event frame (IMU clock)
+  int64_t last_emitted_t = std::numeric_limits<int64_t>::min();  // IMU clock, last frame to the estimator
 
   // Back-end and results.
   std::unique_ptr<backend::SlidingWindowEstimator> est;
@@ -160,6 +196,8 @@ struct VioPipeline::Impl {
       return;  // no frame yet: the first one may start anywhere
     }
     if (use_frames && prev_frame_t >= 0) need = std::min(need, prev_frame_t + shift);  // rotation prior
+    if (use_aps && prev_aps_t >= 0) need = std::min(need, prev_aps_t + shift);          // APS rotation prior
+    if (!waiting_frames.empty()) need = std::min(need, waiting_frames.front().t_ns + shift);
     const auto after = std::upper_bound(imu.begin(), imu.end(), need, [](int64_t t, const ImuSample& s) { return t < s.t_ns; });
     size_t cut = static_cast<size_t>(after - imu.begin());
     if (cut == 0) return;
@@ -267,14 +305,13 @@ struct VioPipeline::Impl {
   void emit_corner_frame(int64_t t_cam) {
     FeatureObservations f;
     f.t_ns = t_cam + shift;
-    f.frame_id = frame_id++;
     corner_tracker->predict_active(t_cam, opt.observation_period_ns, opt.min_track_age_ns,
                                    [&](int64_t id, const Eigen::Vector2d& px) {
                                      Eigen::Vector3d b;
                                      if (px.allFinite() && cal.camera.unproject(px, &b) && b.z() > opt.corner_min_bearing_z)
                                        f.observations.push_back({id, b});
                                    });
-    handle_frame(std::move(f));
+    emit_event_frame(std::move(f));
   }
 
   // Frames front-end: one observation frame per event frame, tracked with the IMU rotation prior.
@@ -286,30 +323,121 @@ struct VioPipeline::Impl {
       for (int64_t t = prev_frame_t + max_window; t < ef.t_ns; t += max_window) {
         FeatureObservations empty;
         empty.t_ns = t + shift;
-        empty.frame_id = frame_id++;
-        handle_frame(std::move(empty));
+        emit_event_frame(std::move(empty));
       }
       in_gap = false;
     }
-    Eigen::Matrix3d R_cur_prev = Eigen::Matrix3d::Identity();
-    bool have_prior = false;
-    const Eigen::Vector3d bg = est ? est->latest_state().bias_gyro : Eigen::Vector3d::Zero();
-    if (prev_frame_t >= 0) {
-      try {
-        const auto pre = backend::ImuPreintegration::between(imu, prev_frame_t + shift, ef.t_ns + shift, bg,
-                                                             Eigen::Vector3d::Zero(), noise);
-        const Eigen::Matrix3d R_c_b = cal.T_c_b.rotation.toRotationMatrix();
-        R_cur_prev = R_c_b * pre.delta_R().transpose() * R_c_b.transpose();
-        have_prior = true;
-      } catch (const std::invalid_argument&) {
-        // no IMU around the frame: track without the rotation prior
-      }
-    }
+    Eigen::Matrix3d R_cur_prev;
+    const bool have_prior = prev_frame_t >= 0 && rotation_prior(prev_frame_t, ef.t_ns, &R_cur_prev);
     prev_frame_t = ef.t_ns;
     FeatureObservations f = frame_tracker->track(ef.t_ns + shift, ef.image, have_prior ? &R_cur_prev : nullptr);
-    f.frame_id = frame_id++;
     if (est) feed_back_motion();
+    emit_event_frame(std::move(f));
+  }
+
+  // Camera rotation from camera-clock t0 to t1 from the gyro (estimated bias once initialised):
+  // p_cur = R_cur_prev p_prev for points at infinity. False without IMU around the interval.
+  bool rotation_prior(int64_t t0_cam, int64_t t1_cam, Eigen::Matrix3d* R_cur_prev) const {
+    const Eigen::Vector3d bg = est ? est->latest_state().bias_gyro : Eigen::Vector3d::Zero();
+    try {
+      const auto pre = backend::ImuPreintegration::between(imu, t0_cam + shift, t1_cam + shift, bg, Eigen::Vector3d::Zero(), noise);
+      const Eigen::Matrix3d R_c_b = cal.T_c_b.rotation.toRotationMatrix();
+      *R_cur_prev = R_c_b * pre.delta_R().transpose() * R_c_b.transpose();
+      return true;
+    } catch (const std::invalid_argument&) {
+      return false;  // no IMU around the interval: track without the rotation prior
+    }
+  }
+
+  // A frame to the estimator (through handle_frame) in strict time order; later-arriving older
+  // frames are dropped.
+  void emit(FeatureObservations f) {
+    if (use_aps && f.t_ns <= last_emitted_t) {
+      ++result.stats.aps_frames_dropped;
+      return;
+    }
+    last_emitted_t = f.t_ns;
+    f.frame_id = frame_id++;
     handle_frame(std::move(f));
+  }
+
+  // An event frame's observations (IMU clock). With events+aps the APS frames up to its time go
+  // first, each with the event tracks seen in both this and the previous event frame interpolated
+  // to the APS time; the event frame itself only when no APS frame is within aps_max_gap_ns.
+  void emit_event_frame(FeatureObservations e) {
+    if (!use_aps) {
+      emit(std::move(e));
+      return;
+    }
+    while (!aps_ready.empty() && aps_ready.front().t_ns <= e.t_ns) {
+      FeatureObservations a = std::move(aps_ready.front());
+      aps_ready.pop_front();
+      if (last_event_obs && last_event_obs->t_ns <= a.t_ns) append_interpolated(*last_event_obs, e, &a);
+      emit(std::move(a));
+    }
+    const auto near = std::lower_bound(aps_times.begin(), aps_times.end(), e.t_ns - opt.aps_max_gap_ns);
+    if (near == aps_times.end() || *near > e.t_ns + opt.aps_max_gap_ns) emit(e);
+    last_event_obs = std::move(e);
+  }
+
+  // Event tracks of a (time t_a) and b (t_b >= t_a) at out->t_ns in [t_a, t_b]: linear in the
+  // normalised image plane.
+  static void append_interpolated(const FeatureObservations& a, const FeatureObservations& b, FeatureObservations* out) {
+    const double span = static_cast<double>(b.t_ns - a.t_ns);
+    const double s = span > 0 ? static_cast<double>(out->t_ns - a.t_ns) / span : 1.0;
+    std::map<int64_t, const FeatureObservation*> in_a;
+    for (const FeatureObservation& o : a.observations) in_a[o.track_id] = &o;
+    for (const FeatureObservation& o : b.observations) {
+      const auto it = in_a.find(o.track_id);
+      if (it == in_a.end()) continue;
+      const Eigen::Vector3d& ba = it->second->bearing_c;
+      const Eigen::Vector3d& bb = o.bearing_c;
+      if (!(ba.z() > 1e-6) || !(bb.z() > 1e-6)) continue;
+      const Eigen::Vector2d x = (1 - s) * ba.head<2>() / ba.z() + s * bb.head<2>() / bb.z();
+      out->observations.push_back({o.track_id, Eigen::Vector3d(x.x(), x.y(), 1.0).normalized(), o.sigma_px});
+    }
+  }
+
+  // One APS frame (camera clock) through undistortion and its tracker.
+  void track_aps_frame(const Frame& fr) {
+    VioStats& st = result.stats;
+    cv::Mat img;
+    try {
+      img = aps_undistorter->undistort(fr.image);
+    } catch (const std::invalid_argument& e) {
+      ++st.aps_frames_dropped;
+      log_warning(std::string("APS frame at ") + format_seconds(fr.t_ns) + " s skipped: " + e.what());
+      return;
+    }
+    Eigen::Matrix3d R_cur_prev;
+    const bool have_prior = prev_aps_t >= 0 && rotation_prior(prev_aps_t, fr.t_ns, &R_cur_prev);
+    prev_aps_t = fr.t_ns;
+    FeatureObservations f = aps_tracker->track(fr.t_ns + shift, img, have_prior ? &R_cur_prev : nullptr);
+    for (FeatureObservation& o : f.observations) {
+      o.track_id += kApsTrackIdOffset;
+      o.sigma_px = opt.aps_pixel_sigma_px;
+    }
+    if (st.aps_frames == 0) st.t_first_aps_ns = fr.t_ns;
+    st.t_last_aps_ns = fr.t_ns;
+    ++st.aps_frames;
+    if (use_events) {
+      aps_ready.push_back(std::move(f));
+    } else {
+      emit(std::move(f));
+    }
+  }
+
+  // Tracks the waiting APS frames the IMU covers (all of them with `all`).
+  void drain_frames(bool all) {
+    while (!waiting_frames.empty()) {
+      if (!all && !imu_covers(waiting_frames.front().t_ns)) {
+        const int64_t newest = imu.empty() ? waiting_frames.front().t_ns + shift : imu.back().t_ns;
+        if (waiting_frames.back().t_ns + shift - newest <= opt.imu_wait_ns) break;
+      }
+      const Frame fr = std::move(waiting_frames.front());
+      waiting_frames.pop_front();
+      track_aps_frame(fr);
+    }
   }
 
   // The estimate back to the frame builder: gyro bias, and for use_depth the camera velocity and
@@ -399,13 +527,32 @@ void VioPipeline::add_imu(const ImuSample& sample) {
   p.check_open();
   p.imu.push_back(sample);
   if (p.frame_builder) p.frame_builder->add_imu(sample);
+  p.drain_frames(false);
   p.drain(false);
+}
+
+void VioPipeline::add_frame(const Frame& frame) {
+  Impl& p = *impl_;
+  p.check_open();
+  if (!p.use_aps) return;
+  const int64_t last = !p.waiting_frames.empty() ? p.waiting_frames.back().t_ns : p.prev_aps_t;
+  if (frame.image.empty() || (last >= 0 && frame.t_ns <= last)) {
+    ++p.result.stats.aps_frames_dropped;
+    return;
+  }
+  p.aps_times.push_back(frame.t_ns + p.shift);
+  p.waiting_frames.push_back(frame);
+  p.drain_frames(false);
 }
 
 void VioPipeline::add_events(EventSpan events) {
   Impl& p = *impl_;
   p.check_open();
   if (events.empty()) return;
+  if (!p.use_events) {
+    p.result.stats.events += static_cast<int64_t>(events.size());
+    return;
+  }
   if (p.waiting.empty() && p.imu_covers(events.back().t_ns)) {
     p.process(events);
     return;
@@ -418,12 +565,18 @@ VioResult VioPipeline::finish() {
   Impl& p = *impl_;
   p.check_open();
   p.finished = true;
+  p.drain_frames(true);
   p.drain(true);
   // Event-rate drops at the end: frames up to the last IMU sample keep the state propagating.
   if (p.use_frames) {
     p.built.clear();
     p.frame_builder->flush(&p.built);
     for (const auto& ef : p.built) p.track_event_frame(ef);
+  }
+  // APS frames after the last event frame: without event tracks.
+  while (!p.aps_ready.empty()) {
+    p.emit(std::move(p.aps_ready.front()));
+    p.aps_ready.pop_front();
   }
   VioStats& st = p.result.stats;
   if (!p.use_frames && p.have_events) {
@@ -438,7 +591,9 @@ VioResult VioPipeline::finish() {
     p.result.tracking_lost.push_back({p.few_since, st.t_last_event_ns + p.shift, p.lost_reason()});
   }
   if (!p.result.initialized && p.result.init_failure.empty()) {
-    p.result.init_failure = p.have_events ? "no frame to initialise from" : "no events";
+    p.result.init_failure = p.have_events || p.result.stats.aps_frames > 0 ? "no frame to initialise from"
+                            : p.use_events                                  ? "no events"
+                                                                            : "no APS frames";
   }
   if (p.use_frames) {
     st.event_frames = p.frame_builder->stats();
@@ -446,6 +601,7 @@ VioResult VioPipeline::finish() {
   } else {
     st.corner_tracker = p.corner_tracker->stats();
   }
+  if (p.use_aps) st.aps_tracker = p.aps_tracker->stats();
   if (p.est) {
     st.window = p.est->stats();
     p.result.keyframes = p.est->keyframe_states();

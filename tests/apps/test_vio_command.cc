@@ -67,6 +67,9 @@ TEST(VioConfig, ErrorsNameFileLineAndKey) {
   expect_error("tracker:\n  ransac: seven_point\n", "tracker.ransac");
   expect_error("frames: {events_per_frame: 100, min_events: 500}\n", "min_events");
   expect_error("init: {method: magic}\n", "init.method");
+  expect_error("inputs: video\n", "inputs");
+  expect_error("aps: {pixel_sigma: 0}\n", "aps.pixel_sigma");
+  expect_error("aps_tracker: {klt_window_px: 4}\n", "klt_window_px");
 }
 
 TEST(VioConfig, ResolvedConfigReadsBackToTheSameValues) {
@@ -74,7 +77,8 @@ TEST(VioConfig, ResolvedConfigReadsBackToTheSameValues) {
   std::string resolved;
   const VioConfig a = load_vio_config(
       dir.write("c.yaml", "frontend: corners\nwindow: {size: 7, pixel_sigma: 0.8, loss: cauchy}\nframes: {events_per_frame: 9000}\n"
-                          "tracker: {ransac: five_point, fast_threshold: 30}\ninit: {method: static, window_ms: 1500}\n"),
+                          "tracker: {ransac: five_point, fast_threshold: 30}\ninit: {method: static, window_ms: 1500}\n"
+                          "inputs: events+aps\naps_tracker: {fast_threshold: 7}\naps: {pixel_sigma: 0.4, max_gap_ms: 80}\n"),
       &resolved);
   std::string again;
   const VioConfig b = load_vio_config(dir.write("r.yaml", resolved), &again);
@@ -89,6 +93,11 @@ TEST(VioConfig, ResolvedConfigReadsBackToTheSameValues) {
   EXPECT_EQ(b.init, "static");
   EXPECT_EQ(b.init_window_ns, 1'500'000'000);
   EXPECT_EQ(a.window.window_size, b.window.window_size);
+  EXPECT_EQ(b.inputs, pipeline::VioInputs::kEventsAndAps);
+  EXPECT_EQ(b.aps_tracker.fast_threshold, 7);
+  EXPECT_EQ(b.tracker.fast_threshold, 30);
+  EXPECT_DOUBLE_EQ(b.aps_pixel_sigma_px, 0.4);
+  EXPECT_EQ(b.aps_max_gap_ns, 80'000'000);
 }
 
 TEST(VioConfig, EveryExampleConfigInDatasetsParses) {

@@ -118,8 +118,9 @@ class SlidingWindowEstimator {
   // IMU samples in time order (body clock).
   void add_imu(const ImuSample& sample);
   // A frame's observations (camera clock = body clock - T_c_b time shift already removed by the
-  // caller). Needs IMU samples up to its time. Returns true when it became a keyframe (and the
-  // window was solved).
+  // caller); each observation's sigma_px (0: options.pixel_sigma) weighs its reprojection error.
+  // Needs IMU samples up to its time. Returns true when it became a keyframe (and the window was
+  // solved).
   bool add_frame(const FeatureObservations& frame);
 
   // Latest estimate: the newest keyframe, or the last frame propagated from it with the IMU.
@@ -145,6 +146,8 @@ class SlidingWindowEstimator {
   // 0 when no landmark is triangulated.
   double translation_parallax_px(const Keyframe& prev, const VioState& predicted) const;
   bool is_keyframe(const FeatureObservations& frame, const VioState& predicted) const;
+  // The observation's noise: its sigma_px, or options_.pixel_sigma when it gives none.
+  double sigma_of(const FeatureObservation& o) const;
   void triangulate(int64_t track, Landmark* lm);
   void solve();
   void remove_outliers();

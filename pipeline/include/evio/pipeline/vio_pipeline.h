@@ -26,6 +26,7 @@
 #include "evio/frontend/event_filters.h"
 #include "evio/frontend/event_frame.h"
 #include "evio/frontend/feature_tracker.h"
+#include "evio/frontend/frame_undistorter.h"
 #include "evio/sensors/event_buffer.h"
 #include "evio/sensors/measurements.h"
 #include "evio/sensors/vio_types.h"
@@ -46,17 +47,32 @@ enum class VioInitMethod {
   kGiven,      // the state of VioPipeline::set_initial_state_provider at the first frame
 };
 
+// Which measurement streams feed the estimator.
+enum class VioInputs {
+  kEvents,        // events through the chosen event front-end (VioFrontEnd)
+  kAps,           // intensity (APS) frames only: undistorted, FAST/KLT/RANSAC under the IMU rotation prior
+  kEventsAndAps,  // both: the estimator gets the APS frames, each with the event tracks interpolated to its
+                  // time; event frames alone where no APS frame is near (aps_max_gap_ns)
+};
+
 // Names as written in configuration files and reports: "frames", "corners"; "auto", "static",
-// "alignment", "given". `option == "name"` compares with a name.
+// "alignment", "given"; "events", "aps", "events+aps". `option == "name"` compares with a name.
 const char* to_string(VioFrontEnd f);
 const char* to_string(VioInitMethod m);
+const char* to_string(VioInputs i);
 inline bool operator==(VioFrontEnd f, std::string_view name) { return name == to_string(f); }
 inline bool operator==(VioInitMethod m, std::string_view name) { return name == to_string(m); }
+inline bool operator==(VioInputs i, std::string_view name) { return name == to_string(i); }
 inline bool operator!=(VioFrontEnd f, std::string_view name) { return !(f == name); }
 inline bool operator!=(VioInitMethod m, std::string_view name) { return !(m == name); }
+inline bool operator!=(VioInputs i, std::string_view name) { return !(i == name); }
+
+// Track ids of APS-frame tracks are offset by this, so they never meet event-track ids.
+constexpr int64_t kApsTrackIdOffset = int64_t{1} << 40;
 
 struct VioPipelineOptions {
-  VioFrontEnd frontend = VioFrontEnd::kFrames;
+  VioInputs inputs = VioInputs::kEvents;
+  VioFrontEnd frontend = VioFrontEnd::kFrames;  // the event front-end (inputs events and events+aps)
 
   // Event filters, applied after the undistortion-validity check, before either front-end.
   bool refractory_enabled = true;                                // drop events within period_ns of the pixel's last
@@ -80,6 +96,23 @@ struct VioPipelineOptions {
   int64_t observation_period_ns = 50'000'000;                    // ns, > 0: one observation frame of the active tracks per period
   int64_t min_track_age_ns = 20'000'000;                         // ns, >= 0: younger tracks are not observed
   double corner_min_bearing_z = 1e-3;                            // unit-bearing z (cos of the angle to the axis), [0, 1): corners at or beyond 90 deg are dropped
+
+  // APS frames (inputs aps and events+aps): undistorted into the ideal pinhole and tracked by their
+  // own FeatureTracker. FAST threshold 10 (grey levels): intensity frames have less contrast than
+  // normalised event frames (on the simulated poster, threshold 20 found 35 tracks per frame, 10
+  // fills the 150). Their observations enter the estimator with aps_pixel_sigma_px (px, > 0; KLT
+  // on simulated 24 Hz frames with 5 ms exposure: 0.04 px between consecutive frames, 0.12 px
+  // against the best-fit landmark, against 0.3-0.45 px for event frames; 0.3 px leaves room for
+  // real sensors' blur and noise); event observations keep window.pixel_sigma.
+  frontend::FeatureTrackerOptions aps_tracker = [] {
+    frontend::FeatureTrackerOptions t;
+    t.fast_threshold = 10;
+    return t;
+  }();
+  double aps_pixel_sigma_px = 0.3;
+  // inputs events+aps: an event frame with no APS frame within this time of it (either side) goes
+  // to the estimator on its own (APS frames missing or sparse), ns, > 0.
+  int64_t aps_max_gap_ns = 100'000'000;
 
   // Back-end.
   backend::SlidingWindowOptions window;                          // window size, solver, keyframe rules (see its header)
@@ -125,6 +158,11 @@ struct VioStats {
   int64_t frontend_frames = 0;        // observation frames the front-end produced (incl. empty gap frames)
   int64_t t_first_event_ns = 0;       // camera clock; both 0 without events
   int64_t t_last_event_ns = 0;
+  int64_t aps_frames = 0;             // APS frames tracked
+  int64_t aps_frames_dropped = 0;     // APS frames out of time order, of another size, or merged too late
+  int64_t t_first_aps_ns = 0;         // camera clock; both 0 without APS frames
+  int64_t t_last_aps_ns = 0;
+  frontend::FeatureTrackerStats aps_tracker;     // inputs aps and events+aps
   frontend::EventFrameStats event_frames;        // frames front-end
   frontend::FeatureTrackerStats tracker;         // frames front-end
   frontend::CornerTrackerStats corner_tracker;   // corners front-end
@@ -164,7 +202,12 @@ class VioPipeline {
   // IMU samples in time order (IMU clock; t_imu = t_cam + camera.time_shift_ns). They may all come
   // first or be interleaved with add_events: events wait until the IMU covers them (imu_wait_ns).
   void add_imu(const ImuSample& sample);
-  // Raw events in time order (camera clock), e.g. chunks as read. Event frames completed within one
+  // An intensity (APS) frame (camera clock, 8-bit grey or BGR of the camera's size, distorted as
+  // recorded), for inputs aps and events+aps (ignored otherwise). Frames must come in time order;
+  // with events+aps add each frame before the events of its time (a merge needs the APS times
+  // around an event frame when that frame is built; adding every frame first is simplest).
+  void add_frame(const Frame& frame);
+  // Raw events in time order (camera clock), e.g. chunks as read (ignored with inputs aps). Event frames completed within one
   // call are built before the estimate of the first of them feeds back (gyro bias, velocity and
   // depth), so the results depend on the chunking (as for any streaming reader).
   void add_events(EventSpan events);

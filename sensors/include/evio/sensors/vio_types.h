@@ -16,6 +16,8 @@ namespace evio {
 struct FeatureObservation {
   int64_t track_id = 0;
   Eigen::Vector3d bearing_c = Eigen::Vector3d::UnitZ();
+  // Observation noise on the undistorted image (px, 1 sigma); 0: the estimator's default.
+  double sigma_px = 0.0;
 };
 
 // The observations of one frame (camera clock, ns).
