@@ -17,7 +17,7 @@ using Eigen::Vector3d;
 
 constexpr double kR = 4.0;         // dimension of a two-view correspondence
 constexpr double kLambda3 = 2.0;   // GRIC's outlier cap factor
-constexpr double kImuAicPenalty = 6.0;  // 3 parameters x 2 (AIC)
+constexpr double kAicPenaltyPerParameter = 2.0;
 constexpr int kMinCorrespondences = 6;
 
 Matrix3d skew(const Vector3d& v) {
@@ -202,7 +202,7 @@ const char* two_view_model_name(TwoViewModel m) {
 }
 
 TwoViewGric two_view_gric(const std::vector<Vector3d>& b0, const std::vector<Vector3d>& b1, const Matrix3d& R_prior,
-                          const Vector3d& t_prior, double focal_px, double sigma_px, bool use_imu, double imu_chi2) {
+                          const Vector3d& t_prior, double focal_px, double sigma_px, int imu_dof, double imu_chi2) {
   TwoViewGric out;
   // Only correspondences in front of both cameras.
   std::vector<Vector3d> c0, c1;
@@ -265,11 +265,12 @@ TwoViewGric two_view_gric(const std::vector<Vector3d>& b0, const std::vector<Vec
   out.gric_static = cost_s + lambda1 * 2 * n;
   out.gric_rotation = cost_r + lambda1 * 2 * n + lambda2 * 3;
   out.gric_general = cost_g + lambda1 * 3 * n + lambda2 * 5;
-  if (use_imu) {
+  if (imu_dof > 0) {
+    out.imu_dof = imu_dof;
     out.imu_chi2 = std::max(0.0, imu_chi2);
     out.gric_static += out.imu_chi2;
     out.gric_rotation += out.imu_chi2;
-    out.gric_general += kImuAicPenalty;
+    out.gric_general += kAicPenaltyPerParameter * imu_dof;
   }
   out.best = TwoViewModel::kStatic;
   double best = out.gric_static;

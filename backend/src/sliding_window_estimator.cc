@@ -64,6 +64,8 @@ bool SlidingWindowOptions::Validate(std::string* why) const {
   if (model_selection_min_tracks < 6) return fail("model_selection_min_tracks must be >= 6 tracks");
   if (!(model_selection_accel_sigma_mps2 >= 0) || !std::isfinite(model_selection_accel_sigma_mps2))
     return fail("model_selection_accel_sigma_mps2 must be finite and >= 0 m/s^2");
+  if (!(model_selection_velocity_sigma_mps >= 0) || !std::isfinite(model_selection_velocity_sigma_mps))
+    return fail("model_selection_velocity_sigma_mps must be finite and >= 0 m/s");
   if (!(rotation_only_parallax_px >= 0) || !(rotation_only_translation_px >= 0))
     return fail("rotation_only_parallax_px and rotation_only_translation_px (deprecated) must be >= 0 px");
   if (max_iterations < 1) return fail("max_iterations must be >= 1");
@@ -182,6 +184,7 @@ bool SlidingWindowEstimator::choose_rotation_only(const Keyframe& prev, const Fe
     // IMU datum: the change of the camera centre's velocity over the interval, zero under S and R.
     const bool use_imu = options_.model_selection_accel_sigma_mps2 > 0 && pre.dt_s() > 0;
     double chi2 = 0;
+    int dof = 0;
     if (use_imu) {
       const VioState ps = state_of(prev);
       const Eigen::Matrix3d R0 = quat_of(prev.pose).toRotationMatrix();
@@ -194,8 +197,21 @@ bool SlidingWindowEstimator::choose_rotation_only(const Keyframe& prev, const Fe
       const Eigen::Matrix3d cov = R0 * pre.covariance().block<3, 3>(3, 3) * R0.transpose() +
                                   std::pow(options_.model_selection_accel_sigma_mps2 * dt, 2) * Eigen::Matrix3d::Identity();
       chi2 = dv_c.dot(cov.ldlt().solve(dv_c));
+      dof = 3;
+      // The predicted displacement of the camera centre, when landmarks make the velocity observable.
+      int triangulated = 0;
+      for (const auto& [track, lm] : landmarks_) triangulated += lm.triangulated ? 1 : 0;
+      if (options_.model_selection_velocity_sigma_mps > 0 && triangulated >= options_.model_selection_min_tracks) {
+        const Eigen::Vector3d dp_c = predicted.T_w_b.translation + R1 * p_b_c - (pos_of(prev.pose) + R0 * p_b_c);
+        const Eigen::Matrix3d cov_p =
+            R0 * pre.covariance().block<3, 3>(6, 6) * R0.transpose() +
+            (std::pow(options_.model_selection_velocity_sigma_mps * dt, 2) +
+             std::pow(0.5 * options_.model_selection_accel_sigma_mps2 * dt * dt, 2)) * Eigen::Matrix3d::Identity();
+        chi2 += dp_c.dot(cov_p.ldlt().solve(dp_c));
+        dof += 3;
+      }
     }
-    const TwoViewGric g = two_view_gric(b0, b1, R_prior, T_c1_c0.translation, focal_px_, options_.pixel_sigma, use_imu, chi2);
+    const TwoViewGric g = two_view_gric(b0, b1, R_prior, T_c1_c0.translation, focal_px_, options_.pixel_sigma, dof, chi2);
     test.gric_static = g.gric_static;
     test.gric_rotation = g.gric_rotation;
     test.gric_general = g.gric_general;

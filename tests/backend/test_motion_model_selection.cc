@@ -73,9 +73,9 @@ TEST(TwoViewGric, ChoosesStaticRotationAndGeneral) {
 TEST(TwoViewGric, ImuChi2EntersStaticAndRotation) {
   const Eigen::Matrix3d R = rot(3, Eigen::Vector3d(0.3, 1, 0.2));
   const Pairs p = make_pairs(R, Eigen::Vector3d::Zero(), 60, kF, kSigma, 0.0, 3);
-  const TwoViewGric a = two_view_gric(p.b0, p.b1, R, Eigen::Vector3d::Zero(), kF, kSigma, true, 2.0);
+  const TwoViewGric a = two_view_gric(p.b0, p.b1, R, Eigen::Vector3d::Zero(), kF, kSigma, 3, 2.0);
   EXPECT_EQ(a.best, TwoViewModel::kRotation);
-  const TwoViewGric b = two_view_gric(p.b0, p.b1, R, Eigen::Vector3d::Zero(), kF, kSigma, true, 1e4);
+  const TwoViewGric b = two_view_gric(p.b0, p.b1, R, Eigen::Vector3d::Zero(), kF, kSigma, 3, 1e4);
   EXPECT_EQ(b.best, TwoViewModel::kGeneral);
   EXPECT_NEAR(b.gric_rotation - a.gric_rotation, 1e4 - 2.0, 1e-6);
   // Too few correspondences: no decision.

@@ -16,11 +16,11 @@
 // The lowest GRIC is the most likely model for its complexity; the capped term makes it robust.
 //
 // IMU evidence (optional): S and R say that the camera centre does not move between the keyframes,
-// so the change of the camera centre's velocity over the interval, dv_c (from the preintegrated
-// accelerometer, gravity and the lever arm of the camera), is zero up to its covariance Sigma. Its
-// Mahalanobis square chi2 = dv_c^T Sigma^-1 dv_c (3 dof) is added to GRIC_S and GRIC_R as their
-// residual on that datum, while G explains dv_c with 3 free parameters, penalised as in AIC
-// (2 per parameter: a single datum, so GRIC's log(r n) does not apply): GRIC_G += 6.
+// so IMU-derived quantities of dimension imu_dof (the caller's: the change of the camera centre's
+// velocity, and its predicted displacement when the velocity is observable) are zero up to their
+// covariance. Their Mahalanobis square imu_chi2 is added to GRIC_S and GRIC_R as their residual on
+// that datum, while G explains it with imu_dof free parameters, penalised as in AIC (2 per
+// parameter: a single datum, so GRIC's log(r n) does not apply): GRIC_G += 2 imu_dof.
 #pragma once
 
 #include <vector>
@@ -38,6 +38,7 @@ struct TwoViewGric {
   double gric_rotation = 0;      // GRIC of R
   double gric_general = 0;       // GRIC of G
   double imu_chi2 = 0;           // chi2 of the static-centre hypothesis on the IMU (0 when not used)
+  int imu_dof = 0;               // its degrees of freedom (0: IMU not used)
   TwoViewModel best = TwoViewModel::kNone;  // lowest GRIC; kNone when n < 6
   Eigen::Matrix3d R_c1_c0 = Eigen::Matrix3d::Identity();  // model R's rotation (c0 bearings into c1)
   Eigen::Vector3d t_c1 = Eigen::Vector3d::Zero();          // model G's unit translation direction (c1)
@@ -48,9 +49,9 @@ struct TwoViewGric {
 // be zero); both start the fits beside the closed-form ones (Kabsch on the bearings for R, the
 // linear epipolar constraint given R for t), which are then refined by Gauss-Newton on the inliers
 // of the capped cost. focal_px converts to pixels, sigma_px: observation noise per coordinate, px.
-// imu_chi2 >= 0 is added as described above when use_imu is set.
+// imu_chi2 >= 0 with imu_dof > 0 degrees of freedom is added as described above (imu_dof = 0: no IMU).
 TwoViewGric two_view_gric(const std::vector<Eigen::Vector3d>& b0, const std::vector<Eigen::Vector3d>& b1,
                           const Eigen::Matrix3d& R_prior, const Eigen::Vector3d& t_prior, double focal_px, double sigma_px,
-                          bool use_imu = false, double imu_chi2 = 0);
+                          int imu_dof = 0, double imu_chi2 = 0);
 
 }  // namespace evio::backend

@@ -18,8 +18,10 @@
 // Rotation-only model: each new keyframe is tested against the previous one by Torr's GRIC
 // (motion_model_selection.h) on the bearings they share: S (no motion), R (pure rotation,
 // homography at infinity, d = 2, k = 3) and G (general motion, essential matrix, d = 3, k = 5),
-// with the IMU as one more datum (S and R say the camera centre's velocity does not change over the
-// interval; its chi2 under the preintegration covariance plus model_selection_accel_sigma_mps2).
+// with the IMU as one more datum: S and R say the camera centre's velocity does not change over the
+// interval (chi2 under the preintegration covariance plus model_selection_accel_sigma_mps2) and,
+// once landmarks make the velocity observable, that it does not move (chi2 of the predicted
+// displacement under model_selection_velocity_sigma_mps).
 // Hysteresis: the model switches on when R has the lowest GRIC, by rotation_only_gric_margin or
 // more, for rotation_only_min_keyframes consecutive keyframes, and off as soon as G has the lowest
 // GRIC (S, no motion, keeps the current model: zero rotation is a rotation). Static phases select S,
@@ -90,6 +92,13 @@ struct SlidingWindowOptions {
   // the accelerometer noise density does not explain (accelerometer bias and gravity-direction
   // errors of the estimate, lever-arm errors), m/s^2, >= 0; 0: the IMU is not used in the test.
   double model_selection_accel_sigma_mps2 = 0.2;
+  // Second IMU datum, used when the window holds at least model_selection_min_tracks triangulated
+  // landmarks (the velocity is then observable): the camera centre's predicted displacement since
+  // the previous keyframe, zero under S and R, with this 1-sigma of the previous keyframe's velocity
+  // estimate, m/s, >= 0 (0: not used). Slow translation in front of a plane (poster_6dof mocap
+  // replay, 0.1-0.2 m/s, 1-2 m) looks rotational to the image test (a fronto-parallel plane's
+  // homography); this datum only helps once landmarks are triangulated.
+  double model_selection_velocity_sigma_mps = 0.02;
   // Deprecated pixel thresholds of the former test, still read by apps/vio_command.cc's `window`
   // section: rotation_only_parallax_px = 0 still disables the model (its old meaning); otherwise
   // both are ignored (px, >= 0).
@@ -128,7 +137,7 @@ struct SlidingWindowStats {
     int64_t t_ns = 0;
     int tracks = 0;                 // shared tracks with the previous keyframe (n of the GRIC)
     double gric_static = 0, gric_rotation = 0, gric_general = 0;  // GRIC units (-2 log likelihood)
-    double imu_chi2 = 0;            // chi2 (3 dof) of "the camera centre does not accelerate"
+    double imu_chi2 = 0;            // chi2 of "the camera centre does not accelerate (3 dof) / move (3 more)"
     TwoViewModel best = TwoViewModel::kNone;  // lowest GRIC (kNone: too few tracks, not tested)
     int run = 0;                    // consecutive keyframes R has won by the margin
     bool rotation_only = false;     // the decision after hysteresis
