@@ -58,8 +58,16 @@ bool SlidingWindowOptions::Validate(std::string* why) const {
     return false;
   };
   if (window_size < 2) return fail("window_size " + std::to_string(window_size) + " (expected >= 2 keyframes)");
-  if (!(rotation_only_translation_px > 0) || !std::isfinite(rotation_only_translation_px))
-    return fail("rotation_only_translation_px must be finite and > 0 px");
+  if (!(rotation_only_gric_margin >= 0) || !std::isfinite(rotation_only_gric_margin))
+    return fail("rotation_only_gric_margin must be finite and >= 0 (GRIC units)");
+  if (rotation_only_min_keyframes < 1) return fail("rotation_only_min_keyframes must be >= 1 keyframe");
+  if (model_selection_min_tracks < 6) return fail("model_selection_min_tracks must be >= 6 tracks");
+  if (!(model_selection_accel_sigma_mps2 >= 0) || !std::isfinite(model_selection_accel_sigma_mps2))
+    return fail("model_selection_accel_sigma_mps2 must be finite and >= 0 m/s^2");
+  if (!(model_selection_velocity_sigma_mps >= 0) || !std::isfinite(model_selection_velocity_sigma_mps))
+    return fail("model_selection_velocity_sigma_mps must be finite and >= 0 m/s");
+  if (!(rotation_only_parallax_px >= 0) || !(rotation_only_translation_px >= 0))
+    return fail("rotation_only_parallax_px and rotation_only_translation_px (deprecated) must be >= 0 px");
   if (max_iterations < 1) return fail("max_iterations must be >= 1");
   if (!(max_solver_time_s >= 0)) return fail("max_solver_time_s must be >= 0 s");
   if (!(loss_scale > 0)) return fail("loss_scale must be > 0 (pixel sigmas)");
@@ -71,8 +79,9 @@ bool SlidingWindowOptions::Validate(std::string* why) const {
   if (!(max_reprojection_px > 0)) return fail("max_reprojection_px must be > 0 px");
   if (!(min_depth_m > 0)) return fail("min_depth_m must be > 0 m");
   if (!gravity_w.allFinite()) return fail("gravity_w must be finite");
+  if (!(init_bias_horizon_s >= 0) || !std::isfinite(init_bias_horizon_s)) return fail("init_bias_horizon_s must be finite and >= 0 s");
   for (double s : {init_sigma_roll_pitch_rad, init_sigma_yaw_rad, init_sigma_position_m, init_sigma_velocity_mps,
-                   init_sigma_bias_gyro_radps, init_sigma_bias_accel_mps2}) {
+                   init_bias_gyro_turn_on_radps, init_bias_accel_turn_on_mps2}) {
     if (!(s > 0) || !std::isfinite(s)) return fail("initial sigmas must be finite and > 0");
   }
   return true;
@@ -154,19 +163,80 @@ double SlidingWindowEstimator::parallax_px(const FeatureObservations& frame, con
   return median(disp);
 }
 
-double SlidingWindowEstimator::translation_parallax_px(const Keyframe& prev, const VioState& predicted) const {
-  // Depths of the triangulated landmarks in the previous keyframe's camera.
-  const Eigen::Matrix3d R_c_w = camera_.T_c_b.rotation.toRotationMatrix() * quat_of(prev.pose).toRotationMatrix().transpose();
-  const Eigen::Vector3d p_prev = pos_of(prev.pose);
-  std::vector<double> depth;
-  for (const auto& [track, lm] : landmarks_) {
-    if (!lm.triangulated) continue;
-    const double z = (R_c_w * (Eigen::Vector3d(lm.p[0], lm.p[1], lm.p[2]) - p_prev)).z();
-    if (z > 0) depth.push_back(z);
+bool SlidingWindowEstimator::choose_rotation_only(const Keyframe& prev, const FeatureObservations& frame,
+                                                  const VioState& predicted, const ImuPreintegration& pre) {
+  SlidingWindowStats::MotionModelTest test;
+  test.t_ns = frame.t_ns;
+  const bool enabled = options_.rotation_only_model && options_.rotation_only_parallax_px != 0;
+  std::vector<Eigen::Vector3d> b0, b1;
+  for (const FeatureObservation& o : frame.observations) {
+    const auto it = prev.obs.find(o.track_id);
+    if (it == prev.obs.end() || closed_tracks_.count(o.track_id)) continue;
+    b0.push_back(it->second);
+    b1.push_back(o.bearing_c);
   }
-  if (depth.empty()) return 0;  // no depth known: the displacement test alone decides
-  const double d = median(depth);
-  return focal_px_ * (R_c_w * (predicted.T_w_b.translation - p_prev)).norm() / std::max(d, options_.min_depth_m);
+  test.tracks = static_cast<int>(b0.size());
+  if (enabled && test.tracks >= options_.model_selection_min_tracks) {
+    // Predicted relative camera motion T_c1_c0 = T_c_b T_b1_w T_w_b0 T_b_c.
+    const calib::SE3 T_w_b0(quat_of(prev.pose), pos_of(prev.pose));
+    const calib::SE3 T_c1_c0 = camera_.T_c_b * predicted.T_w_b.inverse() * T_w_b0 * camera_.T_c_b.inverse();
+    const Eigen::Matrix3d R_prior = T_c1_c0.rotation.toRotationMatrix();
+    // IMU datum: the change of the camera centre's velocity over the interval, zero under S and R.
+    const bool use_imu = options_.model_selection_accel_sigma_mps2 > 0 && pre.dt_s() > 0;
+    double chi2 = 0;
+    int dof = 0;
+    if (use_imu) {
+      const VioState ps = state_of(prev);
+      const Eigen::Matrix3d R0 = quat_of(prev.pose).toRotationMatrix();
+      const Eigen::Matrix3d R1 = predicted.T_w_b.rotation.toRotationMatrix();
+      const double dt = pre.dt_s();
+      const Eigen::Vector3d p_b_c = -(camera_.T_c_b.rotation.conjugate() * camera_.T_c_b.translation);  // camera centre in b
+      const Eigen::Vector3d w0 = ImuPreintegration::interpolate(imu_, prev.t_ns).gyro - ps.bias_gyro;
+      const Eigen::Vector3d w1 = ImuPreintegration::interpolate(imu_, frame.t_ns).gyro - ps.bias_gyro;
+      const Eigen::Vector3d dv_c = R0 * pre.delta_v() + options_.gravity_w * dt + R1 * w1.cross(p_b_c) - R0 * w0.cross(p_b_c);
+      const Eigen::Matrix3d cov = R0 * pre.covariance().block<3, 3>(3, 3) * R0.transpose() +
+                                  std::pow(options_.model_selection_accel_sigma_mps2 * dt, 2) * Eigen::Matrix3d::Identity();
+      chi2 = dv_c.dot(cov.ldlt().solve(dv_c));
+      dof = 3;
+      // The predicted displacement of the camera centre, when landmarks make the velocity observable.
+      int triangulated = 0;
+      for (const auto& [track, lm] : landmarks_) triangulated += lm.triangulated ? 1 : 0;
+      if (options_.model_selection_velocity_sigma_mps > 0 && triangulated >= options_.model_selection_min_tracks) {
+        const Eigen::Vector3d dp_c = predicted.T_w_b.translation + R1 * p_b_c - (pos_of(prev.pose) + R0 * p_b_c);
+        const Eigen::Matrix3d cov_p =
+            R0 * pre.covariance().block<3, 3>(6, 6) * R0.transpose() +
+            (std::pow(options_.model_selection_velocity_sigma_mps * dt, 2) +
+             std::pow(0.5 * options_.model_selection_accel_sigma_mps2 * dt * dt, 2)) * Eigen::Matrix3d::Identity();
+        chi2 += dp_c.dot(cov_p.ldlt().solve(dp_c));
+        dof += 3;
+      }
+    }
+    const TwoViewGric g = two_view_gric(b0, b1, R_prior, T_c1_c0.translation, focal_px_, options_.pixel_sigma, dof, chi2);
+    test.gric_static = g.gric_static;
+    test.gric_rotation = g.gric_rotation;
+    test.gric_general = g.gric_general;
+    test.imu_chi2 = g.imu_chi2;
+    test.best = g.best;
+  }
+  if (test.best == TwoViewModel::kNone) {
+    rotation_only_active_ = false;
+    rotation_only_run_ = 0;
+  } else if (rotation_only_active_) {
+    // Off as soon as G wins; S (no motion) keeps the rotation-only model.
+    if (test.best == TwoViewModel::kGeneral) {
+      rotation_only_active_ = false;
+      rotation_only_run_ = 0;
+    }
+  } else {
+    const bool r_wins = test.best == TwoViewModel::kRotation &&
+                        test.gric_rotation + options_.rotation_only_gric_margin <= std::min(test.gric_static, test.gric_general);
+    rotation_only_run_ = r_wins ? rotation_only_run_ + 1 : 0;
+    rotation_only_active_ = rotation_only_run_ >= options_.rotation_only_min_keyframes;
+  }
+  test.run = rotation_only_run_;
+  test.rotation_only = rotation_only_active_;
+  stats_.motion_model_tests.push_back(test);
+  return rotation_only_active_;
 }
 
 bool SlidingWindowEstimator::is_keyframe(const FeatureObservations& frame, const VioState& predicted) const {
@@ -288,10 +358,9 @@ bool SlidingWindowEstimator::add_frame(const FeatureObservations& frame) {
   if (!window_.empty()) {
     const Keyframe& prev = *window_.back();
     const VioState ps = state_of(prev);
-    size_t common = 0;
-    const double parallax = parallax_px(frame, predicted, &common);
-    kf->rotation_only = options_.rotation_only_parallax_px > 0 && common >= 5 && parallax < options_.rotation_only_parallax_px &&
-                        translation_parallax_px(prev, predicted) < options_.rotation_only_translation_px;
+    kf->pre = std::make_unique<ImuPreintegration>(
+        ImuPreintegration::between(imu_, prev.t_ns, kf->t_ns, ps.bias_gyro, ps.bias_accel, noise_));
+    kf->rotation_only = choose_rotation_only(prev, frame, predicted, *kf->pre);
     if (kf->rotation_only) {
       for (const FeatureObservation& o : frame.observations) {
         const auto it = prev.obs.find(o.track_id);
@@ -300,8 +369,6 @@ bool SlidingWindowEstimator::add_frame(const FeatureObservations& frame) {
             std::make_unique<RotationOnlyError>(it->second, o.bearing_c, camera_.T_c_b, focal_px_, sigma_of(o));
       }
     }
-    kf->pre = std::make_unique<ImuPreintegration>(
-        ImuPreintegration::between(imu_, prev.t_ns, kf->t_ns, ps.bias_gyro, ps.bias_accel, noise_));
     kf->imu_error = std::make_unique<ImuError>(*kf->pre, options_.gravity_w);
   }
   for (const FeatureObservation& o : frame.observations) {
@@ -329,8 +396,10 @@ bool SlidingWindowEstimator::add_frame(const FeatureObservations& frame) {
     S_pose.bottomRightCorner(3, 3) = Eigen::Matrix3d::Identity() / options_.init_sigma_position_m;
     Eigen::MatrixXd S_sb = Eigen::MatrixXd::Zero(9, 9);
     S_sb.diagonal() << Eigen::Vector3d::Constant(1.0 / options_.init_sigma_velocity_mps),
-        Eigen::Vector3d::Constant(1.0 / options_.init_sigma_bias_gyro_radps),
-        Eigen::Vector3d::Constant(1.0 / options_.init_sigma_bias_accel_mps2);
+        Eigen::Vector3d::Constant(1.0 / std::sqrt(std::pow(options_.init_bias_gyro_turn_on_radps, 2) +
+                                                  std::pow(noise_.gyroscope_random_walk, 2) * options_.init_bias_horizon_s)),
+        Eigen::Vector3d::Constant(1.0 / std::sqrt(std::pow(options_.init_bias_accel_turn_on_mps2, 2) +
+                                                  std::pow(noise_.accelerometer_random_walk, 2) * options_.init_bias_horizon_s));
     prior_ = LinearPrior::anchor({pose_block, sb_block}, {S_pose, S_sb});
   }
   // Landmarks: triangulate tracks seen from two or more keyframes; not in a rotation-only

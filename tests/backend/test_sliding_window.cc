@@ -186,8 +186,63 @@ TEST(SlidingWindowSimulated, NoisierObservationsAndMoreOutliers) {
   EXPECT_LT(r.eval.mean_position_error_percent, 0.3);
 }
 
-// Pure rotation for 30 s (datasets/poster_rotation.yaml motion, landmarks 20 m away): no
-// landmark can be triangulated; the rotation-only model keeps orientation and gyro bias.
+// Model selection (GRIC with hysteresis) on 6-DoF motion: the rotation-only model must never switch
+// on, neither with a moving start (random splines: boxes_6dof, poster_6dof, room_6dof with a
+// non-identity T_c_b and radtan distortion) nor with a static start (quadrotor_flight: 1 s hover,
+// then a banked figure eight). Position error bounds are ~1.3x the values measured (printed).
+struct ModelSelectionCase {
+  const char* scene;
+  double duration_s;
+  int landmarks;
+  double max_error_percent;
+};
+
+RunResult run_scene(const ModelSelectionCase& c, const SlidingWindowOptions& o) {
+  test::VioSimOptions so;
+  so.scene_yaml = std::string(EVIO_SOURCE_DIR) + "/datasets/" + c.scene;
+  so.duration_s = c.duration_s;
+  so.landmarks = c.landmarks;
+  const test::VioSimulation sim = test::make_vio_simulation(so);
+  return run(sim, o);
+}
+
+void print_tests(const char* name, const SlidingWindowStats& st) {
+  double max_adv = -1e300;  // max over keyframes of min(GRIC_S, GRIC_G) - GRIC_R
+  int r_best = 0, s_best = 0, g_best = 0;
+  for (const auto& t : st.motion_model_tests) {
+    if (t.best == TwoViewModel::kNone) continue;
+    max_adv = std::max(max_adv, std::min(t.gric_static, t.gric_general) - t.gric_rotation);
+    r_best += t.best == TwoViewModel::kRotation;
+    s_best += t.best == TwoViewModel::kStatic;
+    g_best += t.best == TwoViewModel::kGeneral;
+  }
+  std::printf("%s: %lld keyframes, GRIC best S %d / R %d / G %d, max GRIC_R advantage %.1f, %lld rotation-only\n", name,
+              static_cast<long long>(st.keyframes), s_best, r_best, g_best, max_adv,
+              static_cast<long long>(st.rotation_only_keyframes));
+}
+
+TEST(SlidingWindowModelSelection, NeverRotationOnlyDuring6DofMotion) {
+  for (const ModelSelectionCase& c : {ModelSelectionCase{"boxes_6dof.yaml", 10.0, 1500, 0.18},
+                                      ModelSelectionCase{"poster_6dof.yaml", 10.0, 1500, 0.16},
+                                      ModelSelectionCase{"room_6dof.yaml", 10.0, 3000, 0.16},
+                                      ModelSelectionCase{"quadrotor_flight.yaml", 10.0, 3000, 0.33}}) {
+    SCOPED_TRACE(c.scene);
+    const RunResult r = run_scene(c, SlidingWindowOptions{});
+    SlidingWindowOptions off;
+    off.rotation_only_model = false;
+    const RunResult r_off = run_scene(c, off);
+    print_tests(c.scene, r.stats);
+    std::printf("%s: mean position error %.3f%% (model disabled: %.3f%%), path %.1f m\n", c.scene,
+                r.eval.mean_position_error_percent, r_off.eval.mean_position_error_percent, r.eval.groundtruth_length_m);
+    EXPECT_EQ(r.stats.rotation_only_keyframes, 0);
+    ASSERT_EQ(r.stats.motion_model_tests.size(), static_cast<size_t>(r.stats.keyframes - 1));
+    for (const auto& t : r.stats.motion_model_tests) EXPECT_FALSE(t.rotation_only) << t.t_ns;
+    EXPECT_LT(r.eval.mean_position_error_percent, c.max_error_percent);
+  }
+}
+
+// Pure rotation for 30 s (datasets/poster_rotation.yaml motion, landmarks 20 m away): GRIC selects
+// the rotation-only model, which keeps orientation and gyro bias; hardly a landmark is triangulated.
 TEST(SlidingWindowSimulated, RotationOnlySegmentKeepsOrientation) {
   test::VioSimOptions so;
   so.scene_yaml = std::string(EVIO_SOURCE_DIR) + "/datasets/poster_rotation.yaml";
@@ -215,9 +270,21 @@ TEST(SlidingWindowSimulated, RotationOnlySegmentKeepsOrientation) {
               std::sqrt(sum2 / n), worst, static_cast<long long>(st.rotation_only_keyframes),
               static_cast<long long>(st.keyframes), static_cast<long long>(st.landmarks_triangulated),
               (est.latest_state().bias_gyro - sim.true_state(sim.frames.back().t_ns).bias_gyro).norm());
+  print_tests("poster_rotation 30 s", st);
+  for (const auto& t : st.motion_model_tests)
+    if (t.best != TwoViewModel::kRotation)
+      std::printf("  keyframe %.2f s: n %d, GRIC S %.1f R %.1f G %.1f, IMU chi2 %.1f -> %s\n", 1e-9 * (t.t_ns - sim.t_begin_ns),
+                  t.tracks, t.gric_static, t.gric_rotation, t.gric_general, t.imu_chi2, two_view_model_name(t.best));
   EXPECT_LT(worst, 1.0);
-  EXPECT_GT(st.rotation_only_keyframes, st.keyframes * 9 / 10);
-  EXPECT_EQ(st.landmarks_triangulated, 0);
+  // G wins a few keyframes by chance (5 of 198, by 0.1-15 GRIC units: its free translation fits
+  // the noise); the model then leaves and re-enters after rotation_only_min_keyframes, and such a
+  // 6-DoF keyframe may triangulate a stray landmark.
+  EXPECT_GT(st.rotation_only_keyframes, st.keyframes * 85 / 100);
+  // The first keyframes are 6-DoF until R has won rotation_only_min_keyframes times in a row.
+  ASSERT_GE(st.motion_model_tests.size(), 3u);
+  EXPECT_FALSE(st.motion_model_tests[0].rotation_only);
+  EXPECT_TRUE(st.motion_model_tests[2].rotation_only);
+  EXPECT_LE(st.landmarks_triangulated, 3);
 }
 
 // No ground truth: the visual-inertial alignment over the first second initialises the estimator

@@ -15,12 +15,23 @@
 //
 // Gauge: the first keyframe gets an anchor prior from the initial state (yaw and position tight,
 // roll/pitch, velocity and biases from their sigmas); later the marginalisation prior carries it.
-// Rotation-only model: when a new keyframe shows no parallax (median rotation-compensated
-// displacement below `rotation_only_parallax_px`, and the IMU-predicted translation at the median
-// landmark depth below rotation_only_translation_px), its untriangulated tracks shared with the
-// previous keyframe constrain the relative orientation directly (landmarks at infinity), so
-// orientation and gyro bias stay estimated; no landmark is triangulated without parallax (the
-// triangulation angle test). The model chosen per keyframe is in stats().motion_model.
+// Rotation-only model: each new keyframe is tested against the previous one by Torr's GRIC
+// (motion_model_selection.h) on the bearings they share: S (no motion), R (pure rotation,
+// homography at infinity, d = 2, k = 3) and G (general motion, essential matrix, d = 3, k = 5),
+// with the IMU as one more datum: S and R say the camera centre's velocity does not change over the
+// interval (chi2 under the preintegration covariance plus model_selection_accel_sigma_mps2) and,
+// once landmarks make the velocity observable, that it does not move (chi2 of the predicted
+// displacement under model_selection_velocity_sigma_mps).
+// Hysteresis: the model switches on when R has the lowest GRIC, by rotation_only_gric_margin or
+// more, for rotation_only_min_keyframes consecutive keyframes, and off as soon as G has the lowest
+// GRIC (S, no motion, keeps the current model: zero rotation is a rotation). Static phases select S,
+// so a static start stays 6-DoF. In a rotation-only keyframe, the untriangulated tracks shared with
+// the previous keyframe constrain the relative orientation directly (landmarks at infinity,
+// RotationOnlyError), so orientation and gyro bias stay estimated; no landmark is triangulated
+// from it. The decision and the statistics per keyframe are in stats().motion_model_tests.
+// Bias prior of the first keyframe: sigma = sqrt(turn_on^2 + random_walk^2 * horizon) per axis,
+// with the turn-on sigmas as options and the random walks from the IMU noise model (see the
+// options for why the turn-on term stays: the random walk alone is far below real turn-on biases).
 // Keyframes: a frame becomes a keyframe when the median rotation-compensated displacement of the
 // tracks it shares with the last keyframe reaches `keyframe_min_parallax_px`, when fewer than
 // `keyframe_min_tracked_ratio` of the last keyframe's tracks remain, or after
@@ -40,6 +51,7 @@
 
 #include <Eigen/Core>
 
+#include "evio/backend/motion_model_selection.h"
 #include "evio/calib/calibration_io.h"
 #include "evio/sensors/measurements.h"
 #include "evio/sensors/vio_types.h"
@@ -66,18 +78,32 @@ struct SlidingWindowOptions {
   double min_triangulation_angle_deg = 1.0;  // between the most separated rays, deg
   double max_reprojection_px = 2.0;        // after a solve, larger errors are outliers, px
   double min_depth_m = 0.05;               // landmarks closer to any observing camera are rejected, m
-  // Rotation-only model: a keyframe whose median rotation-compensated displacement from the
-  // previous keyframe is below this (no usable parallax) links the two keyframes' orientations
-  // through their common untriangulated tracks (RotationOnlyError); 0 disables the model, px.
-  // The residual forces the whole displacement to be rotation, so the model is also refused when
-  // the IMU-predicted translation since the previous keyframe, seen at the median depth of the
-  // triangulated landmarks, would move points by rotation_only_translation_px or more
-  // (f |t| / depth; without triangulated landmarks the displacement test alone decides). That
-  // prediction carries no track noise, hence its tighter bound. Without it, slow translating
-  // stretches of the simulated poster_6dof mocap replay (20 s, 0.1-0.2 m/s) became rotation-only
-  // and drifted 90 deg in yaw (52.7% position error instead of 1.5%).
+  // Rotation-only model, chosen per keyframe by GRIC with hysteresis (see the header comment).
+  bool rotation_only_model = true;         // false: every keyframe uses the 6-DoF model
+  // GRIC_R must be below GRIC_S and GRIC_G by at least this much (GRIC units: -2 log likelihood,
+  // i.e. chi2 units of the whitened residuals), >= 0. 10 is e^5 ~ 150 times more likely.
+  double rotation_only_gric_margin = 10.0;
+  // ... on this many consecutive keyframes before the model switches on (keyframes, >= 1). Three
+  // keyframes span 0.2-0.6 s: the onset of a translation (acceleration from rest, banking) looks
+  // rotational for a keyframe or two before its parallax shows.
+  int rotation_only_min_keyframes = 3;
+  int model_selection_min_tracks = 10;     // fewer shared tracks: no test, the 6-DoF model (tracks, >= 6)
+  // IMU datum of the test: 1-sigma of the camera centre's mean acceleration over the interval that
+  // the accelerometer noise density does not explain (accelerometer bias and gravity-direction
+  // errors of the estimate, lever-arm errors), m/s^2, >= 0; 0: the IMU is not used in the test.
+  double model_selection_accel_sigma_mps2 = 0.2;
+  // Second IMU datum, used when the window holds at least model_selection_min_tracks triangulated
+  // landmarks (the velocity is then observable): the camera centre's predicted displacement since
+  // the previous keyframe, zero under S and R, with this 1-sigma of the previous keyframe's velocity
+  // estimate, m/s, >= 0 (0: not used). Slow translation in front of a plane (poster_6dof mocap
+  // replay, 0.1-0.2 m/s, 1-2 m) looks rotational to the image test (a fronto-parallel plane's
+  // homography); this datum only helps once landmarks are triangulated.
+  double model_selection_velocity_sigma_mps = 0.02;
+  // Deprecated pixel thresholds of the former test, still read by apps/vio_command.cc's `window`
+  // section: rotation_only_parallax_px = 0 still disables the model (its old meaning); otherwise
+  // both are ignored (px, >= 0).
   double rotation_only_parallax_px = 1.5;
-  double rotation_only_translation_px = 0.3;  // px, > 0
+  double rotation_only_translation_px = 0.3;
   Eigen::Vector3d gravity_w = Eigen::Vector3d(0, 0, -9.81);  // m/s^2
   bool compute_covariance = false;         // covariance of the newest keyframe's pose after each solve
   // Anchor prior on the first keyframe (1 sigma).
@@ -85,8 +111,15 @@ struct SlidingWindowOptions {
   double init_sigma_yaw_rad = 1e-4;
   double init_sigma_position_m = 1e-4;
   double init_sigma_velocity_mps = 0.1;
-  double init_sigma_bias_gyro_radps = 0.01;
-  double init_sigma_bias_accel_mps2 = 0.1;
+  // Biases: sigma = sqrt(turn_on^2 + random_walk^2 * init_bias_horizon_s) with the random walks of
+  // the IMU noise model: the initial biases are a turn-on estimate (datasheet, calibration or a
+  // static initialiser) that the bias random walk has had up to the horizon to leave. The random
+  // walk alone is no prior for real IMUs: an MPU-6150 class IMU (2e-5 rad/s^2/sqrt(Hz)) gives
+  // 1.5e-4 rad/s over 60 s while its turn-on gyro bias is easily 0.01 rad/s, hence the turn-on terms
+  // (the former fixed sigmas) stay the main part; noisier IMUs get a wider prior.
+  double init_bias_gyro_turn_on_radps = 0.01;   // rad/s, > 0
+  double init_bias_accel_turn_on_mps2 = 0.1;    // m/s^2, > 0
+  double init_bias_horizon_s = 60.0;            // s, >= 0
   bool Validate(std::string* why) const;
 };
 
@@ -99,6 +132,17 @@ struct SlidingWindowStats {
   int64_t observations_dropped = 0;
   int64_t rotation_only_keyframes = 0;  // keyframes that used the rotation-only model
   std::vector<std::pair<int64_t, bool>> motion_model;  // per keyframe: (t_ns, rotation-only)
+  // Per keyframe after the first: the model-selection test and the decision.
+  struct MotionModelTest {
+    int64_t t_ns = 0;
+    int tracks = 0;                 // shared tracks with the previous keyframe (n of the GRIC)
+    double gric_static = 0, gric_rotation = 0, gric_general = 0;  // GRIC units (-2 log likelihood)
+    double imu_chi2 = 0;            // chi2 of "the camera centre does not accelerate (3 dof) / move (3 more)"
+    TwoViewModel best = TwoViewModel::kNone;  // lowest GRIC (kNone: too few tracks, not tested)
+    int run = 0;                    // consecutive keyframes R has won by the margin
+    bool rotation_only = false;     // the decision after hysteresis
+  };
+  std::vector<MotionModelTest> motion_model_tests;
   std::vector<double> solve_time_s;   // per keyframe (solve + marginalisation)
   std::vector<int> solve_landmarks;   // landmarks in each solve
 };
@@ -142,9 +186,10 @@ class SlidingWindowEstimator {
   // Median rotation-compensated displacement (px) of the tracks the frame shares with the last
   // keyframe; *common receives their number.
   double parallax_px(const FeatureObservations& frame, const VioState& predicted, size_t* common) const;
-  // Displacement (px) the predicted translation since `prev` causes at the median landmark depth;
-  // 0 when no landmark is triangulated.
-  double translation_parallax_px(const Keyframe& prev, const VioState& predicted) const;
+  // The GRIC test of the new keyframe (state `predicted`, observations `frame`) against `prev`,
+  // with the preintegration `pre` from prev to it; updates the hysteresis and the stats.
+  bool choose_rotation_only(const Keyframe& prev, const FeatureObservations& frame, const VioState& predicted,
+                            const ImuPreintegration& pre);
   bool is_keyframe(const FeatureObservations& frame, const VioState& predicted) const;
   // The observation's noise: its sigma_px, or options_.pixel_sigma when it gives none.
   double sigma_of(const FeatureObservation& o) const;
@@ -165,6 +210,8 @@ class SlidingWindowEstimator {
   std::unique_ptr<LinearPrior> prior_;
   VioState latest_;
   std::optional<Eigen::Matrix<double, 6, 6>> latest_cov_;
+  bool rotation_only_active_ = false;  // hysteresis state of the rotation-only model
+  int rotation_only_run_ = 0;          // consecutive keyframes R has won by the margin
   SlidingWindowStats stats_;
 };
 
