@@ -13,6 +13,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include "eval_command.h"
+#include "evio/backend/motion_model_selection.h"
 #include "evio/calib/calibration_io.h"
 #include "evio/calib/error.h"
 #include "evio/calib/log.h"
@@ -435,6 +436,16 @@ int run_vio(const VioArgs& args, std::ostream& out) {
     const pipeline::VioSegment& m = r.motion_models[i];
     j << (i ? ", " : "") << "{\"t_begin\": " << format_seconds(m.t_begin_ns) << ", \"t_end\": " << format_seconds(m.t_end_ns)
       << ", \"model\": \"" << m.what << "\"}";
+  }
+  // The model-selection test per keyframe (GRIC of the static, rotation and general models; the
+  // decision after hysteresis and the pixel conditions).
+  j << "],\n  \"motion_model_tests\": [";
+  for (size_t i = 0; i < st.motion_model_tests.size(); ++i) {
+    const auto& m = st.motion_model_tests[i];
+    j << (i ? ",\n    " : "\n    ") << "{\"t\": " << format_seconds(m.t_ns) << ", \"tracks\": " << m.tracks
+      << ", \"gric_static\": " << num(m.gric_static) << ", \"gric_rotation\": " << num(m.gric_rotation)
+      << ", \"gric_general\": " << num(m.gric_general) << ", \"imu_chi2\": " << num(m.imu_chi2) << ", \"best\": \""
+      << backend::two_view_model_name(m.best) << "\", \"rotation_only\": " << (m.rotation_only ? "true" : "false") << "}";
   }
   j << "],\n  \"tracking_lost_segments\": [";
   for (size_t i = 0; i < r.tracking_lost.size(); ++i) {

@@ -233,10 +233,34 @@ bool SlidingWindowEstimator::choose_rotation_only(const Keyframe& prev, const Fe
     rotation_only_run_ = r_wins ? rotation_only_run_ + 1 : 0;
     rotation_only_active_ = rotation_only_run_ >= options_.rotation_only_min_keyframes;
   }
+  // Necessary condition kept from the former pixel test: the median rotation-compensated
+  // displacement below rotation_only_parallax_px and, once landmarks are triangulated, the
+  // IMU-predicted translation seen at their median depth below rotation_only_translation_px. The
+  // GRIC test alone cannot tell a slow sideways motion in front of a single plane from a rotation:
+  // on the poster_6dof mocap replay (0.1-0.2 m/s, 1-2 m from the poster) it chose rotation-only
+  // from 0.89 to 2.54 s and drifted 84 deg in yaw; the pixel test alone switched on during 6-DoF
+  // motion from a moving start. Both must agree.
+  bool small_motion = false;
+  if (rotation_only_active_) {
+    size_t common = 0;
+    small_motion = parallax_px(frame, predicted, &common) < options_.rotation_only_parallax_px;
+    const Eigen::Matrix3d R_c_w = camera_.T_c_b.rotation.toRotationMatrix() * quat_of(prev.pose).toRotationMatrix().transpose();
+    std::vector<double> depth;
+    for (const auto& [track, lm] : landmarks_) {
+      if (!lm.triangulated) continue;
+      const double z = (R_c_w * (Eigen::Vector3d(lm.p[0], lm.p[1], lm.p[2]) - pos_of(prev.pose))).z();
+      if (z > 0) depth.push_back(z);
+    }
+    if (small_motion && !depth.empty()) {
+      const double d = std::max(median(depth), options_.min_depth_m);
+      small_motion = focal_px_ * (R_c_w * (predicted.T_w_b.translation - pos_of(prev.pose))).norm() / d <
+                     options_.rotation_only_translation_px;
+    }
+  }
   test.run = rotation_only_run_;
-  test.rotation_only = rotation_only_active_;
+  test.rotation_only = rotation_only_active_ && small_motion;
   stats_.motion_model_tests.push_back(test);
-  return rotation_only_active_;
+  return test.rotation_only;
 }
 
 bool SlidingWindowEstimator::is_keyframe(const FeatureObservations& frame, const VioState& predicted) const {

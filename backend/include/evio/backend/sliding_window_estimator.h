@@ -99,9 +99,11 @@ struct SlidingWindowOptions {
   // replay, 0.1-0.2 m/s, 1-2 m) looks rotational to the image test (a fronto-parallel plane's
   // homography); this datum only helps once landmarks are triangulated.
   double model_selection_velocity_sigma_mps = 0.02;
-  // Deprecated pixel thresholds of the former test, still read by apps/vio_command.cc's `window`
-  // section: rotation_only_parallax_px = 0 still disables the model (its old meaning); otherwise
-  // both are ignored (px, >= 0).
+  // Pixel conditions of the former test, kept as necessary conditions next to the GRIC test (both
+  // must agree, see choose_rotation_only): the median rotation-compensated displacement from the
+  // previous keyframe below rotation_only_parallax_px (0 disables the model), and the
+  // IMU-predicted translation at the median landmark depth below rotation_only_translation_px
+  // (without triangulated landmarks the displacement alone), px, >= 0.
   double rotation_only_parallax_px = 1.5;
   double rotation_only_translation_px = 0.3;
   Eigen::Vector3d gravity_w = Eigen::Vector3d(0, 0, -9.81);  // m/s^2
