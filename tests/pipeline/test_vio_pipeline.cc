@@ -8,6 +8,7 @@
 #include <random>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -311,8 +312,9 @@ namespace evio::pipeline {
 namespace {
 
 // APS frames (all first) then the events, as `evio vio` feeds inputs aps and events+aps.
-VioResult run_with_frames(const VioPipelineOptions& o, const Sequence& s) {
+VioResult run_with_frames(const VioPipelineOptions& o, const Sequence& s, VioPipeline::ObservationCallback cb = {}) {
   VioPipeline vio(o, s.camera, s.noise);
+  if (cb) vio.set_observation_callback(std::move(cb));
   for (const ImuSample& m : s.imu) vio.add_imu(m);
   for (const Frame& f : s.frames) vio.add_frame(f);
   for (size_t i = 0; i < s.events.size(); i += kChunk) {
@@ -348,9 +350,8 @@ TEST(VioPipelineSimulated, EventsAndApsOnPoster6dof) {
   const Sequence& s = poster_sequence();
   VioPipelineOptions o;
   o.inputs = VioInputs::kEventsAndAps;
-  VioPipeline vio(o, s.camera, s.noise);
   int64_t frames = 0, event_obs = 0, aps_obs = 0, aps_sigma_ok = 0;
-  vio.set_observation_callback([&](const FeatureObservations& f) {
+  const VioResult r = run_with_frames(o, s, [&](const FeatureObservations& f) {
     ++frames;
     for (const FeatureObservation& ob : f.observations) {
       if (ob.track_id >= kApsTrackIdOffset) {
@@ -361,12 +362,6 @@ TEST(VioPipelineSimulated, EventsAndApsOnPoster6dof) {
       }
     }
   });
-  for (const ImuSample& m : s.imu) vio.add_imu(m);
-  for (const Frame& f : s.frames) vio.add_frame(f);
-  for (size_t i = 0; i < s.events.size(); i += kChunk) {
-    vio.add_events(EventSpan(s.events.data() + i, std::min(kChunk, s.events.size() - i)));
-  }
-  const VioResult r = vio.finish();
   const double mpe = check_trajectory(r, s.groundtruth);
   std::printf("events+aps: %lld frames to the estimator, %lld event and %lld APS observations, mean position error %.3f%%\n",
               static_cast<long long>(frames), static_cast<long long>(event_obs), static_cast<long long>(aps_obs), mpe);

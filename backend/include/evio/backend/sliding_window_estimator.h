@@ -25,7 +25,9 @@
 // Hysteresis: the model switches on when R has the lowest GRIC, by rotation_only_gric_margin or
 // more, for rotation_only_min_keyframes consecutive keyframes, and off as soon as G has the lowest
 // GRIC (S, no motion, keeps the current model: zero rotation is a rotation). Static phases select S,
-// so a static start stays 6-DoF. In a rotation-only keyframe, the untriangulated tracks shared with
+// so a static start stays 6-DoF. A keyframe is rotation-only only where the pixel conditions
+// (rotation_only_parallax_px, rotation_only_translation_px) hold as well: GRIC alone took a slow
+// sideways motion in front of one plane for a rotation. In a rotation-only keyframe, the untriangulated tracks shared with
 // the previous keyframe constrain the relative orientation directly (landmarks at infinity,
 // RotationOnlyError), so orientation and gyro bias stay estimated; no landmark is triangulated
 // from it. The decision and the statistics per keyframe are in stats().motion_model_tests.

@@ -4,7 +4,9 @@
 // FAST/KLT/RANSAC under the IMU rotation prior, after Rebecq et al., BMVC 2017; or eFAST corner
 // events with corner tracks sampled at a fixed period), the state is initialised (static start,
 // visual-inertial alignment, or a given state) and estimated by the keyframe sliding window.
-// Plain data in (IMU samples, event spans) and out (VioResult); no files, flags or threads.
+// Intensity (APS) frames can replace or join the events (VioInputs): undistorted and tracked with
+// their own FeatureTracker, merged with the event tracks at the APS frame times.
+// Plain data in (IMU samples, event spans, frames) and out (VioResult); no files, flags or threads.
 #pragma once
 
 #include <cstdint>
