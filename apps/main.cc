@@ -285,6 +285,15 @@ int main(int argc, char** argv) {
                       "folder's calib.yaml, else the dataset's calibration");
   vio_cmd->add_option("--gt", vio.gt,
                       "Ground truth (TUM or csv): evaluate at the end (SE3 alignment on the first 5 s) into eval.json");
+  vio_cmd->add_option("--oracle-tracks", vio.oracle_scene,
+                      "Error budget on a simulated sequence: SCENE.yaml it was simulated from (needs --gt). The estimator "
+                      "sees the true projections of the front-end's tracks (same tracks, lifetimes and frames)");
+  vio_cmd->add_option("--oracle-noise-px", vio.oracle_noise_px,
+                      "With --oracle-tracks: white Gaussian noise added per axis (px on the ideal pinhole)")
+      ->check(CLI::NonNegativeNumber);
+  vio_cmd->add_option("--oracle-drift-px", vio.oracle_drift_px,
+                      "With --oracle-tracks: random-walk drift per track, Gaussian step per axis and frame (px)")
+      ->check(CLI::NonNegativeNumber);
   add_dataset_options(vio_cmd, &vio.dataset_options, &vio_format, &vio_unit, &vio_bad);
 
   evio::apps::MosaicArgs mosaic;

@@ -17,12 +17,14 @@
 #include "evio/calib/calibration_io.h"
 #include "evio/calib/error.h"
 #include "evio/calib/log.h"
+#include "evio/evaluation/track_oracle.h"
 #include "evio/mapping/landmark_map.h"
 #include "evio/sensors/ecd.h"
 #include "evio/sensors/time.h"
 #include "json_util.h"
 #include "dataset_calibration.h"
 #include "progress.h"
+#include "simulate_config.h"
 #include "yaml_config.h"
 
 namespace evio::apps {
@@ -55,6 +57,7 @@ std::string tracker_yaml(const char* key, const frontend::FeatureTrackerOptions&
     << ", max_per_cell: " << tk.max_per_cell << ", fast_threshold: " << tk.fast_threshold
     << ", min_distance_px: " << tk.min_distance_px << ", klt_window_px: " << tk.klt_window_px
     << ", klt_pyramid_levels: " << tk.klt_pyramid_levels << ", forward_backward_max_px: " << num(tk.forward_backward_max_px)
+    << ", template_max_age_frames: " << tk.template_max_age_frames
     << ", ransac: " << frontend::ransac_model_name(tk.ransac)
     << ", ransac_threshold_px: " << num(tk.ransac_threshold_px) << ", min_tracks_before_detection: " << tk.min_tracks_before_detection << "}\n";
   return y.str();
@@ -64,7 +67,7 @@ std::string tracker_yaml(const char* key, const frontend::FeatureTrackerOptions&
 void parse_tracker(const Section& s, frontend::FeatureTrackerOptions* t) {
   s.allow({"grid_cols", "grid_rows", "max_features", "max_per_cell", "fast_threshold", "min_distance_px",
            "klt_window_px", "klt_pyramid_levels", "forward_backward_max_px", "ransac", "ransac_threshold_px",
-           "min_tracks_before_detection"});
+           "min_tracks_before_detection", "template_max_age_frames"});
   t->grid_cols = s.integer("grid_cols", t->grid_cols, 1, 100);
   t->grid_rows = s.integer("grid_rows", t->grid_rows, 1, 100);
   t->max_features = s.integer("max_features", t->max_features, 1, 100000);
@@ -74,6 +77,7 @@ void parse_tracker(const Section& s, frontend::FeatureTrackerOptions* t) {
   t->klt_window_px = s.integer("klt_window_px", t->klt_window_px, 3, 255);
   t->klt_pyramid_levels = s.integer("klt_pyramid_levels", t->klt_pyramid_levels, 0, 8);
   t->forward_backward_max_px = s.number("forward_backward_max_px", t->forward_backward_max_px, Range::kPositive, "px");
+  t->template_max_age_frames = s.integer("template_max_age_frames", t->template_max_age_frames, 1, 100000);
   const std::string r = s.string("ransac", frontend::ransac_model_name(t->ransac), {"two_point", "five_point", "none"});
   t->ransac = r == "two_point" ? frontend::RansacModel::kTwoPoint : r == "five_point" ? frontend::RansacModel::kFivePoint : frontend::RansacModel::kNone;
   t->ransac_threshold_px = s.number("ransac_threshold_px", t->ransac_threshold_px, Range::kPositive, "px");
@@ -342,6 +346,22 @@ int run_vio(const VioArgs& args, std::ostream& out) {
     if (args.gt.empty()) throw InputError(args.config, 0, "init.method groundtruth needs --gt", "--gt GT.tum, or another init.method");
     vio.set_initial_state_provider([gt = load_trajectory(args.gt)](int64_t t_ns) { return groundtruth_state(gt, t_ns); });
   }
+  std::unique_ptr<evaluation::TrackOracle> oracle;
+  std::shared_ptr<const sim::PlanarScene> oracle_planes;
+  if (!args.oracle_scene.empty()) {
+    if (args.gt.empty()) throw InputError(args.oracle_scene, 0, "--oracle-tracks needs the true trajectory", "--gt GT.tum");
+    const SimulationConfig sc = load_simulation_config(args.oracle_scene);
+    oracle_planes = std::dynamic_pointer_cast<const sim::PlanarScene>(sc.scene);
+    if (!oracle_planes)
+      throw InputError(args.oracle_scene, 0, "--oracle-tracks needs a planes scene (got " + sc.scene_type + ")", "scene: planes");
+    evaluation::TrackOracleOptions oo;
+    oo.white_noise_px = args.oracle_noise_px;
+    oo.drift_px_per_frame = args.oracle_drift_px;
+    oracle = std::make_unique<evaluation::TrackOracle>(
+        load_trajectory(args.gt), *cal,
+        [p = oracle_planes](const Eigen::Vector3d& o, const Eigen::Vector3d& d) { return p->intersect(o, d); }, oo);
+    vio.set_observation_filter([o = oracle.get()](FeatureObservations* f) { o->apply(f); });
+  }
   std::ofstream obs_file((fs::path(args.out) / "observations.txt").string());
   obs_file << "# t[s] track_id bx by bz  (front-end observations: unit bearings in the camera frame, body clock)\n";
   vio.set_observation_callback([&obs_file](const FeatureObservations& f) {
@@ -470,7 +490,13 @@ int run_vio(const VioArgs& args, std::ostream& out) {
       << ", \"aps_tracks_detected\": " << as.detected << ", \"aps_tracked\": " << as.tracked << ", \"aps_lost_klt\": " << as.lost_klt
       << ", \"aps_lost_forward_backward\": " << as.lost_fb << ", \"aps_rejected_ransac\": " << as.rejected_ransac;
   }
-  j << "},\n  \"outliers_removed\": " << st.outliers_removed << ",\n  \"rotation_only_keyframes\": " << st.rotation_only_keyframes
+  j << "}";
+  if (oracle) {
+    j << ",\n  \"oracle\": {\"scene\": \"" << json_escape(args.oracle_scene) << "\", \"white_noise_px\": " << num(args.oracle_noise_px)
+      << ", \"drift_px_per_frame\": " << num(args.oracle_drift_px) << ", \"replaced\": " << oracle->stats().replaced
+      << ", \"dropped\": " << oracle->stats().dropped << "}";
+  }
+  j << ",\n  \"outliers_removed\": " << st.outliers_removed << ",\n  \"rotation_only_keyframes\": " << st.rotation_only_keyframes
     << "\n}\n";
   {
     std::ofstream f((fs::path(args.out) / "stats.json").string());

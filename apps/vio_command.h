@@ -46,6 +46,12 @@ struct VioArgs {
   std::string gt;       // optional ground truth (TUM or csv) -> eval.json
   std::string out;
   bool progress = true;
+  // Error budget (evaluation::TrackOracle): the estimator sees the true projections of the
+  // front-end's tracks (landmarks from the simulator scene YAML of the sequence and --gt), with
+  // optional white noise (px) and random-walk drift (px per frame).
+  std::string oracle_scene;
+  double oracle_noise_px = 0;
+  double oracle_drift_px = 0;
 };
 
 int run_vio(const VioArgs& args, std::ostream& out);

@@ -143,6 +143,7 @@ bool FeatureTrackerOptions::Validate(std::string* why) const {
   if (min_tracks_before_detection < 0 || min_tracks_before_detection > max_features)
     return fail("min_tracks_before_detection must be in 0..max_features");
   if (border_px < 0) return fail("border_px must be >= 0");
+  if (template_max_age_frames < 1) return fail("template_max_age_frames must be >= 1");
   return true;
 }
 
@@ -210,7 +211,7 @@ void FeatureTracker::detect(const cv::Mat& frame) {
     if (per_cell[static_cast<size_t>(cell)] >= options_.max_per_cell) continue;
     const cv::Point ip(cvRound(kp.pt.x), cvRound(kp.pt.y));
     if (occupied.at<uint8_t>(ip) != 0) continue;
-    tracks_.push_back({next_id_++, kp.pt});
+    tracks_.push_back({next_id_++, kp.pt, frame_id_, kp.pt});
     ++per_cell[static_cast<size_t>(cell)];
     if (r > 0) cv::circle(occupied, ip, r, 255, -1);
     ++added;
@@ -238,7 +239,7 @@ FeatureObservations FeatureTracker::track(int64_t t_ns, const cv::Mat& frame,
 
   if (!tracks_.empty() && !prev_pyramid_.empty()) {
     const size_t n = tracks_.size();
-    std::vector<cv::Point2f> p0(n), p1(n);
+    std::vector<cv::Point2f> p0(n), p1(n), back(n);
     for (size_t i = 0; i < n; ++i) {
       p0[i] = tracks_[i].px;
       p1[i] = p0[i];
@@ -252,13 +253,47 @@ FeatureObservations FeatureTracker::track(int64_t t_ns, const cv::Mat& frame,
         }
       }
     }
-    std::vector<uchar> st_f, st_b;
-    std::vector<float> err;
-    cv::calcOpticalFlowPyrLK(prev_pyramid_, pyramid, p0, p1, st_f, err, win, levels, term,
-                             cv::OPTFLOW_USE_INITIAL_FLOW);
-    std::vector<cv::Point2f> back = p0;
-    cv::calcOpticalFlowPyrLK(pyramid, prev_pyramid_, p1, back, st_b, err, win, levels, term,
-                             cv::OPTFLOW_USE_INITIAL_FLOW);
+    std::vector<uchar> st_f(n, 0), st_b(n, 0);
+    std::vector<cv::Point2f> ref_px(n);
+    // One KLT call per reference frame (with template_max_age_frames = 1 that is the previous
+    // frame for every track).
+    const bool chained = options_.template_max_age_frames == 1;
+    std::vector<int64_t> refs;
+    for (const Track& t : tracks_) refs.push_back(chained ? frame_id_ - 1 : t.ref_frame);
+    std::vector<int64_t> groups = refs;
+    std::sort(groups.begin(), groups.end());
+    groups.erase(std::unique(groups.begin(), groups.end()), groups.end());
+    for (int64_t g : groups) {
+      const std::vector<cv::Mat>* ref_pyr = &prev_pyramid_;
+      if (!chained) {
+        ref_pyr = nullptr;
+        for (const auto& rp : ref_pyramids_)
+          if (rp.first == g) ref_pyr = &rp.second;
+        if (!ref_pyr) continue;  // cannot happen: every referenced pyramid is kept
+      }
+      std::vector<size_t> idx;
+      std::vector<cv::Point2f> q0, q1, qb;
+      for (size_t i = 0; i < n; ++i) {
+        if (refs[i] != g) continue;
+        idx.push_back(i);
+        ref_px[i] = chained ? p0[i] : tracks_[i].ref_px;
+        q0.push_back(ref_px[i]);
+        q1.push_back(p1[i]);
+      }
+      std::vector<uchar> sf, sb;
+      std::vector<float> err;
+      cv::calcOpticalFlowPyrLK(*ref_pyr, pyramid, q0, q1, sf, err, win, levels, term,
+                               cv::OPTFLOW_USE_INITIAL_FLOW);
+      qb = q0;
+      cv::calcOpticalFlowPyrLK(pyramid, *ref_pyr, q1, qb, sb, err, win, levels, term,
+                               cv::OPTFLOW_USE_INITIAL_FLOW);
+      for (size_t k = 0; k < idx.size(); ++k) {
+        p1[idx[k]] = q1[k];
+        back[idx[k]] = qb[k];
+        st_f[idx[k]] = sf[k];
+        st_b[idx[k]] = sb[k];
+      }
+    }
     std::vector<size_t> kept;
     kept.reserve(n);
     const double fb2 = options_.forward_backward_max_px * options_.forward_backward_max_px;
@@ -267,7 +302,7 @@ FeatureObservations FeatureTracker::track(int64_t t_ns, const cv::Mat& frame,
         ++stats_.lost_klt;
         continue;
       }
-      const double dx = back[i].x - p0[i].x, dy = back[i].y - p0[i].y;
+      const double dx = back[i].x - ref_px[i].x, dy = back[i].y - ref_px[i].y;
       if (!st_b[i] || !(dx * dx + dy * dy <= fb2)) {
         ++stats_.lost_fb;
         continue;
@@ -297,7 +332,14 @@ FeatureObservations FeatureTracker::track(int64_t t_ns, const cv::Mat& frame,
         ++stats_.rejected_ransac;
         continue;
       }
-      survivors.push_back({tracks_[kept[k]].id, p1[kept[k]]});
+      Track t = tracks_[kept[k]];
+      t.px = p1[kept[k]];
+      // The template is refreshed once it is template_max_age_frames old.
+      if (frame_id_ - t.ref_frame >= options_.template_max_age_frames) {
+        t.ref_frame = frame_id_;
+        t.ref_px = t.px;
+      }
+      survivors.push_back(t);
     }
     stats_.tracked += static_cast<int64_t>(survivors.size());
     tracks_ = std::move(survivors);
@@ -308,6 +350,17 @@ FeatureObservations FeatureTracker::track(int64_t t_ns, const cv::Mat& frame,
   if (stats_.frames == 0 ||
       static_cast<int>(tracks_.size()) < options_.min_tracks_before_detection) {
     detect(frame);
+  }
+  if (options_.template_max_age_frames > 1) {
+    // Keep the pyramids still referenced (this frame's is referenced by new and refreshed tracks).
+    std::vector<std::pair<int64_t, std::vector<cv::Mat>>> keep;
+    for (auto& rp : ref_pyramids_) {
+      const bool used = std::any_of(tracks_.begin(), tracks_.end(),
+                                    [&](const Track& t) { return t.ref_frame == rp.first; });
+      if (used) keep.push_back(std::move(rp));
+    }
+    keep.emplace_back(frame_id_, pyramid);
+    ref_pyramids_ = std::move(keep);
   }
   prev_pyramid_ = std::move(pyramid);
 

@@ -125,6 +125,7 @@ struct VioPipeline::Impl {
 
   InitialStateProvider initial_state;
   ObservationCallback on_observations;
+  ObservationFilter observation_filter;
   bool finished = false;
 
   // IMU (IMU clock): every sample still needed by the initialisation, the estimator or the
@@ -282,6 +283,7 @@ struct VioPipeline::Impl {
   // Every front-end frame (IMU clock) goes through here.
   void handle_frame(FeatureObservations f) {
     ++result.stats.frontend_frames;
+    if (observation_filter) observation_filter(&f);
     if (on_observations) on_observations(f);
     if (in_gap) {
       // counted as the event-rate drop
@@ -488,9 +490,14 @@ struct VioPipeline::Impl {
       corner_tracker->add(e);
     }
     if (use_frames) {
-      built.clear();
-      frame_builder->add_events(EventSpan(filtered.data(), filtered.size()), &built);
-      for (const auto& ef : built) track_event_frame(ef);
+      // In slices of a quarter frame, so each frame is built with the estimate (gyro bias,
+      // velocity, depth) fed back after the frame before it, not with the one of the chunk's start.
+      const size_t slice = static_cast<size_t>(std::max<int64_t>(256, opt.frames.events_per_frame / 4));
+      for (size_t b = 0; b < filtered.size(); b += slice) {
+        built.clear();
+        frame_builder->add_events(EventSpan(filtered.data() + b, std::min(slice, filtered.size() - b)), &built);
+        for (const auto& ef : built) track_event_frame(ef);
+      }
     }
     prune_imu();
   }
@@ -519,6 +526,7 @@ VioPipeline::~VioPipeline() = default;
 void VioPipeline::set_initial_state_provider(InitialStateProvider provider) { impl_->initial_state = std::move(provider); }
 
 void VioPipeline::set_observation_callback(ObservationCallback callback) { impl_->on_observations = std::move(callback); }
+void VioPipeline::set_observation_filter(ObservationFilter filter) { impl_->observation_filter = std::move(filter); }
 
 bool VioPipeline::initialized() const { return impl_->est != nullptr; }
 

@@ -3,6 +3,7 @@
 // triangulated, gross errors are counted apart, tracks that end with their landmark in view are
 // counted as lost while visible, and tracks that leave the view are not.
 #include "evio/evaluation/track_evaluation.h"
+#include "evio/evaluation/track_oracle.h"
 
 #include <cmath>
 #include <random>
@@ -148,6 +149,69 @@ TEST(TrackEvaluation, BadOptionsAndMissingRayCaster) {
   EXPECT_EQ(empty.frames, 0);
   EXPECT_TRUE(std::isnan(empty.median_px));
   EXPECT_FALSE(track_evaluation_json(empty).empty());
+}
+
+// TrackOracle: the front-end's tracks (here drifting 0.3 px per frame) become the exact
+// projections of their landmarks (anchored error 0 at every age), with the same topology; a
+// random-walk drift added back grows like sqrt(age); a track whose first ray hits nothing is
+// dropped.
+std::vector<FeatureObservations> through_oracle(const Scenario& s, std::vector<FeatureObservations> frames,
+                                                const TrackOracleOptions& o, RayCaster cast, TrackOracleStats* stats) {
+  TrackOracle oracle(s.gt, s.camera, std::move(cast), o);
+  for (auto& f : frames) oracle.apply(&f);
+  *stats = oracle.stats();
+  return frames;
+}
+
+TEST(TrackOracle, ReplacesTracksByTrueProjectionsKeepingTopology) {
+  const Scenario s;
+  const auto real = s.frames(40, 0.3, 15);
+  TrackOracleStats st;
+  const auto exact = through_oracle(s, real, {}, s.cast, &st);
+  ASSERT_EQ(exact.size(), real.size());
+  int64_t n = 0;
+  for (size_t k = 0; k < real.size(); ++k) {
+    ASSERT_EQ(exact[k].observations.size(), real[k].observations.size());
+    for (size_t i = 0; i < real[k].observations.size(); ++i)
+      EXPECT_EQ(exact[k].observations[i].track_id, real[k].observations[i].track_id);
+    n += static_cast<int64_t>(real[k].observations.size());
+  }
+  EXPECT_EQ(st.replaced, n);
+  EXPECT_EQ(st.dropped, 0);
+  const TrackEvaluation before = evaluate_tracks(real, s.gt, s.camera, s.cast);
+  const TrackEvaluation after = evaluate_tracks(exact, s.gt, s.camera, s.cast);
+  EXPECT_GT(before.by_age[9].median_px, 2.5);  // 0.3 px x 10 frames
+  EXPECT_LT(after.by_age[9].median_px, 1e-6);
+  EXPECT_LT(after.p90_px, 1e-6);
+  EXPECT_EQ(after.tracks, before.tracks);
+}
+
+TEST(TrackOracle, RandomWalkDriftGrowsLikeTheSquareRootOfAge) {
+  const Scenario s;
+  TrackOracleOptions o;
+  o.drift_px_per_frame = 0.5;
+  TrackOracleStats st;
+  const auto drifting = through_oracle(s, s.frames(40, 0.0, 1000), o, s.cast, &st);
+  const TrackEvaluation e = evaluate_tracks(drifting, s.gt, s.camera, s.cast);
+  // 2-D Gaussian with sigma 0.5 sqrt(age) per axis: median radius 1.1774 sigma.
+  for (int age : {4, 16}) {
+    const double expected = 1.1774 * 0.5 * std::sqrt(age);
+    EXPECT_NEAR(e.by_age[static_cast<size_t>(age - 1)].median_px, expected, 0.2 * expected) << "age " << age;
+  }
+}
+
+TEST(TrackOracle, TracksWithoutALandmarkAreDroppedAndOptionsAreChecked) {
+  const Scenario s;
+  TrackOracleStats st;
+  const auto none = through_oracle(s, s.frames(5, 0.0, 1000), {},
+                                   [](const Eigen::Vector3d&, const Eigen::Vector3d&) { return std::optional<double>(); }, &st);
+  for (const auto& f : none) EXPECT_TRUE(f.observations.empty());
+  EXPECT_GT(st.dropped, 0);
+  EXPECT_EQ(st.replaced, 0);
+  TrackOracleOptions bad;
+  bad.white_noise_px = -1;
+  EXPECT_THROW(TrackOracle(s.gt, s.camera, s.cast, bad), std::invalid_argument);
+  EXPECT_THROW(TrackOracle(s.gt, s.camera, RayCaster(), {}), std::invalid_argument);
 }
 
 }  // namespace

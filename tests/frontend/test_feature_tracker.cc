@@ -606,5 +606,58 @@ TEST(FeatureTrackerOptions, Validation) {
   EXPECT_TRUE(t.track(0, cv::Mat(kH, kW, CV_8UC1, cv::Scalar(9))).observations.empty());
 }
 
+
+// Reference templates: on frames with independent noise, chained frame-to-frame KLT accumulates
+// each frame's alignment error (a random walk), tracking against a template refreshed every 10
+// frames accumulates it once per 10 frames.
+double drift_after(int template_max_age_frames, int frames) {
+  const cv::Mat tex = make_texture(11, kW + 2 * kMargin, kH + 2 * kMargin);
+  FeatureTrackerOptions opt;
+  opt.template_max_age_frames = template_max_age_frames;
+  opt.ransac = RansacModel::kNone;
+  opt.forward_backward_max_px = 3.0;
+  FeatureTracker tracker(camera(), opt);
+  const Motion step{0.0, 0.37, 0.21};
+  Eigen::Matrix3d A_k = Eigen::Matrix3d::Identity();
+  std::map<int64_t, cv::Point2f> born;  // tracks of frame 0
+  cv::RNG rng(3);
+  double sum = 0;
+  int n = 0;
+  for (int k = 0; k < frames; ++k) {
+    if (k > 0) A_k = step.A() * A_k;
+    cv::Mat frame = render(tex, A_k), noise(frame.size(), CV_16SC1);
+    rng.fill(noise, cv::RNG::NORMAL, 0, 12);
+    cv::Mat noisy;
+    frame.convertTo(noisy, CV_16SC1);
+    noisy += noise;
+    noisy.convertTo(frame, CV_8UC1);  // saturating
+    tracker.track(k * 10000000LL, frame);
+    for (const auto& [id, px] : tracker.current()) {
+      if (k == 0) born.emplace(id, px);
+      if (k == frames - 1 && born.count(id)) {
+        sum += dist(px, apply(A_k, born.at(id)));
+        ++n;
+      }
+    }
+  }
+  EXPECT_GT(n, 50) << "template_max_age_frames " << template_max_age_frames;
+  return sum / std::max(1, n);
+}
+
+TEST(FeatureTracker, ReferenceTemplatesDriftLessThanChainedTracking) {
+  const double chained = drift_after(1, 30), templ = drift_after(10, 30);
+  std::printf("[template] mean error after 30 noisy frames: chained %.3f px, template every 10 frames %.3f px\n",
+              chained, templ);
+  EXPECT_LT(templ, 0.75 * chained);
+}
+
+TEST(FeatureTrackerOptions, TemplateAgeMustBePositive) {
+  FeatureTrackerOptions o;
+  o.template_max_age_frames = 0;
+  std::string why;
+  EXPECT_FALSE(o.Validate(&why));
+  EXPECT_NE(why.find("template_max_age_frames"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace evio::frontend

@@ -70,6 +70,12 @@ struct FeatureTrackerOptions {
   // Forward-backward check: a track is dropped when tracking the new position back into the
   // previous frame lands farther than this from where it started (px).
   double forward_backward_max_px = 1.0;
+  // Reference template (frames, >= 1). 1 tracks every feature from the previous frame (chained
+  // KLT: each frame's alignment error adds to the track, a random walk). N > 1 aligns each feature
+  // against the frame where its reference was taken (the patch of its detection frame, refreshed
+  // every N frames), with the previous position as the initial guess: errors add once per N frames
+  // instead of once per frame. The forward-backward check runs against the reference frame.
+  int template_max_age_frames = 1;
   // Geometric verification. kTwoPoint needs the IMU rotation: when track() gets no R_cur_prev it
   // falls back to kFivePoint.
   RansacModel ransac = RansacModel::kTwoPoint;
@@ -124,7 +130,9 @@ class FeatureTracker {
  private:
   struct Track {
     int64_t id;
-    cv::Point2f px;
+    cv::Point2f px;      // position in the last frame
+    int64_t ref_frame;   // frame id of the reference template
+    cv::Point2f ref_px;  // position in the reference frame
   };
   int cell_of(const cv::Point2f& px) const;
   bool inside(const cv::Point2f& px) const;
@@ -135,6 +143,8 @@ class FeatureTracker {
   FeatureTrackerStats stats_;
   std::vector<Track> tracks_;
   std::vector<cv::Mat> prev_pyramid_;
+  // Pyramids of the frames still referenced by a track's template (frame id -> pyramid).
+  std::vector<std::pair<int64_t, std::vector<cv::Mat>>> ref_pyramids_;
   int64_t next_id_ = 0;
   int64_t frame_id_ = 0;
 };

@@ -1,0 +1,71 @@
+// Oracle feature tracks for error budgets: replaces the bearings of a front-end's observations by
+// the true projections of their landmarks, keeping the front-end's track topology (which tracks
+// exist, when they start and end), optionally with synthetic error added back. Running the VIO
+// back-end on oracle tracks splits its error into what the topology and the back-end give (exact
+// tracks), what white pixel noise gives, and what a random-walk drift gives, against the real
+// tracks (the "oracle breakdown" of an error budget).
+//
+// The landmark of a track is the ray of its first observation cast into the true scene at the true
+// pose (as TrackReference::kAnchored of track_evaluation.h). Observations are on the body (IMU)
+// clock; the true camera pose is T_w_b(t) T_c_b^-1 from the ground truth (interpolated).
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <random>
+#include <string>
+
+#include <Eigen/Core>
+
+#include "evio/calib/calibration_io.h"
+#include "evio/evaluation/track_evaluation.h"
+#include "evio/sensors/trajectory.h"
+#include "evio/sensors/vio_types.h"
+
+namespace evio::evaluation {
+
+struct TrackOracleOptions {
+  // White noise added to every oracle observation: isotropic Gaussian, standard deviation per
+  // axis (px on the ideal pinhole, >= 0).
+  double white_noise_px = 0;
+  // Random-walk drift: every observation after a track's first adds an isotropic Gaussian step of
+  // this standard deviation per axis to the track's accumulated offset (px per frame, >= 0): the
+  // error of chained frame-to-frame tracking.
+  double drift_px_per_frame = 0;
+  uint64_t seed = 1;  // of the noise generator
+
+  bool Validate(std::string* why) const;
+};
+
+struct TrackOracleStats {
+  int64_t replaced = 0;  // observations replaced by their true projection
+  int64_t dropped = 0;   // observations removed: outside the ground truth, no scene hit for the
+                         // track's first ray, or landmark behind the camera
+};
+
+class TrackOracle {
+ public:
+  // Throws std::invalid_argument on invalid options or an empty ray caster.
+  TrackOracle(const Trajectory& groundtruth, const calib::CameraCalibration& camera, RayCaster cast,
+              const TrackOracleOptions& options = {});
+
+  // Replaces the observations of one frame in place (frames in time order).
+  void apply(FeatureObservations* frame);
+  const TrackOracleStats& stats() const { return stats_; }
+
+ private:
+  struct Landmark {
+    bool valid = false;
+    Eigen::Vector3d X_w = Eigen::Vector3d::Zero();
+    Eigen::Vector2d drift_px = Eigen::Vector2d::Zero();
+  };
+  Trajectory gt_;
+  calib::CameraCalibration camera_;
+  RayCaster cast_;
+  TrackOracleOptions options_;
+  TrackOracleStats stats_;
+  std::map<int64_t, Landmark> landmarks_;
+  std::mt19937_64 rng_;
+};
+
+}  // namespace evio::evaluation
