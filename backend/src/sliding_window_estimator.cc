@@ -365,6 +365,7 @@ bool SlidingWindowEstimator::add_frame(const FeatureObservations& frame) {
   } else {
     predicted = propagate(*window_.back(), frame.t_ns);
     latest_ = predicted;
+    last_prediction_ = std::make_pair(state_of(*window_.back()), predicted);
     if (!is_keyframe(frame, predicted)) return false;
   }
 

@@ -7,6 +7,7 @@
 #include <utility>
 
 #include "evio/backend/imu_preintegration.h"
+#include "evio/backend/trajectory_smoothing.h"
 #include "evio/calib/log.h"
 #include "evio/sensors/time.h"
 
@@ -126,6 +127,8 @@ struct VioPipeline::Impl {
   InitialStateProvider initial_state;
   ObservationCallback on_observations;
   ObservationFilter observation_filter;
+  std::vector<backend::FramePrediction> predictions;  // per trajectory_causal state
+  std::map<int64_t, VioState> final_keyframes;         // every keyframe's last optimised state
   bool finished = false;
 
   // IMU (IMU clock): every sample still needed by the initialisation, the estimator or the
@@ -217,9 +220,21 @@ struct VioPipeline::Impl {
     const bool kf = est->add_frame(f);
     // One state per new state time (a frame the estimator skipped adds none).
     const VioState& ls = est->latest_state();
-    if (result.trajectory.empty() || ls.t_ns > result.trajectory.back().t_ns) result.trajectory.push_back(ls);
+    if (result.trajectory_causal.empty() || ls.t_ns > result.trajectory_causal.back().t_ns) {
+      result.trajectory_causal.push_back(ls);
+      backend::FramePrediction fp;
+      fp.state = ls;
+      const auto& lp = est->last_prediction();
+      if (lp && lp->second.t_ns == ls.t_ns) {
+        fp.predicted = true;
+        fp.anchor = lp->first;
+        fp.prediction = lp->second;
+      }
+      predictions.push_back(std::move(fp));
+    }
     if (kf) {
       for (const auto& [id, p] : est->landmarks()) result.landmarks[id] = p;
+      for (const VioState& k : est->keyframe_states()) final_keyframes[k.t_ns] = k;
     }
   }
 
@@ -612,7 +627,10 @@ VioResult VioPipeline::finish() {
   if (p.use_aps) st.aps_tracker = p.aps_tracker->stats();
   if (p.est) {
     st.window = p.est->stats();
-    p.result.keyframes = p.est->keyframe_states();
+    for (const VioState& k : p.est->keyframe_states()) p.final_keyframes[k.t_ns] = k;
+    p.result.keyframes.clear();
+    for (const auto& [t, k] : p.final_keyframes) p.result.keyframes.push_back(k);
+    p.result.trajectory = backend::repropagate_trajectory(p.predictions, p.final_keyframes, p.est->options().gravity_w);
     // Motion-model segments from the keyframes' models.
     for (const auto& [t, rotation_only] : st.window.motion_model) {
       const std::string m = rotation_only ? "rotation_only" : "6dof";

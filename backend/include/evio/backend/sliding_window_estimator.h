@@ -46,6 +46,7 @@
 #include <deque>
 #include <memory>
 #include <optional>
+#include <utility>
 #include <string>
 #include <unordered_map>
 #include <unordered_set>
@@ -173,6 +174,10 @@ class SlidingWindowEstimator {
 
   // Latest estimate: the newest keyframe, or the last frame propagated from it with the IMU.
   VioState latest_state() const { return latest_; }
+  // The last frame add_frame accepted after the first keyframe: the state predicted for it from
+  // the newest keyframe with the IMU (before any solve), and that keyframe's state at the time
+  // (for trajectory re-propagation, backend/trajectory_smoothing.h). nullopt before.
+  const std::optional<std::pair<VioState, VioState>>& last_prediction() const { return last_prediction_; }
   std::vector<VioState> keyframe_states() const;
   // Covariance of the newest keyframe's pose in its tangent space [dtheta (rad, body frame), dp
   // (m, world)], when compute_covariance is set and the last solve's covariance was computable.
@@ -213,6 +218,7 @@ class SlidingWindowEstimator {
   std::unordered_set<int64_t> closed_tracks_;
   std::unique_ptr<LinearPrior> prior_;
   VioState latest_;
+  std::optional<std::pair<VioState, VioState>> last_prediction_;  // (anchor keyframe, predicted)
   std::optional<Eigen::Matrix<double, 6, 6>> latest_cov_;
   bool rotation_only_active_ = false;  // hysteresis state of the rotation-only model
   int rotation_only_run_ = 0;          // consecutive keyframes R has won by the margin

@@ -182,8 +182,13 @@ struct VioResult {
   VioInitMethod init_method = VioInitMethod::kAuto;  // kStatic, kAlignment or kGiven when initialised
   int64_t init_t_ns = 0;                             // the initial state's time (IMU clock)
   std::string init_failure;                          // not initialised: the last attempt's reason
-  std::vector<VioState> trajectory;                  // one state per frame that advanced the estimate, time order
-  std::vector<VioState> keyframes;                   // the keyframes in the window at the end
+  // One state per frame that advanced the estimate, time order: each frame re-propagated with the
+  // IMU from the final (last optimised) state of its keyframe, the mismatch at the next keyframe
+  // spread over the interval (backend/trajectory_smoothing.h): passes through every keyframe.
+  std::vector<VioState> trajectory;
+  // The same frames as estimated at the time (causal: what an online user had; jumps at keyframes).
+  std::vector<VioState> trajectory_causal;
+  std::vector<VioState> keyframes;                   // every keyframe's last optimised state, time order
   std::map<int64_t, Eigen::Vector3d> landmarks;      // the window's landmarks after every keyframe (world, m), by track id, latest value
   std::vector<VioSegment> motion_models;             // runs of keyframes with the same motion model
   std::vector<VioSegment> tracking_lost;             // event-rate drops and runs with too few tracks
