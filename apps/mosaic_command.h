@@ -4,8 +4,9 @@
 // (mapping::GradientMosaic) builds from the tracked rotation, reconstructed by Poisson
 // integration every `reconstruct_ms`. Bootstrap over the first `bootstrap.duration_ms`: the gyro
 // (--use-imu) or the angular velocity of rotational contrast maximisation per window.
-// Writes rotation.tum, panorama.png (8-bit, gamma), panorama_log.tiff (float log intensity, NaN
-// unseen), stats.json, the resolved config, optional snapshots and, with --gt, eval.json (rotation
+// Writes rotation.tum, panorama.png (8-bit grey + alpha: unseen texels transparent; percentile
+// range over the seen texels, gamma), panorama_seen.png (seen coverage), panorama_log.tiff (float
+// log intensity, NaN unseen), stats.json, the resolved config, optional snapshots and, with --gt, eval.json (rotation
 // error after aligning the initial orientation; with a simulated panorama dataset also PSNR/SSIM
 // of the mosaic against the true panorama over the seen region).
 #pragma once
@@ -27,7 +28,7 @@ struct MosaicConfig : pipeline::MosaicPipelineOptions {
   // tracker.event_stride when the YAML and --stride leave it unset (0): 4 with --use-imu (as
   // accurate as 1 on poster_rotation and 2x faster), 1 without (the stride costs accuracy there).
   int event_stride = 0;
-  mapping::LogImageDisplayOptions display;            // output.{gamma, low_percentile, high_percentile}
+  mapping::LogImageDisplayOptions display;            // output.{gamma, low_percentile, high_percentile, transparent_unseen}
 };
 
 MosaicConfig default_mosaic_config();

@@ -1,5 +1,5 @@
 // `evio mosaic` end to end on a short simulated panorama rotation (poster_rotation, DAVIS240C):
-// outputs exist and parse, the rotation error against ground truth stays bounded with the gyro
+// outputs exist and parse, unseen texels are transparent in panorama.png, the rotation error against ground truth stays bounded with the gyro
 // and events only, the mosaic quality is reported; config errors name file, line and key.
 #include "mosaic_command.h"
 
@@ -10,6 +10,7 @@
 #include <sstream>
 
 #include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
 
 #include "evio/calib/error.h"
 #include "evio_test/temp_dir.h"
@@ -47,9 +48,32 @@ TEST(MosaicCommand, ShortRotationWithAndWithoutGyro) {
     std::ostringstream o;
     ASSERT_EQ(run_mosaic(a, o), 0);
     std::printf("%s", o.str().c_str());
-    for (const char* f : {"rotation.tum", "panorama.png", "panorama_log.tiff", "stats.json", "eval.json", "mosaic_config.yaml"})
+    for (const char* f : {"rotation.tum", "panorama.png", "panorama_seen.png", "panorama_log.tiff", "stats.json", "eval.json", "mosaic_config.yaml"})
       EXPECT_TRUE(std::filesystem::exists(a.out + "/" + f)) << f;
     const std::string stats = read(a.out + "/stats.json"), ev = read(a.out + "/eval.json");
+    // panorama.png: unseen texels (NaN in the TIFF, 0 in the coverage map) transparent, seen ones
+    // opaque, and the tone mapping spreads the seen texels over the grey range.
+    const cv::Mat png = cv::imread(a.out + "/panorama.png", cv::IMREAD_UNCHANGED);
+    const cv::Mat tif = cv::imread(a.out + "/panorama_log.tiff", cv::IMREAD_UNCHANGED);
+    const cv::Mat cov = cv::imread(a.out + "/panorama_seen.png", cv::IMREAD_UNCHANGED);
+    ASSERT_EQ(png.type(), CV_8UC4);
+    ASSERT_EQ(tif.type(), CV_32FC1);
+    ASSERT_EQ(cov.type(), CV_8UC1);
+    int64_t seen = 0, dark = 0, bright = 0, mismatched = 0;
+    for (int j = 0; j < png.rows; ++j)
+      for (int i = 0; i < png.cols; ++i) {
+        const cv::Vec4b c = png.at<cv::Vec4b>(j, i);
+        const bool s = !std::isnan(tif.at<float>(j, i));
+        mismatched += (c[3] == (s ? 255 : 0) && cov.at<uint8_t>(j, i) == (s ? 255 : 0)) ? 0 : 1;
+        if (!s) continue;
+        ++seen;
+        dark += c[0] < 64;
+        bright += c[0] > 191;
+      }
+    EXPECT_EQ(mismatched, 0);
+    EXPECT_NEAR(static_cast<double>(seen) / (png.rows * png.cols), json_value(stats, "seen_fraction"), 1e-9);
+    EXPECT_GT(dark, seen / 20) << "seen " << seen;
+    EXPECT_GT(bright, seen / 20) << "seen " << seen;
     EXPECT_GT(json_value(stats, "events"), 1e5);
     EXPECT_GT(json_value(stats, "real_time_factor"), 0);
     const double rms = json_value(ev, "rot_rms_deg"), mx = json_value(ev, "rot_max_deg");
