@@ -6,9 +6,10 @@
 // (--use-imu) or the angular velocity of rotational contrast maximisation per window.
 // Writes rotation.tum, panorama.png (8-bit grey + alpha: unseen texels transparent; percentile
 // range over the seen texels, gamma), panorama_seen.png (seen coverage), panorama_log.tiff (float
-// log intensity, NaN unseen), stats.json, the resolved config, optional snapshots and, with --gt, eval.json (rotation
-// error after aligning the initial orientation; with a simulated panorama dataset also PSNR/SSIM
-// of the mosaic against the true panorama over the seen region).
+// log intensity, NaN unseen), stats.json, the resolved config, optional snapshots and, with --gt,
+// eval.json (rotation error after aligning the initial orientation, overall and of the bootstrap's
+// poses alone; with a simulated panorama dataset also PSNR/SSIM of the mosaic against the true
+// panorama over the seen region). The algorithm is pipeline::MosaicPipeline; events are streamed.
 #pragma once
 
 #include <cstdint>

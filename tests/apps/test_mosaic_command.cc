@@ -83,6 +83,21 @@ TEST(MosaicCommand, ShortRotationWithAndWithoutGyro) {
     EXPECT_LT(rms, use_imu ? 0.5 : 3.0) << ev;
     EXPECT_LE(rms, mx);
     EXPECT_GT(json_value(ev, "psnr_db"), use_imu ? 24.0 : 19.0) << ev;
+    // The bootstrap alone (its poses up to the tracking start, 0.3 s): part of the whole run.
+    const size_t boot_at = ev.find("\"bootstrap\"");
+    ASSERT_NE(boot_at, std::string::npos) << ev;
+    const std::string boot = ev.substr(boot_at);
+    const double boot_rms = json_value(boot, "rot_rms_deg"), boot_max = json_value(boot, "rot_max_deg");
+    const double boot_end = json_value(boot, "rot_end_deg"), boot_poses = json_value(boot, "poses");
+    // 0.3 s at one pose per 5 ms at most (1 ms gyro windows), one per CMax window (>= 7 ms here) without.
+    EXPECT_GE(boot_poses, use_imu ? 55 : 10) << ev;
+    EXPECT_LE(boot_poses, 61) << ev;
+    EXPECT_LT(boot_poses, json_value(ev, "matched_poses")) << ev;
+    EXPECT_LE(boot_rms, boot_max) << ev;
+    EXPECT_LE(boot_end, boot_max) << ev;
+    EXPECT_LE(boot_max, mx) << ev;
+    // Measured 0.154 deg max (0.091 RMS) with the gyro, 0.609 deg max (0.371 RMS) from CMax rates.
+    EXPECT_LT(boot_max, use_imu ? 0.19 : 0.73) << ev;
     // The tracker's contrast is calibrated on the bootstrap mosaic: below the sensor's C.
     const double c = json_value(stats, "tracker_contrast");
     EXPECT_GT(c, 0.05) << stats;
