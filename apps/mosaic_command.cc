@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <utility>
 
 #include <yaml-cpp/yaml.h>
 
@@ -15,7 +16,6 @@
 #include "evio/calib/error.h"
 #include "evio/calib/geometry.h"
 #include "evio/calib/log.h"
-#include "evio/frontend/event_filters.h"
 #include "evio/sensors/trajectory.h"
 #include "json_util.h"
 #include "progress.h"
@@ -37,6 +37,8 @@ using namespace yaml_config;  // NOLINT
 MosaicConfig default_mosaic_config() {
   MosaicConfig c;
   c.display.gamma = 1.0;
+  // Unseen texels transparent in panorama.png and the snapshots (black ones would look like dark texels).
+  c.display.transparent_unseen = true;
   // 100 events per particle update (the library's default is 10): on poster_rotation (1 s, gyro)
   // 0.17 deg RMS at 0.60 M events/s against 0.23 deg at 0.42 M events/s; events only 1.99 vs 2.04 deg.
   c.tracker.batch_size = 100;
@@ -53,7 +55,8 @@ std::string config_yaml(const MosaicConfig& c) {
     << ", initial_gradient_std: " << num(m.initial_gradient_std) << ", measurement_std_abs: " << num(m.measurement_std_abs)
     << ", measurement_relative_std: " << num(m.measurement_relative_std) << ", min_tau_ms: " << num(m.min_tau_s * 1e3)
     << ", min_speed_px_s: " << num(m.min_speed_px_s) << ", seen_min_observations: " << m.seen_min_observations
-    << ", seen_max_gradient_std: " << num(m.seen_max_gradient_std) << ", max_path_px: " << num(m.max_path_px) << ", reconstruct_ms: " << num(c.reconstruct_period_ns * 1e-6) << "}\n";
+    << ", seen_max_gradient_std: " << num(m.seen_max_gradient_std) << ", max_path_px: " << num(m.max_path_px) << ", reconstruct_ms: " << num(c.reconstruct_period_ns * 1e-6)
+    << ", full_reconstruct_every: " << c.full_reconstruct_every << "}\n";
   y << "tracker: {particles: " << t.num_particles << ", batch_size: " << t.batch_size << ", event_stride: " << t.event_stride
     << ", max_batch_ms: " << num(t.max_batch_duration_ns * 1e-6)
     << ", motion_model: " << frontend::rotation_motion_model_name(t.motion_model)
@@ -66,10 +69,14 @@ std::string config_yaml(const MosaicConfig& c) {
   y << "bootstrap: {duration_ms: " << num(c.bootstrap_ns * 1e-6) << ", window_ms: " << num(c.bootstrap_window_ns * 1e-6)
     << ", window_events: " << c.bootstrap_window_events
     << ", blur_px: " << num(c.cmax.blur_sigma_px) << ", calibrate_contrast: " << (c.calibrate_contrast ? "true" : "false")
-    << ", min_contrast_ratio: " << num(c.min_contrast_ratio) << "}\n";
+    << ", min_contrast_ratio: " << num(c.min_contrast_ratio) << ", calibration_sample_stride: " << c.calibration_sample_stride
+    << ", calibration_min_texel_updates: " << c.calibration_min_texel_updates
+    << ", calibration_min_samples: " << c.calibration_min_samples << ", gyro_window_ms: " << num(c.gyro_bootstrap_window_ns * 1e-6)
+    << ", gyro_step_ms: " << num(c.gyro_integration_step_ns * 1e-6) << "}\n";
   y << "output: {trajectory_ms: " << num(c.trajectory_period_ns * 1e-6) << ", snapshot_ms: " << num(c.snapshot_period_ns * 1e-6)
     << ", gamma: " << num(c.display.gamma) << ", low_percentile: " << num(c.display.low_percentile)
-    << ", high_percentile: " << num(c.display.high_percentile) << "}\n";
+    << ", high_percentile: " << num(c.display.high_percentile)
+    << ", transparent_unseen: " << (c.display.transparent_unseen ? "true" : "false") << "}\n";
   return y.str();
 }
 
@@ -87,8 +94,8 @@ MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_y
     if (top.has("mosaic")) {
       const Section s = top.child("mosaic", false, "a map");
       s.allow({"width", "height", "contrast_threshold", "initial_gradient_std", "measurement_std_abs",
-               "measurement_relative_std", "min_tau_ms", "min_speed_px_s", "reconstruct_ms", "seen_min_observations",
-               "seen_max_gradient_std", "max_path_px"});
+               "measurement_relative_std", "min_tau_ms", "min_speed_px_s", "reconstruct_ms", "full_reconstruct_every",
+               "seen_min_observations", "seen_max_gradient_std", "max_path_px"});
       auto& m = c.mosaic;
       m.width = s.integer("width", m.width, 8, 1 << 15);
       m.height = s.integer("height", m.width / 2, 4, 1 << 14);
@@ -99,6 +106,7 @@ MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_y
       m.min_tau_s = s.number("min_tau_ms", m.min_tau_s * 1e3, Range::kPositive, "ms") * 1e-3;
       m.min_speed_px_s = s.number("min_speed_px_s", m.min_speed_px_s, Range::kNonNegative, "px/s");
       c.reconstruct_period_ns = s.time_ns("reconstruct_ms", c.reconstruct_period_ns, Range::kPositive);
+      c.full_reconstruct_every = s.integer("full_reconstruct_every", c.full_reconstruct_every, 1, 1000000);
       m.seen_min_observations = s.integer("seen_min_observations", m.seen_min_observations, 1, 1000000);
       m.max_path_px = s.number("max_path_px", m.max_path_px, Range::kPositive, "mosaic px");
       m.seen_max_gradient_std = s.number("seen_max_gradient_std", m.seen_max_gradient_std, Range::kNonNegative, "log units/px");
@@ -137,22 +145,30 @@ MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_y
     }
     if (top.has("bootstrap")) {
       const Section s = top.child("bootstrap", false, "a map");
-      s.allow({"duration_ms", "window_ms", "window_events", "blur_px", "calibrate_contrast", "min_contrast_ratio"});
+      s.allow({"duration_ms", "window_ms", "window_events", "blur_px", "calibrate_contrast", "min_contrast_ratio",
+               "calibration_sample_stride", "calibration_min_texel_updates", "calibration_min_samples", "gyro_window_ms",
+               "gyro_step_ms"});
       c.calibrate_contrast = s.boolean("calibrate_contrast", c.calibrate_contrast);
       c.min_contrast_ratio = s.number("min_contrast_ratio", c.min_contrast_ratio, Range::kUnit, "");
       c.bootstrap_ns = s.time_ns("duration_ms", c.bootstrap_ns, Range::kNonNegative);
       c.bootstrap_window_ns = s.time_ns("window_ms", c.bootstrap_window_ns, Range::kPositive);
       c.bootstrap_window_events = s.integer("window_events", c.bootstrap_window_events, 1000, 100000000);
       c.cmax.blur_sigma_px = s.number("blur_px", c.cmax.blur_sigma_px, Range::kPositive, "px");
+      c.calibration_sample_stride = s.integer("calibration_sample_stride", c.calibration_sample_stride, 1, 1000000);
+      c.calibration_min_texel_updates = s.integer("calibration_min_texel_updates", c.calibration_min_texel_updates, 0, 1000000);
+      c.calibration_min_samples = s.integer("calibration_min_samples", c.calibration_min_samples, 1, 100000000);
+      c.gyro_bootstrap_window_ns = s.time_ns("gyro_window_ms", c.gyro_bootstrap_window_ns, Range::kPositive);
+      c.gyro_integration_step_ns = s.time_ns("gyro_step_ms", c.gyro_integration_step_ns, Range::kPositive);
     }
     if (top.has("output")) {
       const Section s = top.child("output", false, "a map");
-      s.allow({"trajectory_ms", "snapshot_ms", "gamma", "low_percentile", "high_percentile"});
+      s.allow({"trajectory_ms", "snapshot_ms", "gamma", "low_percentile", "high_percentile", "transparent_unseen"});
       c.trajectory_period_ns = s.time_ns("trajectory_ms", c.trajectory_period_ns, Range::kPositive);
       c.snapshot_period_ns = s.time_ns("snapshot_ms", c.snapshot_period_ns, Range::kNonNegative);
       c.display.gamma = s.number("gamma", c.display.gamma, Range::kPositive, "");
       c.display.low_percentile = s.number("low_percentile", c.display.low_percentile, Range::kNonNegative, "%");
       c.display.high_percentile = s.number("high_percentile", c.display.high_percentile, Range::kPositive, "%");
+      c.display.transparent_unseen = s.boolean("transparent_unseen", c.display.transparent_unseen);
       std::string why;
       if (!c.display.Validate(&why)) s.fail("invalid output settings: " + why, "consistent settings");
     }
@@ -161,31 +177,6 @@ MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_y
   return c;
 }
 
-namespace {
-
-constexpr int kCalibrationMinUpdates = 5;  // texel updates for a path end to count in the contrast calibration
-
-// The mosaic frame puts the first camera's optical axis on the equator, looking along +x, image
-// right = -y, image down = -z (the simulator's rpy [-90, 0, -90] start), away from the poles.
-Eigen::Matrix3d initial_camera_rotation() {
-  Eigen::Matrix3d R;
-  R.col(0) = Eigen::Vector3d(0, -1, 0);
-  R.col(1) = Eigen::Vector3d(0, 0, -1);
-  R.col(2) = Eigen::Vector3d(1, 0, 0);
-  return R;
-}
-
-// Log intensity of the last reconstruction for the tracker: NaN where unseen.
-void to_map(const mapping::MosaicReconstruction& rec, std::vector<float>* map) {
-  const auto& L = rec.log_intensity;
-  map->resize(static_cast<size_t>(L.size()));
-  for (Eigen::Index j = 0; j < L.rows(); ++j)
-    for (Eigen::Index i = 0; i < L.cols(); ++i)
-      (*map)[static_cast<size_t>(j * L.cols() + i)] = rec.seen(j, i) ? L(j, i) : std::nanf("");
-}
-
-}  // namespace
-
 int run_mosaic(const MosaicArgs& args, std::ostream& out) {
   std::string resolved;
   MosaicConfig cfg = args.config.empty() ? default_mosaic_config() : load_mosaic_config(args.config, &resolved);
@@ -193,6 +184,7 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
   if (args.batch > 0) cfg.tracker.batch_size = args.batch;
   if (args.stride > 0) cfg.event_stride = args.stride;
   cfg.tracker.event_stride = cfg.event_stride > 0 ? cfg.event_stride : (args.use_imu ? 4 : 1);
+  cfg.use_gyro = args.use_imu;
   if (args.width > 0) {
     cfg.mosaic.width = args.width;
     cfg.mosaic.height = args.width / 2;
@@ -202,6 +194,7 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
     std::string why;
     if (!cfg.mosaic.Validate(&why)) throw InputError(args.config.empty() ? "--width" : args.config, 0, why, "valid mosaic settings");
     if (!cfg.tracker.Validate(&why)) throw InputError(args.config.empty() ? "--particles/--batch" : args.config, 0, why, "valid tracker settings");
+    if (!cfg.Validate(&why)) throw InputError(args.config.empty() ? "the defaults" : args.config, 0, why, "valid mosaic settings");
   }
   resolved = config_yaml(cfg);
 
@@ -209,7 +202,6 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
   const DatasetCalibration found = find_dataset_calibration(args.dataset, args.calib, *reader);
   if (!found.camera) throw InputError(args.dataset, 0, "no camera calibration", "--calib FILE (Kalibr camchain YAML or ECD calib.txt)");
   const calib::CameraCalibration cal = *found.camera;
-  const int W = cal.camera.width(), H = cal.camera.height();
   std::vector<ImuSample> imu;
   if (args.use_imu) {
     imu = reader->read_imu();
@@ -221,251 +213,75 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
     f << resolved;
   }
 
-  const frontend::EventUndistorter undistorter(cal.camera);
-  mapping::GradientMosaic mosaic(cfg.mosaic);
-  const calib::Equirectangular proj(cfg.mosaic.width, cfg.mosaic.height);
-  const Eigen::Quaterniond q_c_b(cal.T_c_b.rotation);
-  const int64_t shift = cal.time_shift_ns;  // t_imu = t_cam + shift
-  std::vector<float> map;
-  std::vector<int64_t> last_t(static_cast<size_t>(W) * H, INT64_MIN);
+  pipeline::MosaicPipeline mosaic(cfg, cal);
+  int snapshots = 0;
+  mosaic.set_snapshot_callback([&](int64_t, const mapping::MosaicReconstruction& rec) {
+    fs::create_directories(fs::path(args.out) / "snapshots");
+    char name[64];
+    std::snprintf(name, sizeof(name), "panorama_%06d.png", snapshots++);
+    mapping::write_log_image_png8((fs::path(args.out) / "snapshots" / name).string(), rec.log_intensity, &rec.seen, cfg.display);
+  });
+  for (const ImuSample& m : imu) mosaic.add_imu(m);
+  imu = {};  // the pipeline keeps what it needs
 
-  // Read every event (the tracker and the mapper run in one pass over them).
-  std::vector<Event> events;
-  {
-    EventBuffer chunk;
-    while (reader->read_events(&chunk, size_t{1} << 20) > 0) {
-      events.insert(events.end(), chunk.begin(), chunk.end());
-      chunk.clear();
-    }
-  }
-  if (events.empty()) throw InputError(args.dataset, 0, "no events", "a recording with events");
-  const auto wall0 = std::chrono::steady_clock::now();
-  const int64_t t0 = events.front().t_ns, t_last = events.back().t_ns;
-
-  // Gyro in the camera frame on the camera clock (piecewise constant), for the bootstrap and pf.
-  size_t next_imu = 0;
-  auto gyro_c_at = [&](int64_t t_cam) {
-    const int64_t t = t_cam + shift;
-    auto it = std::upper_bound(imu.begin(), imu.end(), t, [](int64_t a, const ImuSample& s) { return a < s.t_ns; });
-    if (it != imu.begin()) --it;
-    return frontend::RotationParticleFilter::camera_rate_from_imu(*it, q_c_b);
-  };
-
-  uint64_t mapped = 0;
-  // Bootstrap segments (every 8th mapped event) for the tracker's contrast calibration.
-  struct Segment {
-    Eigen::Vector2d from, to;
-    int polarity;
-  };
-  std::vector<Segment> boot_segments;
-  std::vector<Segment>* segments = cfg.calibrate_contrast ? &boot_segments : nullptr;
-  // Per sensor pixel: time and mosaic position of its previous event (the mapper's path start).
-  std::vector<Eigen::Vector2d> last_uv(static_cast<size_t>(W) * H);
-  // The event's direction is R_w_c (b + dt w_c x b): R_w_c at a nearby time, rotated to the
-  // event's time to first order (dt |w_c| is a few mrad at most within a particle-filter batch).
-  auto map_event = [&](const Event& e, const Eigen::Matrix3d& R_w_c, const Eigen::Vector3d& w_c, double dt) {
-    const size_t p = static_cast<size_t>(e.y) * W + e.x;
-    if (!undistorter.valid(e.x, e.y)) return;
-    const int64_t prev = last_t[p];
-    const Eigen::Vector3d b = undistorter.bearing(e.x, e.y).cast<double>();
-    const Eigen::Vector2d uv = proj.project(R_w_c * (b + dt * w_c.cross(b)));
-    last_t[p] = e.t_ns;
-    const Eigen::Vector2d uv_prev = last_uv[p];
-    last_uv[p] = uv;
-    if (prev == INT64_MIN) return;
-    if (mosaic.update_segment(uv_prev, uv, static_cast<double>(e.t_ns - prev) * 1e-9, e.polarity) ==
-        mapping::MosaicUpdate::kApplied) {
-      ++mapped;
-      if (segments && (mapped % 8) == 0) segments->push_back({uv_prev, uv, e.polarity});
-    }
-  };
-
-  // ---- bootstrap: rotation from the gyro or from contrast-maximisation rates -------------------
-  Eigen::Matrix3d R = initial_camera_rotation();
-  size_t i = 0;
-  const int64_t t_boot = t0 + cfg.bootstrap_ns;
-  mapping::RotationalCmaxOptions cmax = cfg.cmax;
-  cmax.width = W;
-  cmax.height = H;
-  cmax.focal_px = std::sqrt(cal.camera.intrinsics().fx * cal.camera.intrinsics().fy);
-  Eigen::Vector3d omega_c = Eigen::Vector3d::Zero();
-  int cmax_windows = 0;
-  Trajectory rotation;
-  auto record = [&](int64_t t, const Eigen::Matrix3d& R_w_c) {
-    if (!rotation.empty() && t - rotation.t_end_ns() < cfg.trajectory_period_ns) return;
-    calib::SE3 T;
-    T.rotation = Eigen::Quaterniond(R_w_c * cal.T_c_b.rotation.toRotationMatrix()).normalized();  // R_w_b
-    T.translation.setZero();
-    rotation.push_back({t, T});
-  };
-  record(t0, R);
-  while (i < events.size() && events[i].t_ns < t_boot) {
-    const int64_t tw0 = events[i].t_ns;
-    // With the gyro, 1 ms windows: within one the rate at each event's time is held constant.
-    int64_t tw1 = std::min(t_boot, tw0 + (args.use_imu ? std::min<int64_t>(cfg.bootstrap_window_ns, 1'000'000)
-                                                       : cfg.bootstrap_window_ns));
-    size_t j = i;
-    const size_t max_events = args.use_imu ? events.size() : static_cast<size_t>(cfg.bootstrap_window_events);
-    while (j < events.size() && events[j].t_ns < tw1 && j - i < max_events) ++j;
-    if (j < events.size() && events[j].t_ns < tw1) tw1 = events[j].t_ns;  // closed by the event count
-    if (!args.use_imu) {
-      std::vector<Eigen::Vector3f> b;
-      std::vector<int64_t> t;
-      for (size_t k = i; k < j; ++k) {
-        if (!undistorter.valid(events[k].x, events[k].y)) continue;
-        b.push_back(undistorter.bearing(events[k].x, events[k].y));
-        t.push_back(events[k].t_ns);
-      }
-      omega_c = mapping::estimate_angular_velocity(b, t, tw0, omega_c, cmax).omega_c;
-      ++cmax_windows;
-    }
-    for (size_t k = i; k < j; ++k) {
-      const Event& e = events[k];
-      const Eigen::Vector3d w_c = args.use_imu ? gyro_c_at(e.t_ns) : omega_c;
-      const Eigen::Matrix3d R_e = R * calib::so3_exp(w_c * (static_cast<double>(e.t_ns - tw0) * 1e-9));
-      map_event(e, R_e, Eigen::Vector3d::Zero(), 0.0);
-    }
-    // Advance R to the window's end (gyro: integrate the samples inside).
-    if (args.use_imu) {
-      for (int64_t t = tw0; t < tw1;) {
-        const int64_t dt = std::min<int64_t>(1'000'000, tw1 - t);
-        R = R * calib::so3_exp(gyro_c_at(t + dt / 2) * (static_cast<double>(dt) * 1e-9));
-        t += dt;
-      }
-    } else {
-      R = R * calib::so3_exp(omega_c * (static_cast<double>(tw1 - tw0) * 1e-9));
-    }
-    record(tw1, R);
-    i = j;
-  }
-  mapping::MosaicReconstruction rec = mosaic.reconstruct(mapping::GradientMosaic::ReconstructMode::kFull);
-  to_map(rec, &map);
-  segments = nullptr;
-  // The tracker's contrast: the mosaic's own log-intensity change along the bootstrap's event
-  // paths (poses from the gyro or CMax, not from the tracker). The reconstruction is smoother than
-  // the scene, so its change per event is below the sensor's C; tracking with the sensor's C
-  // against it makes the tracker over-rotate (previous_mean) until it matches.
-  double contrast_used = cfg.tracker.contrast_threshold;
-  int64_t contrast_samples = 0;
-  if (cfg.calibrate_contrast) {
-    const frontend::LogIntensityMapView v0{cfg.mosaic.width, cfg.mosaic.height, map.data()};
-    double sum = 0;
-    // Only paths between texels with several updates: a young texel's gradient is still shrunk
-    // towards the prior's zero, which would bias the calibration low (slow motion, few events).
-    auto mature = [&](const Eigen::Vector2d& uv) {
-      const int iu = static_cast<int>(std::floor(uv.x())), iv = static_cast<int>(std::floor(uv.y()));
-      if (iv < 0 || iv >= cfg.mosaic.height) return false;
-      const int w = cfg.mosaic.width;
-      return mosaic.observations(((iu % w) + w) % w, iv) >= static_cast<uint32_t>(kCalibrationMinUpdates);
-    };
-    for (const Segment& sg : boot_segments) {
-      if (!mature(sg.from) || !mature(sg.to)) continue;
-      const float a = v0.sample(static_cast<float>(sg.to.x()), static_cast<float>(sg.to.y()));
-      const float b = v0.sample(static_cast<float>(sg.from.x()), static_cast<float>(sg.from.y()));
-      if (std::isnan(a) || std::isnan(b)) continue;
-      sum += sg.polarity * static_cast<double>(a - b);
-      ++contrast_samples;
-    }
-    if (contrast_samples >= 1000 && sum > 0) {
-      contrast_used = std::clamp(sum / static_cast<double>(contrast_samples),
-                                 cfg.min_contrast_ratio * cfg.tracker.contrast_threshold, cfg.tracker.contrast_threshold);
-    } else {
-      log_warning("evio mosaic: too few bootstrap events (" + std::to_string(contrast_samples) +
-               ") to calibrate the tracker's contrast; using tracker.contrast_threshold " + num(contrast_used));
-    }
-  }
-  frontend::RotationParticleFilterOptions tracker_options = cfg.tracker;
-  tracker_options.contrast_threshold = contrast_used;
-  frontend::RotationParticleFilter pf(undistorter, tracker_options);
-  const int64_t t_track0 = i < events.size() ? events[i].t_ns : t_last;
-  pf.reset(Eigen::Quaterniond(R), t_track0);
-  frontend::LogIntensityMapView view;
-  view.width = cfg.mosaic.width;
-  view.height = cfg.mosaic.height;
-  view.data = map.data();
-
-  // ---- tracking and mapping ----------------------------------------------------------------
+  // Stream the events in chunks: the pipeline keeps only the current bootstrap window or tracker batch.
   Progress progress("evio mosaic", args.progress, "events");
-  int64_t next_rec = t_track0 + cfg.reconstruct_period_ns;
-  int64_t next_snap = cfg.snapshot_period_ns > 0 ? t_track0 : INT64_MAX;
-  int snapshots = 0, reconstructions = 1;
-  if (args.use_imu) {
-    while (next_imu < imu.size() && imu[next_imu].t_ns - shift <= t_track0) ++next_imu;
-    if (next_imu > 0) --next_imu;
-  }
-  const size_t batch = static_cast<size_t>(cfg.tracker.batch_size);
-  while (i < events.size()) {
-    const size_t j = std::min(events.size(), i + batch);
-    if (args.use_imu) {
-      for (; next_imu < imu.size() && imu[next_imu].t_ns - shift <= events[j - 1].t_ns; ++next_imu)
-        pf.add_gyro(imu[next_imu].t_ns - shift, frontend::RotationParticleFilter::camera_rate_from_imu(imu[next_imu], q_c_b));
-    }
-    pf.update(events.data() + i, j - i, view);
-    pf.flush(view);
-    const Eigen::Matrix3d R_pf = pf.mean().toRotationMatrix();
-    const Eigen::Vector3d w_c = pf.angular_velocity_c();
-    const int64_t t_pf = pf.time_ns();
-    for (size_t k = i; k < j; ++k) {
-      map_event(events[k], R_pf, w_c, static_cast<double>(events[k].t_ns - t_pf) * 1e-9);
-    }
-    record(t_pf, R_pf);
-    const int64_t t_now = events[j - 1].t_ns;
-    if (t_now >= next_rec) {
-      rec = mosaic.reconstruct(reconstructions % 50 == 0 ? mapping::GradientMosaic::ReconstructMode::kFull : mapping::GradientMosaic::ReconstructMode::kAuto);
-      to_map(rec, &map);
-      view.data = map.data();
-      ++reconstructions;
-      next_rec = t_now + cfg.reconstruct_period_ns;
-    }
-    if (t_now >= next_snap) {
-      fs::create_directories(fs::path(args.out) / "snapshots");
-      char name[64];
-      std::snprintf(name, sizeof(name), "panorama_%06d.png", snapshots++);
-      mapping::write_log_image_png8((fs::path(args.out) / "snapshots" / name).string(), rec.log_intensity, &rec.seen, cfg.display);
-      next_snap = t_now + cfg.snapshot_period_ns;
-    }
-    i = j;
-    const double seq = static_cast<double>(t_now - t0) * 1e-9;
+  const auto wall0 = std::chrono::steady_clock::now();
+  EventBuffer chunk;
+  int64_t events = 0, t0 = 0, t_last = 0;
+  for (;;) {
+    chunk.clear();
+    if (reader->read_events(&chunk, size_t{1} << 18) == 0) break;
+    const EventSpan span = chunk.span();
+    if (events == 0) t0 = span.front().t_ns;
+    t_last = span.back().t_ns;
+    events += static_cast<int64_t>(span.size());
+    mosaic.add_events(span);
+    const double seq = static_cast<double>(t_last - t0) * 1e-9;
     const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
-    if ((i / batch) % 4096 == 0)
-      progress.update(static_cast<double>(i) / static_cast<double>(events.size()), static_cast<int64_t>(i),
-                      "real-time factor " + num(seq > 0 ? wall / seq : 0.0));
+    progress.update(reader->progress(), mosaic.events_processed(), "real-time factor " + num(seq > 0 ? wall / seq : 0.0));
   }
-  rec = mosaic.reconstruct(mapping::GradientMosaic::ReconstructMode::kFull);
+  if (events == 0) throw InputError(args.dataset, 0, "no events", "a recording with events");
+  const pipeline::MosaicResult result = mosaic.finish();
+  const Trajectory& rotation = result.rotation;
+  const mapping::MosaicReconstruction& rec = result.reconstruction;
+  const pipeline::MosaicStats& ms = result.stats;
   const double processing_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
   const double duration_s = static_cast<double>(t_last - t0) * 1e-9;
+  const calib::Equirectangular proj(cfg.mosaic.width, cfg.mosaic.height);
 
   // ---- outputs -------------------------------------------------------------------------------
   write_tum((fs::path(args.out) / "rotation.tum").string(), rotation);
   mapping::write_log_image_png8((fs::path(args.out) / "panorama.png").string(), rec.log_intensity, &rec.seen, cfg.display);
   mapping::write_log_image_tiff((fs::path(args.out) / "panorama_log.tiff").string(), rec.log_intensity, &rec.seen);
-  const auto& st = pf.stats();
-  int64_t seen = 0;
-  for (Eigen::Index k = 0; k < rec.seen.size(); ++k) seen += rec.seen.data()[k] ? 1 : 0;
+  mapping::write_mask_png((fs::path(args.out) / "panorama_seen.png").string(), rec.seen);
+  const auto& st = ms.tracker;
+  const pipeline::MosaicBootstrapStats& bs = ms.bootstrap;
+  const int64_t seen = ms.seen_pixels;
   {
     std::ofstream f((fs::path(args.out) / "stats.json").string());
-    f << "{\n  \"dataset\": " << json_string(args.dataset) << ",\n  \"events\": " << events.size()
+    f << "{\n  \"dataset\": " << json_string(args.dataset) << ",\n  \"events\": " << events
       << ",\n  \"processing_time_s\": " << num(processing_s) << ",\n  \"sequence_duration_s\": " << num(duration_s)
       << ",\n  \"real_time_factor\": " << num(duration_s > 0 ? processing_s / duration_s : 0)
-      << ",\n  \"events_per_s\": " << num(processing_s > 0 ? events.size() / processing_s : 0)
+      << ",\n  \"events_per_s\": " << num(processing_s > 0 ? events / processing_s : 0)
       << ",\n  \"use_imu\": " << (args.use_imu ? "true" : "false") << ",\n  \"particles\": " << cfg.tracker.num_particles
       << ",\n  \"batch_size\": " << cfg.tracker.batch_size << ",\n  \"event_stride\": " << cfg.tracker.event_stride
       << ",\n  \"measurement_model\": \"" << frontend::rotation_measurement_model_name(cfg.tracker.measurement_model) << "\"" << ",\n  \"mosaic_size\": [" << cfg.mosaic.width << ", "
       << cfg.mosaic.height << "],\n  \"bootstrap\": {\"method\": \"" << (args.use_imu ? "gyro" : "contrast_maximisation")
-      << "\", \"duration_s\": " << num((t_track0 - t0) * 1e-9) << ", \"cmax_windows\": " << cmax_windows
-      << ", \"tracker_contrast\": " << num(contrast_used) << ", \"contrast_samples\": " << contrast_samples << "}"
+      << "\", \"duration_s\": " << num((bs.t_end_ns - t0) * 1e-9) << ", \"cmax_windows\": " << bs.cmax_windows
+      << ", \"tracker_contrast\": " << num(bs.tracker_contrast) << ", \"contrast_samples\": " << bs.contrast_samples << "}"
       << ",\n  \"tracker\": {\"events_used\": " << st.events_used << ", \"skipped_no_previous\": " << st.skipped_no_previous
       << ", \"skipped_unknown_map\": " << st.skipped_unknown_map << ", \"skipped_stride\": " << st.skipped_stride << ", \"batches\": " << st.batches
       << ", \"resamples\": " << st.resamples << ", \"linearized_batches\": " << st.linearized_batches << ", \"gyro_predictions\": " << st.gyro_predictions << "}"
-      << ",\n  \"mapper\": {\"events_mapped\": " << mapped << ", \"reconstructions\": " << reconstructions
-      << ", \"seen_pixels\": " << seen << ", \"seen_fraction\": " << num(static_cast<double>(seen) / static_cast<double>(rec.seen.size()))
+      << ",\n  \"mapper\": {\"events_mapped\": " << ms.events_mapped << ", \"reconstructions\": " << ms.reconstructions
+      << ", \"seen_pixels\": " << seen << ", \"seen_fraction\": " << num(ms.seen_fraction)
       << "},\n  \"snapshots\": " << snapshots << "\n}\n";
   }
-  out << "events        " << events.size() << " over " << num(duration_s) << " s, bootstrap "
-      << (args.use_imu ? "gyro" : "contrast maximisation") << " " << num((t_track0 - t0) * 1e-9) << " s\n";
+  out << "events        " << events << " over " << num(duration_s) << " s, bootstrap "
+      << (args.use_imu ? "gyro" : "contrast maximisation") << " " << num((bs.t_end_ns - t0) * 1e-9) << " s\n";
   out << "speed         " << num(processing_s) << " s processing, real-time factor "
       << num(duration_s > 0 ? processing_s / duration_s : 0) << " (one core), "
-      << num(processing_s > 0 ? events.size() / processing_s / 1e6 : 0) << " M events/s\n";
+      << num(processing_s > 0 ? events / processing_s / 1e6 : 0) << " M events/s\n";
   out << "mosaic        " << cfg.mosaic.width << "x" << cfg.mosaic.height << ", "
       << num(100.0 * static_cast<double>(seen) / static_cast<double>(rec.seen.size())) << "% seen\n";
 
@@ -479,18 +295,27 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
     if (!g0) throw InputError(args.gt, 0, "no ground-truth pose within the estimate's time span", "a trajectory overlapping the events");
     const Eigen::Matrix3d A = g0->rotation.toRotationMatrix() * rotation[first].T_w_b.rotation.toRotationMatrix().transpose();
     std::vector<double> err;
+    size_t boot_poses = 0;  // the first boot_poses errors are of bootstrap poses (gyro / CMax rates)
     for (size_t k = first; k < rotation.size(); ++k) {
       const auto g = gt.interpolate(rotation[k].t_ns);
       if (!g) continue;
       const Eigen::Matrix3d E = g->rotation.toRotationMatrix().transpose() * A * rotation[k].T_w_b.rotation.toRotationMatrix();
       err.push_back(calib::so3_log(E).norm() * 180.0 / M_PI);
+      if (rotation[k].t_ns <= bs.t_end_ns) boot_poses = err.size();
     }
-    double s2 = 0, mx = 0;
-    for (double e : err) {
-      s2 += e * e;
-      mx = std::max(mx, e);
-    }
-    const double rms = err.empty() ? 0 : std::sqrt(s2 / static_cast<double>(err.size()));
+    auto rms_max = [](const double* e, size_t n) {
+      double s2 = 0, mx = 0;
+      for (size_t k = 0; k < n; ++k) {
+        s2 += e[k] * e[k];
+        mx = std::max(mx, e[k]);
+      }
+      return std::pair<double, double>(n > 0 ? std::sqrt(s2 / static_cast<double>(n)) : 0.0, mx);
+    };
+    const auto [rms, mx] = rms_max(err.data(), err.size());
+    // The bootstrap alone: its poses up to the tracking start, and its last one (the rotation the
+    // tracker starts from: its error is baked into the bootstrap's part of the mosaic).
+    const auto [boot_rms, boot_max] = rms_max(err.data(), boot_poses);
+    const double boot_end = boot_poses > 0 ? err[boot_poses - 1] : 0.0;
     // Mosaic quality against the true panorama of a simulated dataset (scene_resolved.yaml).
     std::string quality_json;
     const fs::path scene = fs::path(args.dataset) / "scene_resolved.yaml";
@@ -518,11 +343,15 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
     f << "{\n  \"groundtruth\": " << json_string(args.gt) << ",\n  \"estimate\": "
       << json_string((fs::path(args.out) / "rotation.tum").string()) << ",\n  \"alignment\": \"initial orientation\""
       << ",\n  \"matched_poses\": " << err.size() << ",\n  \"rot_rms_deg\": " << num(rms) << ",\n  \"rot_max_deg\": " << num(mx)
+      << ",\n  \"bootstrap\": {\"method\": \"" << (args.use_imu ? "gyro" : "contrast_maximisation") << "\", \"poses\": " << boot_poses
+      << ", \"rot_rms_deg\": " << num(boot_rms) << ", \"rot_max_deg\": " << num(boot_max) << ", \"rot_end_deg\": " << num(boot_end) << "}"
       << quality_json << "\n}\n";
     out << "evaluation    rotation error rms " << num(rms) << " deg, max " << num(mx) << " deg over " << err.size()
         << " poses (initial orientation aligned)\n";
+    out << "bootstrap     rotation error rms " << num(boot_rms) << " deg, max " << num(boot_max) << " deg, at its end "
+        << num(boot_end) << " deg over " << boot_poses << " poses up to " << num((bs.t_end_ns - t0) * 1e-9) << " s\n";
   }
-  out << "wrote " << args.out << "/rotation.tum, panorama.png, panorama_log.tiff, stats.json, mosaic_config.yaml"
+  out << "wrote " << args.out << "/rotation.tum, panorama.png, panorama_seen.png, panorama_log.tiff, stats.json, mosaic_config.yaml"
       << (args.gt.empty() ? "" : ", eval.json") << "\n";
   return 0;
 }

@@ -4,52 +4,32 @@
 // (mapping::GradientMosaic) builds from the tracked rotation, reconstructed by Poisson
 // integration every `reconstruct_ms`. Bootstrap over the first `bootstrap.duration_ms`: the gyro
 // (--use-imu) or the angular velocity of rotational contrast maximisation per window.
-// Writes rotation.tum, panorama.png (8-bit, gamma), panorama_log.tiff (float log intensity, NaN
-// unseen), stats.json, the resolved config, optional snapshots and, with --gt, eval.json (rotation
-// error after aligning the initial orientation; with a simulated panorama dataset also PSNR/SSIM
-// of the mosaic against the true panorama over the seen region).
+// Writes rotation.tum, panorama.png (8-bit grey + alpha: unseen texels transparent; percentile
+// range over the seen texels, gamma), panorama_seen.png (seen coverage), panorama_log.tiff (float
+// log intensity, NaN unseen), stats.json, the resolved config, optional snapshots and, with --gt,
+// eval.json (rotation error after aligning the initial orientation, overall and of the bootstrap's
+// poses alone; with a simulated panorama dataset also PSNR/SSIM of the mosaic against the true
+// panorama over the seen region). The algorithm is pipeline::MosaicPipeline; events are streamed.
 #pragma once
 
 #include <cstdint>
 #include <iosfwd>
 #include <string>
 
-#include "evio/frontend/rotation_particle_filter.h"
-#include "evio/mapping/contrast_maximization.h"
-#include "evio/mapping/gradient_mosaic.h"
 #include "evio/mapping/mosaic_image.h"
+#include "evio/pipeline/mosaic_pipeline.h"
 #include "evio/sensors/dataset.h"
 
 namespace evio::apps {
 
-// Everything `--config FILE` sets (YAML sections mosaic, tracker, bootstrap, output; README.md).
-struct MosaicConfig {
-  mapping::GradientMosaicOptions mosaic;              // mosaic.{width, height, contrast_threshold, ...}
-  frontend::RotationParticleFilterOptions tracker;    // tracker.{particles, batch_size, motion_model, ...}
+// Everything `--config FILE` sets (YAML sections mosaic, tracker, bootstrap, output; README.md):
+// the pipeline's options (mosaic.*, tracker.*, bootstrap.*, output.trajectory_ms/snapshot_ms)
+// plus what only the command uses.
+struct MosaicConfig : pipeline::MosaicPipelineOptions {
   // tracker.event_stride when the YAML and --stride leave it unset (0): 4 with --use-imu (as
   // accurate as 1 on poster_rotation and 2x faster), 1 without (the stride costs accuracy there).
   int event_stride = 0;
-  int64_t reconstruct_period_ns = 20'000'000;         // mosaic.reconstruct_ms: Poisson solve period (tracker's map)
-  int64_t bootstrap_ns = 300'000'000;                 // bootstrap.duration_ms: mapping from gyro / CMax rates only
-  // bootstrap.window_ms / window_events: a CMax window (events only) closes after this time or
-  // this many events, whichever comes first (defaults 50 ms, 40000 events: about 11 ms at
-  // 3.5 M events/s, 50 ms below 0.8 M events/s). Fixed 10 ms windows gave 3.7 deg of error in the
-  // first 0.2 s at 66 deg/s (too little motion per window); fixed 30 ms ones diverged at 270 deg/s.
-  // With the gyro the bootstrap uses 1 ms windows.
-  int64_t bootstrap_window_ns = 50'000'000;
-  int bootstrap_window_events = 40000;
-  // bootstrap.calibrate_contrast: the tracker's C = the bootstrap mosaic's mean log-intensity change
-  // per event along the bootstrap's paths (capped at tracker.contrast_threshold); false: use
-  // tracker.contrast_threshold (default: mosaic.contrast_threshold) as given.
-  bool calibrate_contrast = true;
-  // bootstrap.min_contrast_ratio: the calibrated C is at least this times tracker.contrast_threshold
-  // (in [0, 1], default 0.8). A slow bootstrap sees little texture: on a 66 deg/s scene it measured
-  // 0.128 for C = 0.2 and tracking with that diverged (45 deg RMS over 3 s; 5.7 deg at 0.16).
-  double min_contrast_ratio = 0.8;
-  mapping::RotationalCmaxOptions cmax;                // bootstrap.{blur_px, ...} (IWE size/focal from the camera)
-  int64_t trajectory_period_ns = 5'000'000;           // output.trajectory_ms: rotation.tum sampling
-  int64_t snapshot_period_ns = 0;                     // output.snapshot_ms: panorama snapshots (0 = none)
-  mapping::LogImageDisplayOptions display;            // output.{gamma, low_percentile, high_percentile}
+  mapping::LogImageDisplayOptions display;            // output.{gamma, low_percentile, high_percentile, transparent_unseen}
 };
 
 MosaicConfig default_mosaic_config();

@@ -95,22 +95,47 @@ ImageF log_image_to_display(const ImageF& L, const MaskU8* seen, const LogImageD
   return out;
 }
 
+namespace {
+
+// The display mapping as an 8- or 16-bit image (T = uint8_t or uint16_t): one grey channel, or
+// grey + alpha (alpha 0 where unseen or non-finite) with transparent_unseen.
+template <typename T>
+cv::Mat display_image(const ImageF& L, const MaskU8* seen, const LogImageDisplayOptions& options, int depth) {
+  const ImageF t = log_image_to_display(L, seen, options);
+  const double full = static_cast<double>(std::numeric_limits<T>::max());
+  const int rows = static_cast<int>(t.rows()), cols = static_cast<int>(t.cols());
+  if (!options.transparent_unseen) {
+    cv::Mat img(rows, cols, CV_MAKETYPE(depth, 1));
+    for (int j = 0; j < rows; ++j)
+      for (int i = 0; i < cols; ++i) img.at<T>(j, i) = static_cast<T>(std::lround(full * t(j, i)));
+    return img;
+  }
+  cv::Mat img(rows, cols, CV_MAKETYPE(depth, 4));
+  for (int j = 0; j < rows; ++j)
+    for (int i = 0; i < cols; ++i) {
+      const bool shown = std::isfinite(L(j, i)) && (!seen || (*seen)(j, i) != 0);
+      const T g = static_cast<T>(std::lround(full * t(j, i)));
+      img.at<cv::Vec<T, 4>>(j, i) = cv::Vec<T, 4>(g, g, g, shown ? std::numeric_limits<T>::max() : T{0});
+    }
+  return img;
+}
+
+}  // namespace
+
 void write_log_image_png8(const std::string& path, const ImageF& L, const MaskU8* seen,
                           const LogImageDisplayOptions& options) {
-  const ImageF t = log_image_to_display(L, seen, options);
-  cv::Mat img(static_cast<int>(t.rows()), static_cast<int>(t.cols()), CV_8UC1);
-  for (int j = 0; j < img.rows; ++j)
-    for (int i = 0; i < img.cols; ++i) img.at<uint8_t>(j, i) = static_cast<uint8_t>(std::lround(255.0 * t(j, i)));
-  write_image(path, img);
+  write_image(path, display_image<uint8_t>(L, seen, options, CV_8U));
 }
 
 void write_log_image_png16(const std::string& path, const ImageF& L, const MaskU8* seen,
                            const LogImageDisplayOptions& options) {
-  const ImageF t = log_image_to_display(L, seen, options);
-  cv::Mat img(static_cast<int>(t.rows()), static_cast<int>(t.cols()), CV_16UC1);
+  write_image(path, display_image<uint16_t>(L, seen, options, CV_16U));
+}
+
+void write_mask_png(const std::string& path, const MaskU8& mask) {
+  cv::Mat img(static_cast<int>(mask.rows()), static_cast<int>(mask.cols()), CV_8UC1);
   for (int j = 0; j < img.rows; ++j)
-    for (int i = 0; i < img.cols; ++i)
-      img.at<uint16_t>(j, i) = static_cast<uint16_t>(std::lround(65535.0 * t(j, i)));
+    for (int i = 0; i < img.cols; ++i) img.at<uint8_t>(j, i) = mask(j, i) != 0 ? 255 : 0;
   write_image(path, img);
 }
 

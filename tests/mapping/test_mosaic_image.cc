@@ -115,6 +115,49 @@ TEST(MosaicImage, FilesReadBack) {
   EXPECT_THROW(evio::mapping::write_log_image_png8(dir.file("no/such/dir/x.png"), L, &seen), evio::InputError);
 }
 
+TEST(MosaicImage, TransparentUnseenPixelsAndCoverageMask) {
+  evio_test::TempDir dir;
+  const int W = 64, H = 32;
+  ImageF L = smooth(W, H);
+  MaskU8 seen = MaskU8::Ones(H, W);
+  seen.block(0, 0, 4, W).setZero();
+  seen.block(10, 20, 5, 7).setZero();
+  L(20, 30) = std::nanf("");  // seen but not finite: transparent too
+  LogImageDisplayOptions o;
+  o.transparent_unseen = true;
+  const ImageF t = evio::mapping::log_image_to_display(L, &seen, o);
+  evio::mapping::write_log_image_png8(dir.file("rgba8.png"), L, &seen, o);
+  evio::mapping::write_log_image_png16(dir.file("rgba16.png"), L, &seen, o);
+  evio::mapping::write_mask_png(dir.file("seen.png"), seen);
+  const cv::Mat p8 = cv::imread(dir.file("rgba8.png"), cv::IMREAD_UNCHANGED);
+  const cv::Mat p16 = cv::imread(dir.file("rgba16.png"), cv::IMREAD_UNCHANGED);
+  const cv::Mat m = cv::imread(dir.file("seen.png"), cv::IMREAD_UNCHANGED);
+  ASSERT_EQ(p8.type(), CV_8UC4);
+  ASSERT_EQ(p16.type(), CV_16UC4);
+  ASSERT_EQ(m.type(), CV_8UC1);
+  ASSERT_EQ(p8.rows, H);
+  ASSERT_EQ(p8.cols, W);
+  int transparent = 0, opaque_black = 0;
+  for (int j = 0; j < H; ++j)
+    for (int i = 0; i < W; ++i) {
+      const bool shown = seen(j, i) && std::isfinite(L(j, i));
+      const cv::Vec4b c = p8.at<cv::Vec4b>(j, i);
+      const cv::Vec<uint16_t, 4> c16 = p16.at<cv::Vec<uint16_t, 4>>(j, i);
+      EXPECT_EQ(c[3], shown ? 255 : 0) << j << " " << i;
+      EXPECT_EQ(c16[3], shown ? 65535 : 0) << j << " " << i;
+      for (int k = 0; k < 3; ++k) {
+        EXPECT_EQ(c[k], std::lround(255.0 * t(j, i)));
+        EXPECT_EQ(c16[k], std::lround(65535.0 * t(j, i)));
+      }
+      EXPECT_EQ(m.at<uint8_t>(j, i), seen(j, i) ? 255 : 0);
+      transparent += !shown;
+      opaque_black += shown && c[0] == 0;
+    }
+  EXPECT_EQ(transparent, 4 * W + 5 * 7 + 1);
+  // The darkest seen pixels (below the low percentile) are black but opaque.
+  EXPECT_GE(opaque_black, 10);
+}
+
 TEST(MosaicImage, QualityIdenticalAndAffineCopy) {
   const int W = 96, H = 64;
   const ImageF ref = smooth(W, H);

@@ -24,6 +24,10 @@ struct LogImageDisplayOptions {
   double high_percentile = 99.0;  // %, in (low_percentile, 100], mapped to white
   double gamma = 1.0;             // display gamma (> 0): value = t^(1/gamma); 2.2 for linear_intensity
   bool linear_intensity = false;  // map linear intensity exp(L) instead of log intensity
+  // PNG writers: grey plus alpha (4 channels, R = G = B = the display value) with alpha 0 where a
+  // pixel is unseen or non-finite and full alpha elsewhere, so unseen pixels stand apart from dark
+  // seen ones in any viewer; false: one grey channel, unseen pixels black.
+  bool transparent_unseen = false;
   bool Validate(std::string* why) const;
 };
 
@@ -31,12 +35,16 @@ struct LogImageDisplayOptions {
 // std::invalid_argument for invalid options or a mask of another size.
 ImageF log_image_to_display(const ImageF& log_intensity, const MaskU8* seen, const LogImageDisplayOptions& options = {});
 
-// 8-bit grey PNG (round(255 t)) and 16-bit grey PNG (round(65535 t)) of the display mapping.
+// 8-bit PNG (round(255 t)) and 16-bit PNG (round(65535 t)) of the display mapping: grey, or
+// grey + alpha with options.transparent_unseen (then BGRA as OpenCV writes it: RGBA in the file).
 // Throw evio::InputError when the file cannot be written, std::invalid_argument as above.
 void write_log_image_png8(const std::string& path, const ImageF& log_intensity, const MaskU8* seen,
                           const LogImageDisplayOptions& options = {});
 void write_log_image_png16(const std::string& path, const ImageF& log_intensity, const MaskU8* seen,
                            const LogImageDisplayOptions& options = {});
+// 8-bit grey PNG of a mask: 255 where the mask is non-zero, 0 elsewhere (e.g. the mosaic's
+// seen coverage). Throws evio::InputError when the file cannot be written.
+void write_mask_png(const std::string& path, const MaskU8& mask);
 // 32-bit float single-channel TIFF of the log intensity itself, NaN where seen is 0.
 void write_log_image_tiff(const std::string& path, const ImageF& log_intensity, const MaskU8* seen);
 

@@ -1,0 +1,170 @@
+// Simultaneous rotational tracking and panorama mosaicing (Kim et al., BMVC 2014) as one
+// synchronous library class: a bootstrap (rates from the gyro, or from rotational contrast
+// maximisation per window) maps the first events into the pixel-wise EKF gradient mosaic
+// (mapping::GradientMosaic), the tracker's contrast is calibrated on that mosaic, then a particle
+// filter on SO(3) (frontend::RotationParticleFilter) tracks the camera against the Poisson
+// reconstruction of the mosaic, which it keeps building from the tracked rotation.
+// Plain data in (events, IMU samples) and out (MosaicResult); no files, flags or threads.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "evio/calib/calibration_io.h"
+#include "evio/frontend/rotation_particle_filter.h"
+#include "evio/mapping/contrast_maximization.h"
+#include "evio/mapping/gradient_mosaic.h"
+#include "evio/sensors/event_buffer.h"
+#include "evio/sensors/measurements.h"
+#include "evio/sensors/trajectory.h"
+
+namespace evio::pipeline {
+
+struct MosaicPipelineOptions {
+  mapping::GradientMosaicOptions mosaic;            // equirectangular mosaic size (px), C, EKF noise, ...
+  frontend::RotationParticleFilterOptions tracker;  // particles, batch_size (events), event_stride, ...
+
+  // Drive the bootstrap and the particles' prediction with the gyro (add_imu); false: events only.
+  bool use_gyro = false;
+
+  // Poisson reconstruction of the tracker's map: after the first particle-filter batch that ends at
+  // least this long after the previous reconstruction, ns (> 0).
+  int64_t reconstruct_period_ns = 20'000'000;
+  // Every this many reconstructions (counting the bootstrap's) one is a full solve, the others
+  // are GradientMosaic's kAuto (incremental region solve where it suffices), count (>= 1).
+  int full_reconstruct_every = 50;
+
+  // Bootstrap: the events of the first bootstrap_ns (ns, >= 0) after the first event are mapped
+  // with rotations integrated from gyro or contrast-maximisation rates, not tracked.
+  int64_t bootstrap_ns = 300'000'000;
+  // Events only: a contrast-maximisation window closes after bootstrap_window_ns (ns, > 0) or
+  // bootstrap_window_events events (count, >= 1), whichever comes first; the rate of each window
+  // starts from the previous one. Defaults 50 ms, 40000 events: about 11 ms at 3.5 M events/s,
+  // 50 ms below 0.8 M events/s. Fixed 10 ms windows gave 3.7 deg of error in the first 0.2 s at
+  // 66 deg/s (too little motion per window); fixed 30 ms ones diverged at 270 deg/s.
+  int64_t bootstrap_window_ns = 50'000'000;
+  int bootstrap_window_events = 40000;
+  // With the gyro: bootstrap windows of min(bootstrap_window_ns, this), ns (> 0); within one the
+  // rate at each event's time is held constant from the event window's start.
+  int64_t gyro_bootstrap_window_ns = 1'000'000;
+  // With the gyro: step of the rotation's integration over a bootstrap window (midpoint rate), ns (> 0).
+  int64_t gyro_integration_step_ns = 1'000'000;
+  // Rotational CMax of the bootstrap windows: blur_px (px), optimiser settings. Its IWE size and
+  // focal length are taken from the camera (width, height, sqrt(fx fy)).
+  mapping::RotationalCmaxOptions cmax;
+
+  // The tracker's contrast: true = the bootstrap mosaic's mean log-intensity change per event along
+  // the bootstrap's paths, clamped to [min_contrast_ratio, 1] x tracker.contrast_threshold; false =
+  // tracker.contrast_threshold as given. The reconstruction is smoother than the scene, so its
+  // change per event is below the sensor's C; tracking with the sensor's C against it makes the
+  // tracker over-rotate (previous_mean) until it matches.
+  bool calibrate_contrast = true;
+  // In [0, 1] (default 0.8). A slow bootstrap sees little texture: on a 66 deg/s scene it measured
+  // 0.128 for C = 0.2 and tracking with that diverged (45 deg RMS over 3 s; 5.7 deg at 0.16).
+  double min_contrast_ratio = 0.8;
+  // One mapped bootstrap event in this many gives a calibration sample (its path), count (>= 1).
+  int calibration_sample_stride = 8;
+  // Only paths between texels with at least this many accepted EKF updates count, count (>= 0): a
+  // young texel's gradient is still shrunk towards the prior's zero, which would bias C low.
+  int calibration_min_texel_updates = 5;
+  // Fewer usable samples than this (count, >= 1), or a non-positive mean: keep
+  // tracker.contrast_threshold (MosaicResult::bootstrap.contrast_calibrated = false).
+  int calibration_min_samples = 1000;
+
+  // The rotation trajectory keeps one pose per this period at most, ns (> 0).
+  int64_t trajectory_period_ns = 5'000'000;
+  // Snapshot callback (set_snapshot_callback) at the first tracked batch and then after every
+  // batch at least this long after the previous snapshot, ns (>= 0; 0 = none).
+  int64_t snapshot_period_ns = 0;
+
+  // With the gyro, events wait until the IMU covers them (a sample after the last event of the
+  // step that needs it). Events further than this ahead of the newest IMU sample (camera clock)
+  // are processed without waiting (the gyro is missing there), ns (>= 0).
+  int64_t imu_wait_ns = 1'000'000'000;
+
+  bool Validate(std::string* why) const;
+};
+
+// The mosaic frame puts the first camera's optical axis on the equator, looking along +x, image
+// right = -y, image down = -z (the simulator's rpy [-90, 0, -90] start), away from the poles:
+// R_w_c of the first event.
+Eigen::Matrix3d mosaic_initial_camera_rotation();
+
+struct MosaicBootstrapStats {
+  bool gyro = false;              // rates from the gyro (else rotational contrast maximisation)
+  int64_t t_end_ns = 0;           // tracking starts here (camera clock)
+  int64_t cmax_windows = 0;       // contrast-maximisation windows (events only)
+  int64_t events = 0;             // events of the bootstrap
+  double tracker_contrast = 0;    // the tracker's C, log units
+  bool contrast_calibrated = false;  // tracker_contrast from the bootstrap mosaic (else as configured)
+  int64_t contrast_samples = 0;   // calibration samples used
+};
+
+struct MosaicStats {
+  int64_t events = 0;                 // events given to add_events
+  int64_t imu_samples = 0;            // IMU samples given to add_imu
+  int64_t t_first_event_ns = 0;       // camera clock; both 0 without events
+  int64_t t_last_event_ns = 0;
+  int64_t events_mapped = 0;          // events whose path updated the mosaic
+  int64_t reconstructions = 0;        // Poisson solves for the tracker (the bootstrap's included)
+  int64_t snapshots = 0;              // snapshot callbacks
+  int64_t seen_pixels = 0;            // of the final reconstruction
+  double seen_fraction = 0;           // seen_pixels / mosaic texels
+  MosaicBootstrapStats bootstrap;
+  frontend::RotationParticleFilterStats tracker;
+};
+
+struct MosaicResult {
+  // R_w_b as T_w_b (zero translation) in the mosaic frame, camera clock, at most one pose per
+  // trajectory_period_ns: the first event, each bootstrap window's end, then the tracker's batches.
+  Trajectory rotation;
+  // The final full Poisson reconstruction (H x W log intensity up to an offset, seen mask).
+  mapping::MosaicReconstruction reconstruction;
+  MosaicStats stats;
+};
+
+class MosaicPipeline {
+ public:
+  // Called at each snapshot time (camera clock) with the tracker's current reconstruction.
+  using SnapshotCallback = std::function<void(int64_t t_ns, const mapping::MosaicReconstruction&)>;
+
+  // camera: intrinsics (undistortion), T_c_b (only its rotation: the gyro's frame and the written
+  // body orientation) and time_shift_ns (t_imu = t_cam + shift). Throws std::invalid_argument when
+  // the options are invalid.
+  MosaicPipeline(const MosaicPipelineOptions& options, const calib::CameraCalibration& camera);
+  ~MosaicPipeline();
+  MosaicPipeline(const MosaicPipeline&) = delete;
+  MosaicPipeline& operator=(const MosaicPipeline&) = delete;
+
+  void set_snapshot_callback(SnapshotCallback callback);
+
+  // IMU samples in time order (IMU clock), used with use_gyro (ignored otherwise). They may all
+  // come first or be interleaved with add_events.
+  void add_imu(const ImuSample& sample);
+  // Raw events in time order (camera clock), e.g. chunks as read. Events are kept only until the
+  // bootstrap window or tracker batch they belong to is complete, so memory stays bounded by one
+  // window (or batch) plus one chunk; the results do not depend on the chunking, nor on how the
+  // IMU is interleaved as long as it arrives within imu_wait_ns of the events.
+  void add_events(EventSpan events);
+  // Processes everything buffered, reconstructs the final mosaic (full solve) and returns the
+  // results. No input is accepted afterwards (std::logic_error).
+  MosaicResult finish();
+
+  // Events processed so far (bootstrap and tracker), for progress reports.
+  int64_t events_processed() const;
+  // Events held now: waiting for their bootstrap window or tracker batch to complete, or for the IMU.
+  size_t buffered_events() const;
+  const MosaicPipelineOptions& options() const { return options_; }
+
+ private:
+  struct Impl;
+  MosaicPipelineOptions options_;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace evio::pipeline
