@@ -18,31 +18,19 @@
 #include "evio/calib/geometry.h"
 #include "evio/sensors/sim_imu.h"
 #include "evio/sensors/simulator.h"
+#include "pipeline_test_support.h"
 #include "simulate_config.h"
 
 namespace evio::pipeline {
 namespace {
 
-calib::CameraCalibration test_camera() {
-  calib::CameraIntrinsics in;
-  in.width = 240;
-  in.height = 180;
-  in.fx = in.fy = 200;
-  in.cx = 120;
-  in.cy = 90;
-  calib::CameraCalibration c;
-  c.camera = calib::PinholeCamera(in);
-  return c;
-}
+using testing::test_camera;
+
 
 TEST(MosaicPipelineOptions, DefaultsAreValidAndBadValuesAreRejectedWithAReason) {
   std::string why;
   EXPECT_TRUE(MosaicPipelineOptions{}.Validate(&why)) << why;
-  const auto rejected = [](const MosaicPipelineOptions& o, const std::string& reason) {
-    std::string w;
-    EXPECT_FALSE(o.Validate(&w)) << reason;
-    EXPECT_NE(w.find(reason), std::string::npos) << w;
-  };
+  const auto rejected = [](const MosaicPipelineOptions& o, const std::string& reason) { testing::expect_rejected(o, reason); };
   MosaicPipelineOptions o;
   o.reconstruct_period_ns = 0;
   rejected(o, "reconstruct_period_ns");

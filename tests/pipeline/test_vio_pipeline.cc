@@ -16,23 +16,15 @@
 #include "evio/evaluation/trajectory_evaluation.h"
 #include "evio/sensors/sim_imu.h"
 #include "evio/sensors/simulator.h"
+#include "pipeline_test_support.h"
 #include "simulate_config.h"
 
 namespace evio::pipeline {
 namespace {
 
-// A DAVIS240C-like camera without distortion and IMU noise densities of the simulator's default.
-calib::CameraCalibration test_camera() {
-  calib::CameraIntrinsics in;
-  in.width = 240;
-  in.height = 180;
-  in.fx = in.fy = 200;
-  in.cx = 120;
-  in.cy = 90;
-  calib::CameraCalibration c;
-  c.camera = calib::PinholeCamera(in);
-  return c;
-}
+using testing::test_camera;
+
+// IMU noise densities of the simulator's default.
 
 calib::ImuNoise test_noise() {
   calib::ImuNoise n;
@@ -48,11 +40,7 @@ TEST(VioPipelineOptions, DefaultsAreValidAndBadValuesAreRejectedWithAReason) {
   std::string why;
   EXPECT_TRUE(VioPipelineOptions{}.Validate(&why)) << why;
   EXPECT_EQ(VioPipelineOptions{}.frames.min_window_ns, 10'000'000);
-  const auto rejected = [](const VioPipelineOptions& o, const std::string& reason) {
-    std::string w;
-    EXPECT_FALSE(o.Validate(&w)) << reason;
-    EXPECT_NE(w.find(reason), std::string::npos) << w;
-  };
+  const auto rejected = [](const VioPipelineOptions& o, const std::string& reason) { testing::expect_rejected(o, reason); };
   VioPipelineOptions o;
   o.observation_period_ns = 0;
   rejected(o, "observation_period_ns");
