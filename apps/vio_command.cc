@@ -310,6 +310,15 @@ std::string init_description(pipeline::VioInitMethod m) {
 }  // namespace
 
 int run_vio(const VioArgs& args, std::ostream& out) {
+  // The oracle's scene first: its errors come before reading a dataset.
+  std::shared_ptr<const sim::PlanarScene> oracle_planes;
+  if (!args.oracle_scene.empty()) {
+    if (args.gt.empty()) throw InputError(args.oracle_scene, 0, "--oracle-tracks needs the true trajectory", "--gt GT.tum");
+    const SimulationConfig sc = load_simulation_config(args.oracle_scene);
+    oracle_planes = std::dynamic_pointer_cast<const sim::PlanarScene>(sc.scene);
+    if (!oracle_planes)
+      throw InputError(args.oracle_scene, 0, "--oracle-tracks needs a planes scene (got " + sc.scene_type + ")", "scene: planes");
+  }
   std::string resolved;
   VioConfig cfg = default_vio_config();
   if (!args.config.empty()) {
@@ -347,13 +356,7 @@ int run_vio(const VioArgs& args, std::ostream& out) {
     vio.set_initial_state_provider([gt = load_trajectory(args.gt)](int64_t t_ns) { return groundtruth_state(gt, t_ns); });
   }
   std::unique_ptr<evaluation::TrackOracle> oracle;
-  std::shared_ptr<const sim::PlanarScene> oracle_planes;
-  if (!args.oracle_scene.empty()) {
-    if (args.gt.empty()) throw InputError(args.oracle_scene, 0, "--oracle-tracks needs the true trajectory", "--gt GT.tum");
-    const SimulationConfig sc = load_simulation_config(args.oracle_scene);
-    oracle_planes = std::dynamic_pointer_cast<const sim::PlanarScene>(sc.scene);
-    if (!oracle_planes)
-      throw InputError(args.oracle_scene, 0, "--oracle-tracks needs a planes scene (got " + sc.scene_type + ")", "scene: planes");
+  if (oracle_planes) {
     evaluation::TrackOracleOptions oo;
     oo.white_noise_px = args.oracle_noise_px;
     oo.drift_px_per_frame = args.oracle_drift_px;

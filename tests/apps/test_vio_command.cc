@@ -113,6 +113,33 @@ TEST(VioConfig, EveryExampleConfigInDatasetsParses) {
 }
 
 // A 6 s simulated poster_6dof sequence through `evio vio --gt`.
+// --oracle-tracks: rejected before any dataset is read without --gt, or with a scene that is not
+// made of planes (no ray caster), naming the scene file.
+TEST(VioCommand, OracleTracksNeedGroundTruthAndAPlanesScene) {
+  evio_test::TempDir dir;
+  VioArgs va;
+  va.dataset = dir.file("missing");
+  va.out = dir.file("out");
+  va.progress = false;
+  va.oracle_scene = std::string(EVIO_SOURCE_DIR) + "/datasets/poster_6dof.yaml";
+  std::ostringstream o;
+  try {
+    run_vio(va, o);
+    ADD_FAILURE() << "no error without --gt";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("--gt"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("poster_6dof.yaml"), std::string::npos) << e.what();
+  }
+  va.gt = dir.file("gt.tum");
+  va.oracle_scene = std::string(EVIO_SOURCE_DIR) + "/datasets/poster_rotation.yaml";
+  try {
+    run_vio(va, o);
+    ADD_FAILURE() << "no error for a panorama scene";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("planes scene"), std::string::npos) << e.what();
+  }
+}
+
 TEST(VioCommand, ShortSimulatedSequenceEndToEnd) {
   evio_test::TempDir dir;
   const VioArgs va = vio_on(simulate(dir, "poster_6dof.yaml", 6.0), dir.file("vio"));
