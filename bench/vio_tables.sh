@@ -1,15 +1,20 @@
 #!/usr/bin/env bash
-# Whole-process benchmark of `evio vio` (issue 8 acceptance tables):
-#  1. per-sequence accuracy: the poster-, boxes- and shapes-like 6-DoF scenes (10 s each) and the
-#     poster_6dof motion-capture replay (first 20 s; needs the shared real data), each simulated
-#     once by `evio simulate` and kept in SEQ_DIR, run with datasets/vio/simulator.yaml and
-#     evaluated with SE3 alignment on the first 5 s (mean position error as % of distance, final
-#     yaw error, ATE, real-time factor);
-#  2. speed-accuracy: frames.events_per_frame x window.size on the poster replay (or, without the
-#     real data, on poster_6dof), with error and real-time factor.
+# Whole-process benchmark of `evio vio` (issue 16 acceptance tables):
+#  1. per-sequence accuracy for each input (events, aps, events+aps): the poster-, boxes- and
+#     shapes-like 6-DoF scenes, the room (DAVIS346, radtan, camera-IMU extrinsic) and the
+#     quadrotor flight from a static start (10 s each) and the whole poster_6dof motion-capture
+#     replay (59.8 s; needs the shared real data), each simulated once by `evio simulate` and kept
+#     in SEQ_DIR, run with datasets/vio/simulator.yaml (inputs set per row) and evaluated with SE3
+#     alignment on the first 5 s: mean position error in % of distance of trajectory.tum (and of
+#     trajectory_causal.tum), yaw drift deg/m, final yaw error, rotation-only keyframes, and the
+#     real-time factor of the whole process (CPU time user+sys / sequence duration: one core;
+#     wall time alongside);
+#  2. speed-accuracy on the replay (or, without the real data, on poster_6dof), events only:
+#     frames.events_per_frame x window.size x tracker (frames front-end with chained KLT,
+#     frames with reference templates refreshed every 5 frames, corners front-end), with error
+#     and real-time factor.
 # Prints markdown tables and writes OUT/per_sequence.md, OUT/speed_accuracy.md and every run's
-# outputs under OUT/runs. Timings are one-core wall times of the whole process; run on an
-# otherwise idle machine.
+# outputs under OUT/runs. Run on an otherwise idle machine for the wall times.
 #   bench/vio_tables.sh [SEQ_DIR] [OUT]        (defaults: build/vio_sequences, build/vio_tables)
 #   EVIO=path/to/evio  EVIO_REAL_DATA=path/to/shared/data/real  QUICK=1 (per-sequence table only)
 set -euo pipefail
@@ -20,6 +25,7 @@ out=${2:-build/vio_tables}
 real=${EVIO_REAL_DATA:-../shared/data/real}
 mocap="$real/trajectories/poster_6dof_mocap.csv"
 [ -x "$evio" ] || { echo "vio_tables: $evio not found (build the evio target or set EVIO)" >&2; exit 1; }
+[ -x /usr/bin/time ] || { echo "vio_tables: /usr/bin/time not found (Debian package time)" >&2; exit 1; }
 mkdir -p "$seqs" "$out/runs"
 
 simulate() {  # name yaml [extra args...]
@@ -29,13 +35,13 @@ simulate() {  # name yaml [extra args...]
     "$evio" -q simulate "$yaml" "$@" --out "$seqs/$name" >&2
   fi
 }
-simulate poster_6dof datasets/poster_6dof.yaml
-simulate boxes_6dof datasets/boxes_6dof.yaml
-simulate shapes_6dof datasets/shapes_6dof.yaml
-names=(poster_6dof boxes_6dof shapes_6dof)
+names=()
+for n in poster_6dof boxes_6dof shapes_6dof room_6dof quadrotor_flight; do
+  simulate "$n" "datasets/$n.yaml"
+  names+=("$n")
+done
 if [ -f "$mocap" ]; then
-  simulate poster_6dof_mocap datasets/poster_6dof_mocap.yaml --duration 20 \
-    --set "trajectory.path=$(readlink -f "$mocap")"
+  simulate poster_6dof_mocap datasets/poster_6dof_mocap.yaml --set "trajectory.path=$(readlink -f "$mocap")"
   names+=(poster_6dof_mocap)
   sweep_seq=poster_6dof_mocap
 else
@@ -43,54 +49,74 @@ else
   sweep_seq=poster_6dof
 fi
 
-run() {  # tag sequence config -> OUT/runs/tag
+run() {  # tag sequence config -> OUT/runs/tag (+ tag.time: wall and CPU seconds)
   local tag=$1 seq=$2 cfg=$3
   rm -rf "$out/runs/$tag"
-  "$evio" -q vio "$seqs/$seq" --out "$out/runs/$tag" --config "$cfg" --gt "$seqs/$seq/groundtruth.txt" \
+  /usr/bin/time -f "%e %U %S" -o "$out/runs/$tag.time" \
+    "$evio" -q vio "$seqs/$seq" --out "$out/runs/$tag" --config "$cfg" --gt "$seqs/$seq/groundtruth.txt" \
     > "$out/runs/$tag.log" 2>&1 || { echo "vio_tables: run $tag failed, see $out/runs/$tag.log" >&2; return 0; }
 }
 
 row() {  # label run-dir -> one markdown row
-  /usr/bin/env python3 - "$1" "$2" <<'EOF'
+  /usr/bin/python3 - "$1" "$2" <<'EOF'
 import json, sys, os
 label, d = sys.argv[1], sys.argv[2]
 try:
     s = json.load(open(os.path.join(d, "stats.json")))
-    e = json.load(open(os.path.join(d, "eval.json")))["estimates"][0]
+    est = json.load(open(os.path.join(d, "eval.json")))["estimates"]
+    e, c = est[0], est[1]
+    wall, user, sys_ = (float(x) for x in open(d + ".time").read().split()[-3:])
 except Exception as ex:
     print("| %s | failed (%s) |" % (label, ex)); sys.exit(0)
-print("| %s | %.1f | %.2f | %.3f | %.2f | %.3f | %.1f | %d | %.3f |" % (
-    label, e["time_span_s"][1] - e["time_span_s"][0], e["groundtruth_length_m"],
-    e["mean_position_error_percent"], e["final_yaw_error_deg"], e["ate"]["trans_m"]["rmse"],
-    s["events"] / 1e6, s["keyframes"], s["real_time_factor"]))
+dur = s["sequence_duration_s"]
+print("| %s | %.1f | %.2f | %.3f | %.3f | %.3f | %.2f | %d | %d | %.3f | %.3f |" % (
+    label, dur, e["groundtruth_length_m"], e["mean_position_error_percent"], c["mean_position_error_percent"],
+    e["yaw_drift_deg_per_m"], e["final_yaw_error_deg"], s["keyframes"], s["rotation_only_keyframes"],
+    (user + sys_) / dur, wall / dur))
 EOF
 }
-header="| run | span s | length m | mean pos. err. % | final yaw err. deg | ATE rmse m | events M | keyframes | real-time factor |
-|---|---|---|---|---|---|---|---|---|"
+header="| run | duration s | length m | mean pos. err. % | causal % | yaw drift deg/m | final yaw deg | keyframes | rotation-only kf | real-time factor (CPU) | real-time factor (wall) |
+|---|---|---|---|---|---|---|---|---|---|---|"
+
+config() {  # file inputs [sed expressions...] -> a copy of datasets/vio/simulator.yaml
+  local f=$1 inputs=$2; shift 2
+  sed -e "s/^inputs: .*/inputs: $inputs/" "$@" datasets/vio/simulator.yaml > "$f"
+  grep -q "^inputs: $inputs" "$f" || echo "inputs: $inputs" >> "$f"
+}
 
 {
   echo "### evio vio per sequence (datasets/vio/simulator.yaml, SE3 alignment on the first 5 s)"
   echo
   echo "$header"
-  for n in "${names[@]}"; do
-    run "seq_$n" "$n" datasets/vio/simulator.yaml
-    row "$n" "$out/runs/seq_$n"
+  for inputs in events aps events+aps; do
+    tag=${inputs/+/_}
+    cfg="$out/runs/cfg_$tag.yaml"
+    config "$cfg" "$inputs" -e "s/x/x/"
+    for n in "${names[@]}"; do
+      run "seq_${tag}_$n" "$n" "$cfg"
+      row "$inputs: $n" "$out/runs/seq_${tag}_$n"
+    done
   done
 } | tee "$out/per_sequence.md"
 [ "${QUICK:-0}" = 1 ] && exit 0
 
 echo
 {
-  echo "### speed-accuracy on $sweep_seq: frames.events_per_frame x window.size"
+  echo "### speed-accuracy on $sweep_seq (events): frames.events_per_frame x window.size x tracker"
   echo
   echo "$header"
-  for epf in 5000 10000 15000 30000; do
-    for k in 5 10 15; do
-      cfg="$out/runs/cfg_${epf}_$k.yaml"
-      sed -e "s/events_per_frame: [0-9]*/events_per_frame: $epf/" -e "s/window: {size: [0-9]*/window: {size: $k/" \
-        datasets/vio/simulator.yaml > "$cfg"
-      run "sweep_${epf}_$k" "$sweep_seq" "$cfg"
-      row "events/frame $epf, window $k" "$out/runs/sweep_${epf}_$k"
+  for tracker in chained template5 corners; do
+    for epf in 5000 15000 30000; do
+      for k in 5 10 15; do
+        [ "$tracker" = corners ] && [ "$epf" != 15000 ] && continue  # corners: no event frames
+        cfg="$out/runs/cfg_${tracker}_${epf}_$k.yaml"
+        extra=(-e "s/events_per_frame: [0-9]*/events_per_frame: $epf/" -e "s/window: {size: [0-9]*/window: {size: $k/")
+        [ "$tracker" = template5 ] && extra+=(-e "s/template_max_age_frames: [0-9]*/template_max_age_frames: 5/")
+        [ "$tracker" = corners ] && extra+=(-e "s/^frontend: .*/frontend: corners/")
+        config "$cfg" events "${extra[@]}"
+        run "sweep_${tracker}_${epf}_$k" "$sweep_seq" "$cfg"
+        row "$tracker, events/frame $epf, window $k" "$out/runs/sweep_${tracker}_${epf}_$k"
+      done
     done
   done
 } | tee "$out/speed_accuracy.md"
