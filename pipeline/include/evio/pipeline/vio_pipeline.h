@@ -96,7 +96,15 @@ struct VioPipelineOptions {
     f.use_depth = true;
     return f;
   }();                                                           // events_per_frame, windows (ns), ...
-  frontend::FeatureTrackerOptions tracker;                       // grid, FAST, KLT (px), RANSAC (px)
+  // KLT window 27 px on event frames (the tracker's own default, 21, stays for APS frames): event
+  // frames are sparse, and a larger window averages more events. Mean position error over six
+  // simulated scenes 1.32% -> 0.95% (better on 5 of 6; 15 px 1.33%, 31 px 0.96%, 41 px 1.20%),
+  // 59.8 s replay 0.171% -> 0.155%, median track lifetime on poster_6dof 5 -> 6 frames.
+  frontend::FeatureTrackerOptions tracker = [] {
+    frontend::FeatureTrackerOptions t;
+    t.klt_window_px = 27;
+    return t;
+  }();                                                           // grid, FAST, KLT (px), RANSAC (px)
 
   // Corners front-end.
   frontend::EfastOptions efast;                                  // filter_sae, filter_window_ns (ns)
