@@ -56,7 +56,12 @@ std::string config_yaml(const MosaicConfig& c) {
     << ", measurement_relative_std: " << num(m.measurement_relative_std) << ", min_tau_ms: " << num(m.min_tau_s * 1e3)
     << ", min_speed_px_s: " << num(m.min_speed_px_s) << ", seen_min_observations: " << m.seen_min_observations
     << ", seen_max_gradient_std: " << num(m.seen_max_gradient_std) << ", max_path_px: " << num(m.max_path_px) << ", reconstruct_ms: " << num(c.reconstruct_period_ns * 1e-6)
-    << ", full_reconstruct_every: " << c.full_reconstruct_every << "}\n";
+    << ", full_reconstruct_every: " << c.full_reconstruct_every
+    << ", poisson_weighting: " << mapping::poisson_weighting_name(c.output_weighting)
+    << ", weight_reference_std: " << num(m.weight_reference_std) << ", viewed_edge_weight: " << num(m.viewed_edge_weight)
+    << ", weight_floor: " << num(m.weighted_poisson.weight_floor) << ", pcg_tolerance: " << num(m.weighted_poisson.tolerance)
+    << ", pcg_max_iterations: " << m.weighted_poisson.max_iterations
+    << ", pcg_preconditioner: " << mapping::poisson_preconditioner_name(m.weighted_poisson.preconditioner) << "}\n";
   y << "tracker: {particles: " << t.num_particles << ", batch_size: " << t.batch_size << ", event_stride: " << t.event_stride
     << ", max_batch_ms: " << num(t.max_batch_duration_ns * 1e-6)
     << ", motion_model: " << frontend::rotation_motion_model_name(t.motion_model)
@@ -95,7 +100,8 @@ MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_y
       const Section s = top.child("mosaic", false, "a map");
       s.allow({"width", "height", "contrast_threshold", "initial_gradient_std", "measurement_std_abs",
                "measurement_relative_std", "min_tau_ms", "min_speed_px_s", "reconstruct_ms", "full_reconstruct_every",
-               "seen_min_observations", "seen_max_gradient_std", "max_path_px"});
+               "seen_min_observations", "seen_max_gradient_std", "max_path_px", "poisson_weighting", "weight_reference_std", "viewed_edge_weight", "weight_floor",
+               "pcg_tolerance", "pcg_max_iterations", "pcg_preconditioner"});
       auto& m = c.mosaic;
       m.width = s.integer("width", m.width, 8, 1 << 15);
       m.height = s.integer("height", m.width / 2, 4, 1 << 14);
@@ -110,6 +116,21 @@ MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_y
       m.seen_min_observations = s.integer("seen_min_observations", m.seen_min_observations, 1, 1000000);
       m.max_path_px = s.number("max_path_px", m.max_path_px, Range::kPositive, "mosaic px");
       m.seen_max_gradient_std = s.number("seen_max_gradient_std", m.seen_max_gradient_std, Range::kNonNegative, "log units/px");
+      const std::string weighting =
+          s.string("poisson_weighting", mapping::poisson_weighting_name(c.output_weighting), {"none", "information"});
+      c.output_weighting = weighting == "none" ? mapping::PoissonWeighting::kNone : mapping::PoissonWeighting::kInformation;
+      m.weight_reference_std = s.number("weight_reference_std", m.weight_reference_std, Range::kPositive, "log units/px");
+      m.viewed_edge_weight = s.number("viewed_edge_weight", m.viewed_edge_weight, Range::kUnit, "");
+      auto& wp = m.weighted_poisson;
+      wp.weight_floor = s.number("weight_floor", wp.weight_floor, Range::kUnit, "");
+      wp.tolerance = s.number("pcg_tolerance", wp.tolerance, Range::kUnit, "");
+      wp.max_iterations = s.integer("pcg_max_iterations", wp.max_iterations, 0, 1000000);
+      const std::string pre = s.string("pcg_preconditioner", mapping::poisson_preconditioner_name(wp.preconditioner),
+                                       {"none", "jacobi", "spectral", "scaled_spectral"});
+      wp.preconditioner = pre == "none"       ? mapping::PoissonPreconditioner::kNone
+                          : pre == "jacobi"   ? mapping::PoissonPreconditioner::kJacobi
+                          : pre == "spectral" ? mapping::PoissonPreconditioner::kSpectral
+                                              : mapping::PoissonPreconditioner::kScaledSpectral;
       std::string why;
       if (!m.Validate(&why)) s.fail("invalid mosaic settings: " + why, "consistent settings");
     }
@@ -275,7 +296,12 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
       << ", \"resamples\": " << st.resamples << ", \"linearized_batches\": " << st.linearized_batches << ", \"gyro_predictions\": " << st.gyro_predictions << "}"
       << ",\n  \"mapper\": {\"events_mapped\": " << ms.events_mapped << ", \"reconstructions\": " << ms.reconstructions
       << ", \"seen_pixels\": " << seen << ", \"seen_fraction\": " << num(ms.seen_fraction)
-      << "},\n  \"snapshots\": " << snapshots << "\n}\n";
+      << "},\n  \"poisson\": {\"weighting\": \"" << mapping::poisson_weighting_name(rec.weighting)
+      << "\", \"pcg_iterations\": " << rec.weighted_stats.iterations
+      << ", \"initial_relative_residual\": " << num(rec.weighted_stats.initial_relative_residual)
+      << ", \"relative_residual\": " << num(rec.weighted_stats.relative_residual)
+      << ", \"converged\": " << (rec.weighted_stats.converged ? "true" : "false") << "}"
+      << ",\n  \"snapshots\": " << snapshots << "\n}\n";
   }
   out << "events        " << events << " over " << num(duration_s) << " s, bootstrap "
       << (args.use_imu ? "gyro" : "contrast maximisation") << " " << num((bs.t_end_ns - t0) * 1e-9) << " s\n";
@@ -323,20 +349,23 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
       const SimulationConfig sc = load_simulation_config(scene.string());
       if (sc.panorama) {
         const Eigen::Matrix3d R_w_m = A;  // mosaic frame -> simulator world
-        const calib::Equirectangular tex_proj(sc.panorama->width(), sc.panorama->height());
-        mapping::ImageF ref(cfg.mosaic.height, cfg.mosaic.width);
-        for (int v = 0; v < cfg.mosaic.height; ++v)
-          for (int u = 0; u < cfg.mosaic.width; ++u) {
-            const Eigen::Vector2d t = tex_proj.project(R_w_m * proj.pixel_direction(u, v));
-            const double footprint = static_cast<double>(sc.panorama->height()) / cfg.mosaic.height;
-            ref(v, u) = std::log(std::max(1e-4f, sc.panorama->sample(t.x(), t.y(), footprint)));
-          }
+        const mapping::ImageF ref = mapping::panorama_log_reference(*sc.panorama, R_w_m, cfg.mosaic.width, cfg.mosaic.height);
         const mapping::ImageQuality q = mapping::compare_images(rec.log_intensity, ref, &rec.seen);
-        quality_json = ",\n  \"mosaic_quality\": {\"psnr_db\": " + num(q.psnr_db) + ", \"ssim\": " + num(q.ssim) +
-                       ", \"rmse_log\": " + num(q.rmse) + ", \"contrast_gain\": " + num(q.scale) + ", \"pixels\": " + std::to_string(q.pixels) +
-                       ", \"fit\": \"affine in log intensity over the seen pixels\"}";
+        auto quality = [&](const mapping::ImageQuality& x) {
+          return "{\"psnr_db\": " + num(x.psnr_db) + ", \"ssim\": " + num(x.ssim) + ", \"rmse_log\": " + num(x.rmse) +
+                 ", \"contrast_gain\": " + num(x.scale) + ", \"pixels\": " + std::to_string(x.pixels) +
+                 ", \"fit\": \"affine in log intensity over the seen pixels\"}";
+        };
+        quality_json = ",\n  \"mosaic_quality\": " + quality(q);
         out << "mosaic vs true panorama: PSNR " << num(q.psnr_db) << " dB, SSIM " << num(q.ssim) << " over "
-            << q.pixels << " seen pixels (affine log-intensity fit)\n";
+            << q.pixels << " seen pixels (affine log-intensity fit, " << mapping::poisson_weighting_name(rec.weighting)
+            << " Poisson weighting)\n";
+        if (rec.weighting == mapping::PoissonWeighting::kInformation) {
+          // The unweighted solve that seeded the weighted one: before / after on the same mosaic.
+          const mapping::ImageQuality u = mapping::compare_images(rec.unweighted_log_intensity, ref, &rec.seen);
+          quality_json += ",\n  \"mosaic_quality_unweighted\": " + quality(u);
+          out << "  unweighted Poisson: PSNR " << num(u.psnr_db) << " dB, SSIM " << num(u.ssim) << "\n";
+        }
       }
     }
     std::ofstream f((fs::path(args.out) / "eval.json").string());

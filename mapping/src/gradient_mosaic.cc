@@ -33,7 +33,19 @@ bool GradientMosaicOptions::Validate(std::string* why) const {
     return fail("seen_max_gradient_std must be >= 0 (0 = no covariance test)");
   std::string w;
   if (!poisson.Validate(&w)) return fail("poisson: " + w);
+  if (!(viewed_edge_weight >= 0.0 && viewed_edge_weight <= 1.0)) return fail("viewed_edge_weight must be in [0, 1]");
+  if (!(std::isfinite(weight_reference_std) && weight_reference_std >= min_gradient_std))
+    return fail("weight_reference_std must be >= min_gradient_std (log units/px)");
+  if (!weighted_poisson.Validate(&w)) return fail("weighted_poisson: " + w);
   return true;
+}
+
+const char* poisson_weighting_name(PoissonWeighting w) {
+  switch (w) {
+    case PoissonWeighting::kNone: return "none";
+    case PoissonWeighting::kInformation: return "information";
+  }
+  return "?";
 }
 
 namespace {
@@ -45,10 +57,12 @@ const GradientMosaicOptions& validated(const GradientMosaicOptions& o) {
 }  // namespace
 
 GradientMosaic::GradientMosaic(const GradientMosaicOptions& options)
-    : options_(validated(options)), solver_(options.width, options.height, options.poisson) {
+    : options_(validated(options)),
+      solver_(options.width, options.height, options.poisson),
+      weighted_solver_(options.width, options.height, options.weighted_poisson, options.poisson) {
   const size_t n = static_cast<size_t>(options_.width) * options_.height;
   const double p0 = options_.initial_gradient_std * options_.initial_gradient_std;
-  state_.assign(n, PixelState{0.0, 0.0, p0, 0.0, p0, 0});
+  state_.assign(n, PixelState{0.0, 0.0, p0, 0.0, p0, 0, 0});
   edge_gu_ = ImageD::Zero(options_.height, options_.width);
   edge_gv_ = ImageD::Zero(options_.height, options_.width);
   log_intensity_ = ImageD::Zero(options_.height, options_.width);
@@ -200,6 +214,25 @@ bool GradientMosaic::is_seen(const PixelState& p) const {
   return l_max <= options_.seen_max_gradient_std * options_.seen_max_gradient_std;
 }
 
+void GradientMosaic::mark_viewed(const Eigen::Vector2d& uv) {
+  if (!uv.allFinite()) return;
+  const int W = options_.width, H = options_.height;
+  const int i0 = static_cast<int>(std::floor(uv.x() - 0.5)) - 1, j0 = static_cast<int>(std::floor(uv.y() - 0.5)) - 1;
+  for (int dj = 0; dj < 4; ++dj) {
+    const int j = std::min(std::max(j0 + dj, 0), H - 1);
+    for (int di = 0; di < 4; ++di) {
+      const int i = (((i0 + di) % W) + W) % W;
+      state_[index(i, j)].viewed = 1;
+    }
+  }
+}
+
+MaskU8 GradientMosaic::viewed_mask() const {
+  MaskU8 m(options_.height, options_.width);
+  for (size_t k = 0; k < state_.size(); ++k) m.data()[k] = state_[k].viewed;
+  return m;
+}
+
 MaskU8 GradientMosaic::seen_mask() const {
   MaskU8 m(options_.height, options_.width);
   for (size_t k = 0; k < state_.size(); ++k) m.data()[k] = is_seen(state_[k]) ? 1 : 0;
@@ -237,12 +270,47 @@ void GradientMosaic::update_edges(int x0, int y0, int w, int h) {
   }
 }
 
-MosaicReconstruction GradientMosaic::reconstruct(ReconstructMode mode) {
+void GradientMosaic::edge_weights(ImageD* wx, ImageD* wy) const {
+  const int W = options_.width, H = options_.height;
+  const bool periodic = options_.poisson.boundary == PoissonBoundary::kPeriodicU;
+  const double ref = options_.weight_reference_std * options_.weight_reference_std;
+  const double prior = options_.initial_gradient_std * options_.initial_gradient_std;
+  auto weight = [&](bool s0, double p0, bool s1, double p1, bool viewed) {
+    if (!s0 && !s1 && viewed) return options_.viewed_edge_weight;
+    double var = prior;
+    if (s0 && s1) {
+      var = 0.25 * (p0 + p1);
+    } else if (s0) {
+      var = p0;
+    } else if (s1) {
+      var = p1;
+    }
+    return std::min(1.0, ref / var);
+  };
+  wx->setZero(H, W);
+  wy->setZero(H, W);
+  for (int j = 0; j < H; ++j) {
+    for (int i = 0; i < W; ++i) {
+      const PixelState& p = state_[index(i, j)];
+      const bool s = is_seen(p);
+      if (i + 1 < W || periodic) {
+        const PixelState& r = state_[index((i + 1) % W, j)];
+        (*wx)(j, i) = weight(s, p.puu, is_seen(r), r.puu, p.viewed && r.viewed);
+      }
+      if (j + 1 < H) {
+        const PixelState& d = state_[index(i, j + 1)];
+        (*wy)(j, i) = weight(s, p.pvv, is_seen(d), d.pvv, p.viewed && d.viewed);
+      }
+    }
+  }
+}
+
+MosaicReconstruction GradientMosaic::reconstruct(ReconstructMode mode, PoissonWeighting weighting) {
   const int W = options_.width, H = options_.height;
   const bool periodic = options_.poisson.boundary == PoissonBoundary::kPeriodicU;
   MosaicReconstruction out;
   const bool dirty = dirty_x1_ >= dirty_x0_;
-  bool full = mode == ReconstructMode::kFull || !solved_once_;
+  bool full = mode == ReconstructMode::kFull || !solved_once_ || weighting == PoissonWeighting::kInformation;
   PixelRect rect;
   if (!full && dirty) {
     // Changed pixels' edges touch the box grown by one pixel on every side.
@@ -258,6 +326,13 @@ MosaicReconstruction GradientMosaic::reconstruct(ReconstructMode mode) {
   if (full) {
     update_edges(0, 0, W, H);
     solver_.solve(edge_gu_, edge_gv_, &log_intensity_);
+    if (weighting == PoissonWeighting::kInformation) {
+      out.unweighted_log_intensity = log_intensity_.cast<float>();
+      ImageD wx, wy;
+      edge_weights(&wx, &wy);
+      out.weighted_stats = weighted_solver_.solve(edge_gu_, edge_gv_, wx, wy, &log_intensity_, &log_intensity_);
+    }
+    out.weighting = weighting;
     solved_once_ = true;
     out.full_solve = true;
     out.region = PixelRect{0, 0, W, H};

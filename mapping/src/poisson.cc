@@ -107,12 +107,11 @@ Eigen::MatrixXd separable_solve(const AxisBasis& by, const AxisBasis& bx, const 
   return Qy * X * Qx.transpose();
 }
 
+// Solves lap(L) = div (H x W, both even) with the (0,0) mode set to zero. div is overwritten.
 template <typename T>
-void spectral_solve(const Image<T>& gx, const Image<T>& gy, const Image<T>* weight, bool periodic, Image<T>* L) {
-  const int H = static_cast<int>(gx.rows()), W = static_cast<int>(gx.cols());
+void spectral_inverse(cv::Mat& div, bool periodic, Image<T>* L) {
+  const int H = div.rows, W = div.cols;
   constexpr int kType = std::is_same<T, float>::value ? CV_32F : CV_64F;
-  cv::Mat div(H, W, kType);
-  divergence_into<T>(gx, gy, weight, periodic, div.ptr<T>());
 
   // 1-D eigenvalues of the Laplacian along each axis.
   std::vector<double> lx(W), ly(H);
@@ -166,15 +165,32 @@ void spectral_solve(const Image<T>& gx, const Image<T>& gy, const Image<T>* weig
 }
 
 template <typename T>
-void dense_solve(const Image<T>& gx, const Image<T>& gy, const Image<T>* weight, bool periodic, Image<T>* L) {
+void spectral_solve(const Image<T>& gx, const Image<T>& gy, const Image<T>* weight, bool periodic, Image<T>* L) {
   const int H = static_cast<int>(gx.rows()), W = static_cast<int>(gx.cols());
-  Image<T> div(H, W);
-  divergence_into<T>(gx, gy, weight, periodic, div.data());
+  constexpr int kType = std::is_same<T, float>::value ? CV_32F : CV_64F;
+  cv::Mat div(H, W, kType);
+  divergence_into<T>(gx, gy, weight, periodic, div.ptr<T>());
+  spectral_inverse<T>(div, periodic, L);
+}
+
+// Solves lap(L) = div in the dense separable eigenbases (any size), constant mode zero.
+template <typename T>
+void dense_inverse(const Image<T>& div, bool periodic, Image<T>* L) {
+  const int H = static_cast<int>(div.rows()), W = static_cast<int>(div.cols());
   const Eigen::MatrixXd X =
       separable_solve(axis_basis(axis_operator(H, false, 0, H)), axis_basis(axis_operator(W, periodic, 0, W)),
                       div.template cast<double>());
   *L = X.cast<T>();
 }
+
+template <typename T>
+void dense_solve(const Image<T>& gx, const Image<T>& gy, const Image<T>* weight, bool periodic, Image<T>* L) {
+  const int H = static_cast<int>(gx.rows()), W = static_cast<int>(gx.cols());
+  Image<T> div(H, W);
+  divergence_into<T>(gx, gy, weight, periodic, div.data());
+  dense_inverse<T>(div, periodic, L);
+}
+
 
 template <typename T>
 void full_solve(int width, int height, const PoissonOptions& o, const Image<T>& gx, const Image<T>& gy, Image<T>* L,
@@ -271,6 +287,22 @@ void PoissonSolver::solve(const ImageD& gx, const ImageD& gy, ImageD* L, const I
 
 void PoissonSolver::solve(const ImageF& gx, const ImageF& gy, ImageF* L, const ImageF* weight) const {
   full_solve<float>(width_, height_, options_, gx, gy, L, weight);
+}
+
+void PoissonSolver::solve_laplacian(const ImageD& f, ImageD* L) const {
+  if (L == nullptr) throw std::invalid_argument("Poisson solver: null output");
+  check_size("f", f.rows(), f.cols(), width_, height_);
+  const bool periodic = options_.boundary == PoissonBoundary::kPeriodicU;
+  if (width_ % 2 == 0 && height_ % 2 == 0) {
+    cv::Mat div(height_, width_, CV_64F);
+    // Remove the constant component (a consistent right-hand side has none; lap cannot produce it).
+    const double mean = f.mean();
+    Eigen::Map<ImageD>(div.ptr<double>(), height_, width_) = f.array() - mean;
+    spectral_inverse<double>(div, periodic, L);
+  } else {
+    const ImageD g = f.array() - f.mean();
+    dense_inverse<double>(g, periodic, L);
+  }
 }
 
 void PoissonSolver::solve_region(const ImageD& gx, const ImageD& gy, const PixelRect& rect, ImageD* L,

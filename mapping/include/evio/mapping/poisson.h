@@ -76,6 +76,12 @@ class PoissonSolver {
   void solve(const ImageD& gx, const ImageD& gy, ImageD* L, const ImageD* weight = nullptr) const;
   void solve(const ImageF& gx, const ImageF& gy, ImageF* L, const ImageF* weight = nullptr) const;
 
+  // The inverse Laplacian: L with lap(L) = f - mean(f) and zero mean (f: H x W, any units; the
+  // mean of f is removed first, as no L can produce it). Same transforms as solve(); the weighted
+  // solver (weighted_poisson.h) uses it as its preconditioner. Double precision only. Throws
+  // std::invalid_argument on a size mismatch or null output.
+  void solve_laplacian(const ImageD& f, ImageD* L) const;
+
   // Incremental solve on a region: re-solves the pixels of rect (after clipping its rows to
   // [0, H)) with every pixel outside it held at its current value in *L (Dirichlet data), edges
   // leaving the image keep their Neumann/periodic treatment. The result is the exact minimiser of
