@@ -105,7 +105,8 @@ std::string config_yaml(const VioConfig& c) {
     << ", clip_percentile: " << num(fr.clip_percentile) << "}\n";
   y << tracker_yaml("tracker", c.tracker);
   y << tracker_yaml("aps_tracker", c.aps_tracker);
-  y << "aps: {pixel_sigma: " << num(c.aps_pixel_sigma_px) << ", max_gap_ms: " << num(ns_to_ms(c.aps_max_gap_ns)) << "}\n";
+  y << "aps: {pixel_sigma: " << num(c.aps_pixel_sigma_px) << ", event_pixel_sigma: " << num(c.aps_event_pixel_sigma_px)
+    << ", max_gap_ms: " << num(ns_to_ms(c.aps_max_gap_ns)) << "}\n";
   y << "efast: {filter_sae: " << (c.efast.filter_sae ? "true" : "false")
     << ", filter_window_ms: " << num(ns_to_ms(c.efast.filter_window_ns)) << "}\n";
   const auto& t = c.corner_tracker;
@@ -171,8 +172,9 @@ VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
       if (top.has("aps_tracker")) parse_tracker(top.child("aps_tracker", false, "a map"), &c.aps_tracker);
       if (top.has("aps")) {
         const Section s = top.child("aps", false, "a map");
-        s.allow({"pixel_sigma", "max_gap_ms"});
+        s.allow({"pixel_sigma", "event_pixel_sigma", "max_gap_ms"});
         c.aps_pixel_sigma_px = s.number("pixel_sigma", c.aps_pixel_sigma_px, Range::kPositive, "px");
+        c.aps_event_pixel_sigma_px = s.number("event_pixel_sigma", c.aps_event_pixel_sigma_px, Range::kPositive, "px");
         c.aps_max_gap_ns = ms_to_ns(s.number("max_gap_ms", ns_to_ms(c.aps_max_gap_ns), Range::kPositive, "ms"));
       }
       if (top.has("filters")) {

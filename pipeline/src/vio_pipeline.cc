@@ -49,6 +49,8 @@ bool VioPipelineOptions::Validate(std::string* why) const {
     return fail("inputs must be events, aps or events+aps");
   if (!(aps_pixel_sigma_px > 0) || !std::isfinite(aps_pixel_sigma_px)) return fail("aps_pixel_sigma_px must be finite and > 0");
   if (aps_max_gap_ns <= 0) return fail("aps_max_gap_ns must be > 0");
+  if (!(aps_event_pixel_sigma_px > 0) || !std::isfinite(aps_event_pixel_sigma_px))
+    return fail("aps_event_pixel_sigma_px must be finite and > 0");
   if (!efast.Validate(&w)) return fail("efast: " + w);
   if (!corner_tracker.Validate(&w)) return fail("corner_tracker: " + w);
   if (!window.Validate(&w)) return fail("window: " + w);
@@ -386,6 +388,7 @@ struct VioPipeline::Impl {
       emit(std::move(e));
       return;
     }
+    for (FeatureObservation& o : e.observations) o.sigma_px = opt.aps_event_pixel_sigma_px;
     while (!aps_ready.empty() && aps_ready.front().t_ns <= e.t_ns) {
       FeatureObservations a = std::move(aps_ready.front());
       aps_ready.pop_front();
