@@ -469,9 +469,11 @@ int run_vio(const VioArgs& args, std::ostream& out) {
   for (size_t i = 0; i < st.motion_model_tests.size(); ++i) {
     const auto& m = st.motion_model_tests[i];
     j << (i ? ",\n    " : "\n    ") << "{\"t\": " << format_seconds(m.t_ns) << ", \"tracks\": " << m.tracks
+      << ", \"baseline_s\": " << num(m.baseline_s)
       << ", \"gric_static\": " << num(m.gric_static) << ", \"gric_rotation\": " << num(m.gric_rotation)
       << ", \"gric_general\": " << num(m.gric_general) << ", \"imu_chi2\": " << num(m.imu_chi2) << ", \"best\": \""
-      << backend::two_view_model_name(m.best) << "\", \"rotation_only\": " << (m.rotation_only ? "true" : "false") << "}";
+      << backend::two_view_model_name(m.best) << "\", \"imu_veto\": " << (m.imu_veto ? "true" : "false")
+      << ", \"rotation_only\": " << (m.rotation_only ? "true" : "false") << "}";
   }
   j << "],\n  \"tracking_lost_segments\": [";
   for (size_t i = 0; i < r.tracking_lost.size(); ++i) {

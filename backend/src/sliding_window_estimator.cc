@@ -62,6 +62,10 @@ bool SlidingWindowOptions::Validate(std::string* why) const {
     return fail("rotation_only_gric_margin must be finite and >= 0 (GRIC units)");
   if (rotation_only_min_keyframes < 1) return fail("rotation_only_min_keyframes must be >= 1 keyframe");
   if (model_selection_min_tracks < 6) return fail("model_selection_min_tracks must be >= 6 tracks");
+  if (!(model_selection_imu_veto_chi2_per_dof >= 0) || !std::isfinite(model_selection_imu_veto_chi2_per_dof))
+    return fail("model_selection_imu_veto_chi2_per_dof must be finite and >= 0");
+  if (!(model_selection_min_interval_s >= 0) || !std::isfinite(model_selection_min_interval_s))
+    return fail("model_selection_min_interval_s must be finite and >= 0 s");
   if (!(model_selection_accel_sigma_mps2 >= 0) || !std::isfinite(model_selection_accel_sigma_mps2))
     return fail("model_selection_accel_sigma_mps2 must be finite and >= 0 m/s^2");
   if (!(model_selection_velocity_sigma_mps >= 0) || !std::isfinite(model_selection_velocity_sigma_mps))
@@ -169,32 +173,59 @@ bool SlidingWindowEstimator::choose_rotation_only(const Keyframe& prev, const Fe
   test.t_ns = frame.t_ns;
   const bool enabled = options_.rotation_only_model && options_.rotation_only_parallax_px != 0;
   std::vector<Eigen::Vector3d> b0, b1;
-  for (const FeatureObservation& o : frame.observations) {
-    const auto it = prev.obs.find(o.track_id);
-    if (it == prev.obs.end() || closed_tracks_.count(o.track_id)) continue;
-    b0.push_back(it->second);
-    b1.push_back(o.bearing_c);
+  const auto shared = [&](const Keyframe& k) {
+    b0.clear();
+    b1.clear();
+    for (const FeatureObservation& o : frame.observations) {
+      const auto it = k.obs.find(o.track_id);
+      if (it == k.obs.end() || closed_tracks_.count(o.track_id)) continue;
+      b0.push_back(it->second);
+      b1.push_back(o.bearing_c);
+    }
+    return static_cast<int>(b0.size());
+  };
+  // The reference view: the newest window keyframe at least model_selection_min_interval_s before
+  // the frame that still shares model_selection_min_tracks tracks with it, else the previous
+  // keyframe. Keyframes made by track losses can be 10 ms apart (boxes_6dof): over such a
+  // baseline a translation shows no parallax and R wins the test.
+  const Keyframe* ref = &prev;
+  std::optional<ImuPreintegration> ref_pre;
+  if (enabled && 1e-9 * static_cast<double>(frame.t_ns - prev.t_ns) < options_.model_selection_min_interval_s) {
+    for (auto it = window_.rbegin(); it != window_.rend(); ++it) {
+      const Keyframe& k = **it;
+      if (1e-9 * static_cast<double>(frame.t_ns - k.t_ns) < options_.model_selection_min_interval_s) continue;
+      if (shared(k) < options_.model_selection_min_tracks) break;
+      try {
+        ref_pre = ImuPreintegration::between(imu_, k.t_ns, frame.t_ns, predicted.bias_gyro, predicted.bias_accel, noise_);
+        ref = &k;
+      } catch (const std::exception&) {
+        ref_pre.reset();
+      }
+      break;
+    }
   }
-  test.tracks = static_cast<int>(b0.size());
+  test.tracks = shared(*ref);
+  test.baseline_s = 1e-9 * static_cast<double>(frame.t_ns - ref->t_ns);
+  const ImuPreintegration& ref_interval = ref_pre ? *ref_pre : pre;
   if (enabled && test.tracks >= options_.model_selection_min_tracks) {
     // Predicted relative camera motion T_c1_c0 = T_c_b T_b1_w T_w_b0 T_b_c.
-    const calib::SE3 T_w_b0(quat_of(prev.pose), pos_of(prev.pose));
+    const calib::SE3 T_w_b0(quat_of(ref->pose), pos_of(ref->pose));
     const calib::SE3 T_c1_c0 = camera_.T_c_b * predicted.T_w_b.inverse() * T_w_b0 * camera_.T_c_b.inverse();
     const Eigen::Matrix3d R_prior = T_c1_c0.rotation.toRotationMatrix();
     // IMU datum: the change of the camera centre's velocity over the interval, zero under S and R.
-    const bool use_imu = options_.model_selection_accel_sigma_mps2 > 0 && pre.dt_s() > 0;
+    const bool use_imu = options_.model_selection_accel_sigma_mps2 > 0 && ref_interval.dt_s() > 0;
     double chi2 = 0;
     int dof = 0;
     if (use_imu) {
-      const VioState ps = state_of(prev);
-      const Eigen::Matrix3d R0 = quat_of(prev.pose).toRotationMatrix();
+      const VioState ps = state_of(*ref);
+      const Eigen::Matrix3d R0 = quat_of(ref->pose).toRotationMatrix();
       const Eigen::Matrix3d R1 = predicted.T_w_b.rotation.toRotationMatrix();
-      const double dt = pre.dt_s();
+      const double dt = ref_interval.dt_s();
       const Eigen::Vector3d p_b_c = -(camera_.T_c_b.rotation.conjugate() * camera_.T_c_b.translation);  // camera centre in b
-      const Eigen::Vector3d w0 = ImuPreintegration::interpolate(imu_, prev.t_ns).gyro - ps.bias_gyro;
+      const Eigen::Vector3d w0 = ImuPreintegration::interpolate(imu_, ref->t_ns).gyro - ps.bias_gyro;
       const Eigen::Vector3d w1 = ImuPreintegration::interpolate(imu_, frame.t_ns).gyro - ps.bias_gyro;
-      const Eigen::Vector3d dv_c = R0 * pre.delta_v() + options_.gravity_w * dt + R1 * w1.cross(p_b_c) - R0 * w0.cross(p_b_c);
-      const Eigen::Matrix3d cov = R0 * pre.covariance().block<3, 3>(3, 3) * R0.transpose() +
+      const Eigen::Vector3d dv_c = R0 * ref_interval.delta_v() + options_.gravity_w * dt + R1 * w1.cross(p_b_c) - R0 * w0.cross(p_b_c);
+      const Eigen::Matrix3d cov = R0 * ref_interval.covariance().block<3, 3>(3, 3) * R0.transpose() +
                                   std::pow(options_.model_selection_accel_sigma_mps2 * dt, 2) * Eigen::Matrix3d::Identity();
       chi2 = dv_c.dot(cov.ldlt().solve(dv_c));
       dof = 3;
@@ -202,9 +233,9 @@ bool SlidingWindowEstimator::choose_rotation_only(const Keyframe& prev, const Fe
       int triangulated = 0;
       for (const auto& [track, lm] : landmarks_) triangulated += lm.triangulated ? 1 : 0;
       if (options_.model_selection_velocity_sigma_mps > 0 && triangulated >= options_.model_selection_min_tracks) {
-        const Eigen::Vector3d dp_c = predicted.T_w_b.translation + R1 * p_b_c - (pos_of(prev.pose) + R0 * p_b_c);
+        const Eigen::Vector3d dp_c = predicted.T_w_b.translation + R1 * p_b_c - (pos_of(ref->pose) + R0 * p_b_c);
         const Eigen::Matrix3d cov_p =
-            R0 * pre.covariance().block<3, 3>(6, 6) * R0.transpose() +
+            R0 * ref_interval.covariance().block<3, 3>(6, 6) * R0.transpose() +
             (std::pow(options_.model_selection_velocity_sigma_mps * dt, 2) +
              std::pow(0.5 * options_.model_selection_accel_sigma_mps2 * dt * dt, 2)) * Eigen::Matrix3d::Identity();
         chi2 += dp_c.dot(cov_p.ldlt().solve(dp_c));
@@ -217,6 +248,13 @@ bool SlidingWindowEstimator::choose_rotation_only(const Keyframe& prev, const Fe
     test.gric_general = g.gric_general;
     test.imu_chi2 = g.imu_chi2;
     test.best = g.best;
+    // IMU veto: a camera centre whose velocity change (or displacement) the IMU rejects cannot
+    // be rotating in place, whatever the image test says.
+    if (test.best == TwoViewModel::kRotation && g.imu_dof > 0 && options_.model_selection_imu_veto_chi2_per_dof > 0 &&
+        g.imu_chi2 > options_.model_selection_imu_veto_chi2_per_dof * g.imu_dof) {
+      test.best = TwoViewModel::kGeneral;
+      test.imu_veto = true;
+    }
   }
   if (test.best == TwoViewModel::kNone) {
     rotation_only_active_ = false;

@@ -91,6 +91,16 @@ struct SlidingWindowOptions {
   // rotational for a keyframe or two before its parallax shows.
   int rotation_only_min_keyframes = 3;
   int model_selection_min_tracks = 10;     // fewer shared tracks: no test, the 6-DoF model (tracks, >= 6)
+  // The test's reference view is at least this much older than the new keyframe (the newest
+  // window keyframe that is and still shares model_selection_min_tracks tracks; else the previous
+  // one): keyframes made by track losses can be 10 ms apart (boxes_6dof), too little baseline for
+  // a translation to show (s, >= 0).
+  double model_selection_min_interval_s = 0.05;
+  // IMU veto: R cannot win when the IMU datum's chi2 exceeds this times its degrees of freedom
+  // (5.42 x 3 = 16.3: p = 0.001 for the velocity change alone; with the displacement, 6 dof, p ~
+  // 1e-5). On boxes_6dof at 0.1-0.15 m/s the image test chose R with the IMU at chi2 35-48 (3 dof).
+  // 0 disables the veto.
+  double model_selection_imu_veto_chi2_per_dof = 5.42;
   // IMU datum of the test: 1-sigma of the camera centre's mean acceleration over the interval that
   // the accelerometer noise density does not explain (accelerometer bias and gravity-direction
   // errors of the estimate, lever-arm errors), m/s^2, >= 0; 0: the IMU is not used in the test.
@@ -140,10 +150,12 @@ struct SlidingWindowStats {
   // Per keyframe after the first: the model-selection test and the decision.
   struct MotionModelTest {
     int64_t t_ns = 0;
-    int tracks = 0;                 // shared tracks with the previous keyframe (n of the GRIC)
+    int tracks = 0;                 // shared tracks with the reference keyframe (n of the GRIC)
+    double baseline_s = 0;          // time from the reference keyframe (s)
     double gric_static = 0, gric_rotation = 0, gric_general = 0;  // GRIC units (-2 log likelihood)
     double imu_chi2 = 0;            // chi2 of "the camera centre does not accelerate (3 dof) / move (3 more)"
-    TwoViewModel best = TwoViewModel::kNone;  // lowest GRIC (kNone: too few tracks, not tested)
+    TwoViewModel best = TwoViewModel::kNone;  // lowest GRIC (kNone: too few tracks, not tested); kGeneral when vetoed
+    bool imu_veto = false;          // R had the lowest GRIC but the IMU rejected a static centre
     int run = 0;                    // consecutive keyframes R has won by the margin
     bool rotation_only = false;     // the decision after hysteresis
   };
