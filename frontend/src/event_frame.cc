@@ -21,6 +21,7 @@ bool EventFrameOptions::Validate(std::string* why) const {
   if (min_events < 1 || min_events > events_per_frame) return fail("min_events must be in 1..events_per_frame");
   if (use_depth && !motion_compensation) return fail("use_depth needs motion_compensation");
   if (!(clip_percentile > 0.0 && clip_percentile <= 1.0)) return fail("clip_percentile must be in (0, 1]");
+  if (!(clip_count >= 0.0) || !std::isfinite(clip_count)) return fail("clip_count must be finite and >= 0");
   if (knot_spacing_ns <= 0) return fail("knot_spacing_ns must be > 0 ns");
   if (max_imu_extrapolation_ns < 0) return fail("max_imu_extrapolation_ns must be >= 0 ns");
   if (max_imu_gap_ns <= 0) return fail("max_imu_gap_ns must be > 0 ns");
@@ -218,14 +219,16 @@ EventFrame EventFrameBuilder::build_frame(EventSpan events, int64_t t_ref_ns) {
   const size_t n = static_cast<size_t>(width_) * height_;
   uint8_t* img = f.image.ptr<uint8_t>();
   if (o_.normalize) {
+    float c = static_cast<float>(o_.clip_count);
     // Non-zero magnitudes, collected without branches, then the exact quantile by nth_element.
-    scratch_.resize(n);
     size_t m = 0;
-    for (size_t k = 0; k < n; ++k) {
-      scratch_[m] = std::abs(a[k]);
-      m += a[k] != 0.0f;
+    if (!(o_.clip_count > 0)) {
+      scratch_.resize(n);
+      for (size_t k = 0; k < n; ++k) {
+        scratch_[m] = std::abs(a[k]);
+        m += a[k] != 0.0f;
+      }
     }
-    float c = 0.0f;
     if (m > 0) {
       const size_t q = static_cast<size_t>(std::floor(o_.clip_percentile * static_cast<double>(m - 1)));
       std::nth_element(scratch_.begin(), scratch_.begin() + static_cast<std::ptrdiff_t>(q),

@@ -77,6 +77,38 @@ Eigen::Vector2d project_k(const CameraCalibration& c, const Eigen::Vector3d& p) 
   return Eigen::Vector2d(in.fx * p.x() / p.z() + in.cx, in.fy * p.y() / p.z() + in.cy);
 }
 
+// Fixed clip: image = round(255 min(a, c) / c) with c = clip_count, whatever else the frame holds
+// (the percentile clip would rescale when a bright pixel is added).
+TEST(EventFrame, FixedClipCountDoesNotDependOnTheFramesContent) {
+  const CameraCalibration cam = undistorted_camera(0, Eigen::Matrix3d::Identity());
+  EventFrameOptions o;
+  o.motion_compensation = false;
+  o.clip_count = 4.0;
+  o.min_events = 1;
+  EventFrameBuilder b(cam, o);
+  auto events_at = [](std::vector<std::pair<int, int>> counts) {  // (pixel x, count) on row 50
+    std::vector<Event> ev;
+    int64_t t = 1000;
+    for (const auto& [x, n] : counts)
+      for (int k = 0; k < n; ++k) ev.push_back(Event{t++, static_cast<uint16_t>(x), 50, 1});
+    return ev;
+  };
+  const std::vector<Event> a = events_at({{10, 1}, {20, 2}, {30, 8}});
+  const EventFrame f = b.build_frame(EventSpan(a.data(), a.size()), a.back().t_ns);
+  EXPECT_NEAR(f.image.at<uint8_t>(50, 10), 64, 1);   // 255 / 4 (bilinear splat: within 1)
+  EXPECT_NEAR(f.image.at<uint8_t>(50, 20), 128, 1);  // 255 * 2 / 4
+  EXPECT_EQ(f.image.at<uint8_t>(50, 30), 255);       // clipped
+  const std::vector<Event> c = events_at({{10, 1}, {20, 2}, {30, 40}});
+  const EventFrame g = b.build_frame(EventSpan(c.data(), c.size()), c.back().t_ns);
+  EXPECT_EQ(g.image.at<uint8_t>(50, 10), f.image.at<uint8_t>(50, 10));
+  EXPECT_EQ(g.image.at<uint8_t>(50, 20), f.image.at<uint8_t>(50, 20));
+  o.clip_count = 0.0;  // the percentile clip (here the maximum): pixel 20 scales with the brightest pixel
+  o.clip_percentile = 1.0;
+  EventFrameBuilder p(cam, o);
+  EXPECT_NE(p.build_frame(EventSpan(c.data(), c.size()), c.back().t_ns).image.at<uint8_t>(50, 20),
+            p.build_frame(EventSpan(a.data(), a.size()), a.back().t_ns).image.at<uint8_t>(50, 20));
+}
+
 TEST(EventFrame, RotationWarpMatchesClosedForm) {
   const int64_t shift = 3'000'000;
   const Eigen::Matrix3d R_c_b = camera_from_body_rotation();
@@ -330,6 +362,7 @@ TEST(EventFrame, OptionsValidation) {
   EXPECT_FALSE(bad([](EventFrameOptions& x) { x.clip_percentile = 0.0; }));
   EXPECT_FALSE(bad([](EventFrameOptions& x) { x.clip_percentile = 1.5; }));
   EXPECT_FALSE(bad([](EventFrameOptions& x) { x.clip_percentile = std::nan(""); }));
+  EXPECT_FALSE(bad([](EventFrameOptions& x) { x.clip_count = -1.0; }));
   EXPECT_FALSE(bad([](EventFrameOptions& x) { x.knot_spacing_ns = 0; }));
   EXPECT_FALSE(bad([](EventFrameOptions& x) { x.max_imu_extrapolation_ns = -1; }));
   EXPECT_FALSE(bad([](EventFrameOptions& x) { x.max_imu_gap_ns = 0; }));

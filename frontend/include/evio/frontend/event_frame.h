@@ -52,6 +52,9 @@ struct EventFrameOptions {
   // false: image = saturate_cast<uint8>(round(a)) (counts) or 128 + a (polarity), no scaling.
   bool normalize = true;
   double clip_percentile = 0.99;  // fraction in (0, 1]; 1 = the maximum
+  // Fixed clip instead of the percentile: c = clip_count (events per pixel, accumulator units),
+  // the same for every frame whatever its content (0: the clip_percentile quantile).
+  double clip_count = 0.0;
   // Rotation knots: the gyro is integrated (bias removed, midpoint rule on the linearly
   // interpolated rate) into camera-frame rotation matrices every knot_spacing_ns, ns, > 0
   // (default 0.5 ms); each event's rotation is the linear blend of the two neighbouring knot
