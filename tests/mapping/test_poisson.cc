@@ -9,8 +9,12 @@
 #include <gtest/gtest.h>
 
 #include "evio/mapping/poisson.h"
+#include "poisson_test_fields.h"
 
 namespace {
+
+using evio::mapping::testing::smooth_field;
+const auto opts = evio::mapping::testing::boundary_options;
 
 using evio::mapping::ImageD;
 using evio::mapping::ImageF;
@@ -18,28 +22,6 @@ using evio::mapping::PixelRect;
 using evio::mapping::PoissonBoundary;
 using evio::mapping::PoissonOptions;
 using evio::mapping::PoissonSolver;
-
-PoissonOptions opts(PoissonBoundary b) {
-  PoissonOptions o;
-  o.boundary = b;
-  return o;
-}
-
-// Sum of random sinusoids (not periodic in either direction unless periodic_u: then integer
-// numbers of periods along u).
-ImageD smooth_field(int W, int H, unsigned seed, bool periodic_u) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> U(0.0, 1.0);
-  ImageD L = ImageD::Zero(H, W);
-  for (int k = 0; k < 8; ++k) {
-    const double fu = periodic_u ? 2.0 * M_PI * std::floor(1 + 6 * U(rng)) / W : 2.0 * M_PI * (0.3 + 5 * U(rng)) / W;
-    const double fv = 2.0 * M_PI * (0.3 + 5 * U(rng)) / H;
-    const double a = 0.2 + U(rng), ph = 2 * M_PI * U(rng);
-    for (int j = 0; j < H; ++j)
-      for (int i = 0; i < W; ++i) L(j, i) += a * std::sin(fu * i + fv * j + ph);
-  }
-  return L;
-}
 
 double max_abs_diff_up_to_offset(const ImageD& a, const ImageD& b) {
   const ImageD d = a - b;

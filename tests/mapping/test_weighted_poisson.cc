@@ -12,9 +12,13 @@
 #include <gtest/gtest.h>
 
 #include "evio/mapping/poisson.h"
+#include "poisson_test_fields.h"
 #include "evio/mapping/weighted_poisson.h"
 
 namespace {
+
+using evio::mapping::testing::smooth_field;
+const auto boundary = evio::mapping::testing::boundary_options;
 
 using evio::mapping::forward_gradient;
 using evio::mapping::ImageD;
@@ -25,27 +29,6 @@ using evio::mapping::PoissonSolver;
 using evio::mapping::WeightedPoissonOptions;
 using evio::mapping::WeightedPoissonSolver;
 using evio::mapping::WeightedPoissonStats;
-
-PoissonOptions boundary(PoissonBoundary b) {
-  PoissonOptions o;
-  o.boundary = b;
-  return o;
-}
-
-// Sum of random sinusoids; integer periods along u when periodic_u.
-ImageD smooth_field(int W, int H, unsigned seed, bool periodic_u) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> U(0.0, 1.0);
-  ImageD L = ImageD::Zero(H, W);
-  for (int k = 0; k < 8; ++k) {
-    const double fu = periodic_u ? 2.0 * M_PI * std::floor(1 + 6 * U(rng)) / W : 2.0 * M_PI * (0.3 + 5 * U(rng)) / W;
-    const double fv = 2.0 * M_PI * (0.3 + 5 * U(rng)) / H;
-    const double a = 0.2 + U(rng), ph = 2 * M_PI * U(rng);
-    for (int j = 0; j < H; ++j)
-      for (int i = 0; i < W; ++i) L(j, i) += a * std::sin(fu * i + fv * j + ph);
-  }
-  return L;
-}
 
 // RMS of a - b over rows [j0, j1) after removing the mean difference there.
 double rms_up_to_offset(const ImageD& a, const ImageD& b, int j0, int j1) {
