@@ -20,7 +20,9 @@ struct FeatureObservation {
   double sigma_px = 0.0;
 };
 
-// The observations of one frame (camera clock, ns).
+// The observations of one frame. t_ns is on the body (IMU) clock, ns: the front-ends stamp their
+// camera-clock frames with t_cam + camera.time_shift_ns (t_imu = t_cam + shift) before the
+// estimator sees them.
 struct FeatureObservations {
   int64_t t_ns = 0;
   int64_t frame_id = 0;
