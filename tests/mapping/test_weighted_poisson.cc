@@ -12,8 +12,8 @@
 #include <gtest/gtest.h>
 
 #include "evio/mapping/poisson.h"
-#include "poisson_test_fields.h"
 #include "evio/mapping/weighted_poisson.h"
+#include "poisson_test_fields.h"
 
 namespace {
 
