@@ -59,7 +59,8 @@ std::string tracker_yaml(const char* key, const frontend::FeatureTrackerOptions&
     << ", klt_pyramid_levels: " << tk.klt_pyramid_levels << ", forward_backward_max_px: " << num(tk.forward_backward_max_px)
     << ", template_max_age_frames: " << tk.template_max_age_frames
     << ", ransac: " << frontend::ransac_model_name(tk.ransac)
-    << ", ransac_threshold_px: " << num(tk.ransac_threshold_px) << ", min_tracks_before_detection: " << tk.min_tracks_before_detection << "}\n";
+    << ", ransac_threshold_px: " << num(tk.ransac_threshold_px) << ", min_tracks_before_detection: " << tk.min_tracks_before_detection
+    << ", seed: " << tk.seed << "}\n";
   return y.str();
 }
 
@@ -67,7 +68,7 @@ std::string tracker_yaml(const char* key, const frontend::FeatureTrackerOptions&
 void parse_tracker(const Section& s, frontend::FeatureTrackerOptions* t) {
   s.allow({"grid_cols", "grid_rows", "max_features", "max_per_cell", "fast_threshold", "min_distance_px",
            "klt_window_px", "klt_pyramid_levels", "forward_backward_max_px", "ransac", "ransac_threshold_px",
-           "min_tracks_before_detection", "template_max_age_frames"});
+           "min_tracks_before_detection", "template_max_age_frames", "seed"});
   t->grid_cols = s.integer("grid_cols", t->grid_cols, 1, 100);
   t->grid_rows = s.integer("grid_rows", t->grid_rows, 1, 100);
   t->max_features = s.integer("max_features", t->max_features, 1, 100000);
@@ -82,6 +83,7 @@ void parse_tracker(const Section& s, frontend::FeatureTrackerOptions* t) {
   t->ransac = r == "two_point" ? frontend::RansacModel::kTwoPoint : r == "five_point" ? frontend::RansacModel::kFivePoint : frontend::RansacModel::kNone;
   t->ransac_threshold_px = s.number("ransac_threshold_px", t->ransac_threshold_px, Range::kPositive, "px");
   t->min_tracks_before_detection = s.integer("min_tracks_before_detection", t->min_tracks_before_detection, 0, 100000);
+  t->seed = static_cast<uint64_t>(s.integer("seed", static_cast<int>(t->seed), 0, 1 << 30));
   std::string why;
   if (!t->Validate(&why)) s.fail("invalid tracker settings: " + why, "consistent settings");
 }
@@ -124,7 +126,10 @@ std::string config_yaml(const VioConfig& c) {
     << "\n  min_triangulation_angle_deg: " << num(w.min_triangulation_angle_deg)
     << "\n  max_reprojection_px: " << num(w.max_reprojection_px)
     << "\n  rotation_only_parallax_px: " << num(w.rotation_only_parallax_px)
-    << "\n  rotation_only_translation_px: " << num(w.rotation_only_translation_px) << "\n";
+    << "\n  rotation_only_translation_px: " << num(w.rotation_only_translation_px)
+    << "\n  init_bias_gyro_turn_on_radps: " << num(w.init_bias_gyro_turn_on_radps)
+    << "\n  init_bias_accel_turn_on_mps2: " << num(w.init_bias_accel_turn_on_mps2)
+    << "\n  init_bias_horizon_s: " << num(w.init_bias_horizon_s) << "\n";
   const auto& n = c.imu_noise;
   y << "imu: {accelerometer_noise_density: " << num(n.accelerometer_noise_density)
     << ", accelerometer_random_walk: " << num(n.accelerometer_random_walk)
@@ -223,7 +228,8 @@ VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
         s.allow({"size", "max_iterations", "max_solver_time_ms", "loss", "loss_scale", "pixel_sigma",
                  "keyframe_min_parallax_px", "keyframe_min_tracked_ratio", "keyframe_max_interval_ms",
                  "min_triangulation_angle_deg", "max_reprojection_px", "rotation_only_parallax_px",
-                 "rotation_only_translation_px"});
+                 "rotation_only_translation_px", "init_bias_gyro_turn_on_radps", "init_bias_accel_turn_on_mps2",
+                 "init_bias_horizon_s"});
         auto& w = c.window;
         w.window_size = s.integer("size", w.window_size, 2, 200);
         w.max_iterations = s.integer("max_iterations", w.max_iterations, 1, 1000);
@@ -239,6 +245,9 @@ VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
         w.max_reprojection_px = s.number("max_reprojection_px", w.max_reprojection_px, Range::kPositive, "px");
         w.rotation_only_parallax_px = s.number("rotation_only_parallax_px", w.rotation_only_parallax_px, Range::kNonNegative, "px");
         w.rotation_only_translation_px = s.number("rotation_only_translation_px", w.rotation_only_translation_px, Range::kPositive, "px");
+        w.init_bias_gyro_turn_on_radps = s.number("init_bias_gyro_turn_on_radps", w.init_bias_gyro_turn_on_radps, Range::kPositive, "rad/s");
+        w.init_bias_accel_turn_on_mps2 = s.number("init_bias_accel_turn_on_mps2", w.init_bias_accel_turn_on_mps2, Range::kPositive, "m/s^2");
+        w.init_bias_horizon_s = s.number("init_bias_horizon_s", w.init_bias_horizon_s, Range::kNonNegative, "s");
         std::string why;
         if (!w.Validate(&why)) s.fail("invalid window settings: " + why, "consistent settings");
       }

@@ -26,7 +26,8 @@ bool StaticInitOptions::Validate(std::string* why) const {
 }
 
 std::optional<VioState> static_initialization(const std::vector<ImuSample>& imu, int64_t t_begin_ns,
-                                              const calib::ImuNoise& noise, const StaticInitOptions& o, std::string* why) {
+                                              const calib::ImuNoise& noise, const StaticInitOptions& o, std::string* why,
+                                              double* bias_gyro_sigma_radps) {
   auto fail = [why](const std::string& m) -> std::optional<VioState> {
     if (why) *why = m;
     return std::nullopt;
@@ -38,9 +39,10 @@ std::optional<VioState> static_initialization(const std::vector<ImuSample>& imu,
   Eigen::Vector3d sg = Eigen::Vector3d::Zero(), sa = Eigen::Vector3d::Zero();
   Eigen::Vector3d sg2 = Eigen::Vector3d::Zero(), sa2 = Eigen::Vector3d::Zero();
   int n = 0;
-  int64_t t_last = t_begin_ns;
+  int64_t t_last = t_begin_ns, t_first = t_end;
   for (const ImuSample& s : imu) {
     if (s.t_ns < t_begin_ns || s.t_ns > t_end) continue;
+    t_first = std::min(t_first, s.t_ns);
     sg += s.gyro;
     sa += s.accel;
     sg2 += s.gyro.cwiseProduct(s.gyro);
@@ -49,6 +51,10 @@ std::optional<VioState> static_initialization(const std::vector<ImuSample>& imu,
     ++n;
   }
   if (n < 10) return fail("only " + std::to_string(n) + " IMU samples in the window (need 10)");
+  if (static_cast<double>(t_last - t_first) < 0.8 * static_cast<double>(o.window_ns)) {
+    return fail("the IMU covers only " + std::to_string(static_cast<double>(t_last - t_first) * 1e-9) + " s of the " +
+                std::to_string(static_cast<double>(o.window_ns) * 1e-9) + " s window");
+  }
   const Eigen::Vector3d mg = sg / n, ma = sa / n;
   const Eigen::Vector3d std_g = (sg2 / n - mg.cwiseProduct(mg)).cwiseMax(0.0).cwiseSqrt();
   const Eigen::Vector3d std_a = (sa2 / n - ma.cwiseProduct(ma)).cwiseMax(0.0).cwiseSqrt();
@@ -90,6 +96,7 @@ std::optional<VioState> static_initialization(const std::vector<ImuSample>& imu,
     VioState s;
     s.t_ns = w.back()->t_ns;
     s.T_w_b = calib::SE3(Eigen::Quaterniond::FromTwoVectors(mean.normalized(), Eigen::Vector3d::UnitZ()), Eigen::Vector3d::Zero());
+    if (bias_gyro_sigma_radps) *bias_gyro_sigma_radps = -1.0;
     return s;  // gyro bias unknown while rotating: zero
   }
   if (std_a.maxCoeff() > o.max_accel_noise_ratio * accel_sigma) {
@@ -105,6 +112,7 @@ std::optional<VioState> static_initialization(const std::vector<ImuSample>& imu,
   // R_w_b maps the measured up direction (specific force at rest = -g) onto world +z; yaw 0.
   s.T_w_b = calib::SE3(Eigen::Quaterniond::FromTwoVectors(ma.normalized(), Eigen::Vector3d::UnitZ()), Eigen::Vector3d::Zero());
   s.bias_gyro = mg;
+  if (bias_gyro_sigma_radps) *bias_gyro_sigma_radps = std::max(std_g.maxCoeff(), gyro_sigma) / std::sqrt(static_cast<double>(n));
   return s;
 }
 

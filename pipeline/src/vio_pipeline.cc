@@ -193,7 +193,8 @@ struct VioPipeline::Impl {
     if (est) {
       need = next_imu < imu.size() ? imu[next_imu].t_ns : kNever;  // the estimator's next sample
     } else if (!pending.empty()) {
-      need = pending.front().t_ns - opt.init_imu_history_ns;  // the initialisation's first frame
+      // The initialisation's first frame, and the static window that ends there.
+      need = pending.front().t_ns - std::max(opt.init_imu_history_ns, opt.static_init.window_ns);
     } else if (!use_frames && have_events) {
       need = next_obs + shift - opt.init_imu_history_ns;  // the next corner frame
     } else if (use_frames && prev_frame_t >= 0) {
@@ -246,6 +247,7 @@ struct VioPipeline::Impl {
     if (pending.back().t_ns - t0 < opt.init_window_ns && !final_attempt) return;
     std::optional<VioState> s;
     std::string why;
+    double bias_gyro_sigma = -1.0;  // rad/s, from the static initialiser when it measured the bias
     VioInitMethod method = opt.init;
     if (opt.init == VioInitMethod::kGiven) {
       if (!initial_state) {
@@ -260,7 +262,13 @@ struct VioPipeline::Impl {
       }
     }
     if (opt.init == VioInitMethod::kAuto || opt.init == VioInitMethod::kStatic) {
-      s = backend::static_initialization(imu, t0, noise, opt.static_init, &why);
+      // A still body gives no events: the first frame comes once it moves, so the static window
+      // that ends at the first frame comes first; then the one that starts there (frames while still).
+      std::string why_before;
+      s = backend::static_initialization(imu, t0 - opt.static_init.window_ns, noise, opt.static_init, &why_before,
+                                         &bias_gyro_sigma);
+      if (!s) s = backend::static_initialization(imu, t0, noise, opt.static_init, &why, &bias_gyro_sigma);
+      if (!s) why = "before the first frame: " + why_before + "; after it: " + why;
       method = VioInitMethod::kStatic;
     }
     if (!s && (opt.init == VioInitMethod::kAuto || opt.init == VioInitMethod::kAlignment)) {
@@ -288,7 +296,7 @@ struct VioPipeline::Impl {
              (method == VioInitMethod::kStatic ? "static" : method == VioInitMethod::kAlignment ? "visual-inertial alignment"
                                                                                                : "the given initial state"));
     est = std::make_unique<backend::SlidingWindowEstimator>(opt.window, cal, noise);
-    est->initialize(*s);
+    est->initialize(*s, method == VioInitMethod::kStatic ? bias_gyro_sigma : -1.0);
     while (next_imu < imu.size() && imu[next_imu].t_ns < s->t_ns - opt.init_imu_history_ns) ++next_imu;
     for (const auto& f : pending)
       if (f.t_ns >= s->t_ns) feed(f);

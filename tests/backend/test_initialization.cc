@@ -84,5 +84,31 @@ TEST(StaticInitialization, RejectsAMovingStartAcceptsRotationInPlace) {
   EXPECT_NE(why.find("samples"), std::string::npos);
 }
 
+// The gyro bias comes with its standard error (white noise over sqrt(samples)), and a window the
+// IMU covers only in part is refused: a still start seen for 0.3 s is no 1 s static window.
+TEST(StaticInitialization, GyroBiasStandardErrorAndWindowCoverage) {
+  sim::SinusoidTrajectoryOptions t;
+  t.duration_s = 1.5;
+  const auto imu = imu_of(t, 6);
+  std::string why;
+  double sigma = 0;
+  const auto s = static_initialization(imu, 0, davis_imu(), StaticInitOptions{}, &why, &sigma);
+  ASSERT_TRUE(s.has_value()) << why;
+  // 0.0003 rad/s/sqrt(Hz) over 1 s: 3e-4 rad/s (the measured spread may be a little larger).
+  std::printf("gyro bias standard error %.3e rad/s, error %.3e rad/s\n", sigma,
+              (s->bias_gyro - Eigen::Vector3d(0.01, -0.02, 0.005)).cwiseAbs().maxCoeff());
+  EXPECT_GE(sigma, 0.0003 * 0.999);
+  EXPECT_LT(sigma, 0.0003 * 1.1);
+  EXPECT_LT((s->bias_gyro - Eigen::Vector3d(0.01, -0.02, 0.005)).cwiseAbs().maxCoeff(), 4 * sigma);
+  // The window [-0.7 s, 0.3 s] holds 0.3 s of samples.
+  EXPECT_FALSE(static_initialization(imu, -700'000'000, davis_imu(), StaticInitOptions{}, &why, &sigma).has_value());
+  EXPECT_NE(why.find("covers only"), std::string::npos) << why;
+  // Rotating in place: the bias is unknown (zero) and so is its sigma (-1).
+  t.angle_amplitude_rad = Eigen::Vector3d(0.3, 0.2, 0.5);
+  t.angle_frequency_hz = Eigen::Vector3d(0.7, 1.1, 1.0);
+  ASSERT_TRUE(static_initialization(imu_of(t, 7), 0, davis_imu(), StaticInitOptions{}, &why, &sigma).has_value()) << why;
+  EXPECT_EQ(sigma, -1.0);
+}
+
 }  // namespace
 }  // namespace evio::backend

@@ -118,6 +118,50 @@ TEST(VioPipeline, WithoutEventsOrImuItIsNotInitialised) {
   }
 }
 
+// A still body gives no events, so the first event frame comes only once it moves: the static
+// initialiser must use the still IMU before that frame (the window after it is already moving).
+TEST(VioPipeline, StaticStartInitialisesFromTheImuBeforeTheFirstFrame) {
+  VioPipelineOptions o;
+  VioPipeline vio(o, test_camera(), test_noise());
+  const Eigen::Vector3d bias(0.002, -0.001, 0.0005);
+  for (int64_t t = 0; t <= 4'000'000'000; t += 1'000'000) {
+    ImuSample m;
+    m.t_ns = t;
+    m.accel = Eigen::Vector3d(0, 0, 9.81);
+    m.gyro = bias;
+    if (t > 1'500'000'000) {  // moving from 1.5 s on
+      const double s = 1e-9 * static_cast<double>(t - 1'500'000'000);
+      m.accel += Eigen::Vector3d(2.0 * std::sin(6 * s), 1.5 * std::cos(5 * s), 0.5);
+      m.gyro += Eigen::Vector3d(0.5 * std::sin(3 * s), 0.3, -0.2 * std::cos(4 * s));
+    }
+    vio.add_imu(m);
+  }
+  // Events from 1.5 s on: the edges of 30 squares of 8 px drifting at (40, 25) px/s (pixels a
+  // square newly covers fire +1, pixels it leaves fire -1), every millisecond.
+  std::vector<Event> ev;
+  for (int64_t t = 1'501'000'000; t < 4'000'000'000; t += 1'000'000) {
+    const double s1 = 1e-9 * static_cast<double>(t - 1'500'000'000);
+    for (int i = 0; i < 6; ++i)
+      for (int j = 0; j < 5; ++j) {
+        const double x1 = 10 + 40 * i + 40 * s1, y1 = 10 + 36 * j + 25 * s1, x0 = x1 - 0.04, y0 = y1 - 0.025;
+        for (int y = static_cast<int>(y0) - 1; y <= static_cast<int>(y1) + 9; ++y)
+          for (int x = static_cast<int>(x0) - 1; x <= static_cast<int>(x1) + 9; ++x) {
+            if (x < 0 || y < 0 || x >= 240 || y >= 180) continue;
+            const bool now = x >= x1 && x < x1 + 8 && y >= y1 && y < y1 + 8;
+            const bool before = x >= x0 && x < x0 + 8 && y >= y0 && y < y0 + 8;
+            if (now != before) ev.push_back({t, static_cast<uint16_t>(x), static_cast<uint16_t>(y), static_cast<int8_t>(now ? 1 : -1)});
+          }
+      }
+  }
+  ASSERT_GT(ev.size(), 20000u);
+  vio.add_events(EventSpan(ev.data(), ev.size()));
+  const VioResult r = vio.finish();
+  ASSERT_TRUE(r.initialized) << r.init_failure;
+  EXPECT_EQ(r.init_method, VioInitMethod::kStatic);
+  EXPECT_GE(r.init_t_ns, 1'500'000'000);
+  EXPECT_LT(r.init_t_ns, 1'600'000'000);
+}
+
 // 4 s of datasets/poster_6dof.yaml simulated in memory (events on the camera clock, IMU, ground
 // truth at 200 Hz), shared by the tests below.
 struct Sequence {

@@ -36,10 +36,14 @@ struct StaticInitOptions {
 };
 
 // State at the end of the window [t_begin_ns, t_begin_ns + window_ns], or nullopt with *why
-// (not enough samples, not still, gravity magnitude off).
+// (fewer than 10 samples or samples spanning less than 80% of the window, not still, gravity
+// magnitude off).
+// bias_gyro_sigma_radps (optional out): the standard error of the gyro bias per axis, rad/s: the
+// larger of the measured spread and the noise model's white-noise sigma, over sqrt(samples), when
+// the body was still; -1 when it rotated in place (bias unknown, returned as zero).
 std::optional<VioState> static_initialization(const std::vector<ImuSample>& imu, int64_t t_begin_ns,
                                               const calib::ImuNoise& noise, const StaticInitOptions& options,
-                                              std::string* why = nullptr);
+                                              std::string* why = nullptr, double* bias_gyro_sigma_radps = nullptr);
 
 // Moving start: a linear visual-inertial alignment in the spirit of Martinelli's closed form
 // (IJCV 2014) and Kaiser et al. (RA-L 2017). Over the first frames of a window, the IMU gives the

@@ -131,7 +131,10 @@ struct SlidingWindowOptions {
   // static initialiser) that the bias random walk has had up to the horizon to leave. The random
   // walk alone is no prior for real IMUs: an MPU-6150 class IMU (2e-5 rad/s^2/sqrt(Hz)) gives
   // 1.5e-4 rad/s over 60 s while its turn-on gyro bias is easily 0.01 rad/s, hence the turn-on terms
-  // (the former fixed sigmas) stay the main part; noisier IMUs get a wider prior.
+  // (the former fixed sigmas) stay the main part; noisier IMUs get a wider prior. Where the bias
+  // is known better (a calibrated IMU, a simulator that starts at zero bias), a smaller turn-on
+  // sigma keeps the visual tracks from pulling it: their slowly varying common-mode error looks
+  // like a gyro bias. A still start measures the bias, and initialize() then takes its sigma.
   double init_bias_gyro_turn_on_radps = 0.01;   // rad/s, > 0
   double init_bias_accel_turn_on_mps2 = 0.1;    // m/s^2, > 0
   double init_bias_horizon_s = 60.0;            // s, >= 0
@@ -173,7 +176,10 @@ class SlidingWindowEstimator {
   ~SlidingWindowEstimator();
 
   // Initial state (from an initialiser or a known start). Frames before its time are ignored.
-  void initialize(const VioState& state);
+  // bias_gyro_sigma_radps > 0: the initial gyro bias was measured (e.g. static_initialization's
+  // standard error, rad/s per axis) and the first keyframe's gyro bias prior uses that sigma
+  // instead of the turn-on sigma of the options; <= 0: the turn-on sigma.
+  void initialize(const VioState& state, double bias_gyro_sigma_radps = -1.0);
   bool initialized() const { return initial_.has_value(); }
 
   // IMU samples in time order (body clock).
@@ -224,6 +230,7 @@ class SlidingWindowEstimator {
   calib::ImuNoise noise_;
   double focal_px_;
   std::optional<VioState> initial_;
+  double initial_bias_gyro_sigma_ = -1.0;  // rad/s; <= 0: from the options' turn-on sigma
   std::vector<ImuSample> imu_;                  // pruned to the window
   std::deque<std::unique_ptr<Keyframe>> window_;
   std::unordered_map<int64_t, Landmark> landmarks_;
