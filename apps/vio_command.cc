@@ -129,7 +129,9 @@ std::string config_yaml(const VioConfig& c) {
     << "\n  rotation_only_translation_px: " << num(w.rotation_only_translation_px)
     << "\n  init_bias_gyro_turn_on_radps: " << num(w.init_bias_gyro_turn_on_radps)
     << "\n  init_bias_accel_turn_on_mps2: " << num(w.init_bias_accel_turn_on_mps2)
-    << "\n  init_bias_horizon_s: " << num(w.init_bias_horizon_s) << "\n";
+    << "\n  init_bias_horizon_s: " << num(w.init_bias_horizon_s)
+    << "\n  estimate_time_offset: " << (w.estimate_time_offset ? "true" : "false")
+    << "\n  time_offset_sigma_ms: " << num(w.time_offset_sigma_s * 1e3) << "\n";
   const auto& n = c.imu_noise;
   y << "imu: {accelerometer_noise_density: " << num(n.accelerometer_noise_density)
     << ", accelerometer_random_walk: " << num(n.accelerometer_random_walk)
@@ -229,7 +231,7 @@ VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
                  "keyframe_min_parallax_px", "keyframe_min_tracked_ratio", "keyframe_max_interval_ms",
                  "min_triangulation_angle_deg", "max_reprojection_px", "rotation_only_parallax_px",
                  "rotation_only_translation_px", "init_bias_gyro_turn_on_radps", "init_bias_accel_turn_on_mps2",
-                 "init_bias_horizon_s"});
+                 "init_bias_horizon_s", "estimate_time_offset", "time_offset_sigma_ms"});
         auto& w = c.window;
         w.window_size = s.integer("size", w.window_size, 2, 200);
         w.max_iterations = s.integer("max_iterations", w.max_iterations, 1, 1000);
@@ -248,6 +250,8 @@ VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
         w.init_bias_gyro_turn_on_radps = s.number("init_bias_gyro_turn_on_radps", w.init_bias_gyro_turn_on_radps, Range::kPositive, "rad/s");
         w.init_bias_accel_turn_on_mps2 = s.number("init_bias_accel_turn_on_mps2", w.init_bias_accel_turn_on_mps2, Range::kPositive, "m/s^2");
         w.init_bias_horizon_s = s.number("init_bias_horizon_s", w.init_bias_horizon_s, Range::kNonNegative, "s");
+        w.estimate_time_offset = s.boolean("estimate_time_offset", w.estimate_time_offset);
+        w.time_offset_sigma_s = 1e-3 * s.number("time_offset_sigma_ms", w.time_offset_sigma_s * 1e3, Range::kPositive, "ms");
         std::string why;
         if (!w.Validate(&why)) s.fail("invalid window settings: " + why, "consistent settings");
       }
@@ -515,7 +519,9 @@ int run_vio(const VioArgs& args, std::ostream& out) {
       << ", \"drift_px_per_frame\": " << num(args.oracle_drift_px) << ", \"replaced\": " << oracle->stats().replaced
       << ", \"dropped\": " << oracle->stats().dropped << "}";
   }
-  j << ",\n  \"outliers_removed\": " << st.outliers_removed << ",\n  \"rotation_only_keyframes\": " << st.rotation_only_keyframes
+  j << ",\n  \"outliers_removed\": " << st.outliers_removed << ",\n  \"rotation_only_keyframes\": " << st.rotation_only_keyframes;
+  if (cfg.window.estimate_time_offset) j << ",\n  \"time_offset_correction_s\": " << num(st.time_offset_s);
+  j
     << "\n}\n";
   {
     std::ofstream f((fs::path(args.out) / "stats.json").string());

@@ -106,4 +106,23 @@ bool RotationOnlyError::Evaluate(double const* const* parameters, double* residu
   return true;
 }
 
+TimeOffsetReprojectionError::TimeOffsetReprojectionError(const Eigen::Vector3d& bearing_c, const Eigen::Vector2d& velocity,
+                                                         const calib::SE3& T_c_b, double focal_px, double sigma_px)
+    : reprojection_(bearing_c, T_c_b, focal_px, sigma_px), velocity_(velocity), scale_(focal_px / sigma_px) {
+  if (!velocity.allFinite()) throw std::invalid_argument("time-offset reprojection error: velocity must be finite");
+}
+
+bool TimeOffsetReprojectionError::Evaluate(double const* const* parameters, double* residuals, double** jacobians) const {
+  double* base_jacobians[2] = {jacobians ? jacobians[0] : nullptr, jacobians ? jacobians[1] : nullptr};
+  if (!reprojection_.Evaluate(parameters, residuals, jacobians ? base_jacobians : nullptr)) return false;
+  const double td = parameters[2][0];
+  residuals[0] += scale_ * td * velocity_.x();
+  residuals[1] += scale_ * td * velocity_.y();
+  if (jacobians && jacobians[2]) {
+    jacobians[2][0] = scale_ * velocity_.x();
+    jacobians[2][1] = scale_ * velocity_.y();
+  }
+  return true;
+}
+
 }  // namespace evio::backend

@@ -25,6 +25,8 @@ struct SlidingWindowEstimator::Keyframe {
   std::unique_ptr<ImuError> imu_error;
   std::unordered_map<int64_t, Eigen::Vector3d> obs;                          // track -> bearing
   std::unordered_map<int64_t, std::unique_ptr<ReprojectionError>> reproj;   // track -> residual
+  // With estimate_time_offset: the same residuals with the time offset, by track.
+  std::unordered_map<int64_t, std::unique_ptr<TimeOffsetReprojectionError>> reproj_td;
   bool rotation_only = false;                                                // no parallax to the previous keyframe
   std::unordered_map<int64_t, std::unique_ptr<RotationOnlyError>> rot;      // track -> residual to the previous keyframe
 };
@@ -81,6 +83,7 @@ bool SlidingWindowOptions::Validate(std::string* why) const {
   if (!(keyframe_max_interval_s > 0)) return fail("keyframe_max_interval_s must be > 0 s");
   if (!(min_triangulation_angle_deg >= 0 && min_triangulation_angle_deg < 90)) return fail("min_triangulation_angle_deg must be in [0, 90) deg");
   if (!(max_reprojection_px > 0)) return fail("max_reprojection_px must be > 0 px");
+  if (!(time_offset_sigma_s > 0) || !std::isfinite(time_offset_sigma_s)) return fail("time_offset_sigma_s must be finite and > 0 s");
   if (!(min_depth_m > 0)) return fail("min_depth_m must be > 0 m");
   if (!gravity_w.allFinite()) return fail("gravity_w must be finite");
   if (!(init_bias_horizon_s >= 0) || !std::isfinite(init_bias_horizon_s)) return fail("init_bias_horizon_s must be finite and >= 0 s");
@@ -369,6 +372,7 @@ void SlidingWindowEstimator::triangulate(int64_t track, Landmark* lm) {
     for (Keyframe* k : bad) {
       k->obs.erase(track);
       k->reproj.erase(track);
+      k->reproj_td.erase(track);
       k->rot.erase(track);
       ++stats_.outliers_removed;
     }
@@ -385,6 +389,31 @@ bool SlidingWindowEstimator::add_frame(const FeatureObservations& frame) {
   // A frame at (or before) the newest keyframe's time adds no interval: ignored.
   if (!window_.empty() && frame.t_ns <= window_.back()->t_ns) return false;
   ++stats_.frames;
+  // Image velocities of this frame's tracks from their previous frame (time offset only). A
+  // velocity is used only when it predicts this observation from the one before within
+  // max_reprojection_px (constant velocity over three frames): a single outlier observation, in this
+  // frame or the previous one, would otherwise give a huge velocity that pulls the offset.
+  std::unordered_map<int64_t, Eigen::Vector2d> velocity;
+  if (options_.estimate_time_offset) {
+    std::unordered_map<int64_t, SeenTrack> seen;
+    for (const FeatureObservation& o : frame.observations) {
+      if (!(o.bearing_c.z() > 1e-6)) continue;
+      SeenTrack now;
+      now.t_ns = frame.t_ns;
+      now.m = o.bearing_c.head<2>() / o.bearing_c.z();
+      const auto it = last_seen_.find(o.track_id);
+      if (it != last_seen_.end() && frame.t_ns > it->second.t_ns) {
+        const double dt = 1e-9 * static_cast<double>(frame.t_ns - it->second.t_ns);
+        now.v = (now.m - it->second.m) / dt;
+        now.has_v = true;
+        if (it->second.has_v && focal_px_ * (now.v - it->second.v).norm() * dt <= options_.max_reprojection_px) {
+          velocity[o.track_id] = now.v;
+        }
+      }
+      seen[o.track_id] = now;
+    }
+    last_seen_ = std::move(seen);
+  }
   VioState predicted;
   if (window_.empty()) {
     // First keyframe: the initial state propagated to the frame, anchored by a prior.
@@ -440,6 +469,11 @@ bool SlidingWindowEstimator::add_frame(const FeatureObservations& frame) {
     if (closed_tracks_.count(o.track_id) || !(o.bearing_c.z() > 1e-6)) continue;
     kf->obs[o.track_id] = o.bearing_c;
     kf->reproj[o.track_id] = std::make_unique<ReprojectionError>(o.bearing_c, camera_.T_c_b, focal_px_, sigma_of(o));
+    if (options_.estimate_time_offset) {
+      const auto v = velocity.find(o.track_id);
+      kf->reproj_td[o.track_id] = std::make_unique<TimeOffsetReprojectionError>(
+          o.bearing_c, v == velocity.end() ? Eigen::Vector2d::Zero() : v->second, camera_.T_c_b, focal_px_, sigma_of(o));
+    }
   }
   const bool first = window_.empty();
   stats_.motion_model.emplace_back(kf->t_ns, kf->rotation_only);
@@ -467,7 +501,13 @@ bool SlidingWindowEstimator::add_frame(const FeatureObservations& frame) {
                                                          std::pow(noise_.gyroscope_random_walk, 2) * options_.init_bias_horizon_s))),
         Eigen::Vector3d::Constant(1.0 / std::sqrt(std::pow(options_.init_bias_accel_turn_on_mps2, 2) +
                                                   std::pow(noise_.accelerometer_random_walk, 2) * options_.init_bias_horizon_s));
-    prior_ = LinearPrior::anchor({pose_block, sb_block}, {S_pose, S_sb});
+    if (options_.estimate_time_offset) {
+      PriorBlock td_block{time_offset_.data(), 1, false, {time_offset_[0]}};
+      prior_ = LinearPrior::anchor({pose_block, sb_block, td_block},
+                                   {S_pose, S_sb, Eigen::MatrixXd::Constant(1, 1, 1.0 / options_.time_offset_sigma_s)});
+    } else {
+      prior_ = LinearPrior::anchor({pose_block, sb_block}, {S_pose, S_sb});
+    }
   }
   // Landmarks: triangulate tracks seen from two or more keyframes; not in a rotation-only
   // keyframe (any apparent parallax there is noise or an outlier).
@@ -481,6 +521,7 @@ bool SlidingWindowEstimator::add_frame(const FeatureObservations& frame) {
   remove_outliers();
   if (static_cast<int>(window_.size()) > options_.window_size) marginalize_oldest();
   stats_.solve_time_s.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+  stats_.time_offset_s = time_offset_[0];
   latest_ = state_of(*window_.back());
   // Keep IMU samples from just before the oldest keyframe.
   const int64_t keep = window_.front()->t_ns;
@@ -556,6 +597,12 @@ void SlidingWindowEstimator::solve() {
     if (n < 2) continue;
     ++used;
     for (auto& k : window_) {
+      if (options_.estimate_time_offset) {
+        const auto it = k->reproj_td.find(track);
+        if (it == k->reproj_td.end()) continue;
+        problem.AddResidualBlock(it->second.get(), loss.get(), k->pose.data(), lm.p.data(), time_offset_.data());
+        continue;
+      }
       const auto it = k->reproj.find(track);
       if (it == k->reproj.end()) continue;
       problem.AddResidualBlock(it->second.get(), loss.get(), k->pose.data(), lm.p.data());
@@ -596,11 +643,13 @@ void SlidingWindowEstimator::remove_outliers() {
         continue;
       }
       double r[2];
-      const double* params[2] = {k->pose.data(), lit->second.p.data()};
-      const bool ok = k->reproj[track]->Evaluate(params, r, nullptr);
+      const double* params[3] = {k->pose.data(), lit->second.p.data(), time_offset_.data()};
+      const bool ok = options_.estimate_time_offset ? k->reproj_td.at(track)->Evaluate(params, r, nullptr)
+                                                    : k->reproj[track]->Evaluate(params, r, nullptr);
       const double err_px = ok ? std::hypot(r[0], r[1]) * options_.pixel_sigma : 1e9;
       if (err_px > options_.max_reprojection_px) {
         k->reproj.erase(track);
+        k->reproj_td.erase(track);
         it = k->obs.erase(it);
         ++stats_.outliers_removed;
       } else {
@@ -663,6 +712,14 @@ void SlidingWindowEstimator::marginalize_oldest() {
     problem.AddParameterBlock(lm.p.data(), 3);
     removed.push_back(lm.p.data());
     for (auto& k : window_) {
+      if (options_.estimate_time_offset) {
+        const auto it = k->reproj_td.find(track);
+        if (it == k->reproj_td.end()) continue;
+        add_kf_blocks(*k);
+        if (!problem.HasParameterBlock(time_offset_.data())) problem.AddParameterBlock(time_offset_.data(), 1);
+        ids.push_back(problem.AddResidualBlock(it->second.get(), loss.get(), k->pose.data(), lm.p.data(), time_offset_.data()));
+        continue;
+      }
       const auto it = k->reproj.find(track);
       if (it == k->reproj.end()) continue;
       add_kf_blocks(*k);
@@ -678,6 +735,7 @@ void SlidingWindowEstimator::marginalize_oldest() {
     for (auto& k : window_) {
       k->obs.erase(track);
       k->reproj.erase(track);
+      k->reproj_td.erase(track);
     }
     landmarks_.erase(track);
     closed_tracks_.insert(track);

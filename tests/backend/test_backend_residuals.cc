@@ -83,6 +83,49 @@ TEST(ReprojectionError, ResidualIsThePixelErrorInSigmas) {
   EXPECT_THROW(ReprojectionError(Eigen::Vector3d(0, 0, -1), T_c_b, 200, 0.5), std::invalid_argument);
 }
 
+// The time-offset form: its Jacobians (pose, landmark and td) against numeric differentiation,
+// and at td = 0 the plain reprojection residual; td moves the measurement by -td v.
+TEST(TimeOffsetReprojectionError, GradientCheckerAndShiftAlongTheImageVelocity) {
+  std::mt19937 rng(4);
+  std::normal_distribution<double> n(0.0, 1.0);
+  const PoseManifold pm;
+  const ceres::EuclideanManifold<3> e3;
+  const ceres::EuclideanManifold<1> e1;
+  const std::vector<const ceres::Manifold*> manifolds = {&pm, &e3, &e1};
+  const calib::SE3 T_c_b(calib::so3_exp_quat(Eigen::Vector3d(0.1, -0.2, 0.05)), Eigen::Vector3d(0.02, -0.01, 0.03));
+  double worst = 0;
+  for (int trial = 0; trial < 30; ++trial) {
+    auto pose = random_pose(rng);
+    const calib::SE3 T_w_b(Eigen::Quaterniond(pose[3], pose[0], pose[1], pose[2]), Eigen::Vector3d(pose[4], pose[5], pose[6]));
+    const calib::SE3 T_w_c = T_w_b * T_c_b.inverse();
+    const Eigen::Vector3d p_c(0.5 * n(rng), 0.5 * n(rng), 2.0 + 4.0 * std::abs(n(rng)) / 3.0);
+    const Eigen::Vector3d p_w = T_w_c.rotation * p_c + T_w_c.translation;
+    std::array<double, 3> l = {p_w.x(), p_w.y(), p_w.z()};
+    std::array<double, 1> td = {0.01 * n(rng)};
+    const Eigen::Vector3d bearing = (p_c + Eigen::Vector3d(0.01 * n(rng), 0.01 * n(rng), 0)).normalized();
+    const Eigen::Vector2d v(0.5 * n(rng), 0.5 * n(rng));
+    const TimeOffsetReprojectionError err(bearing, v, T_c_b, 200.0, 0.5);
+    const double* params[3] = {pose.data(), l.data(), td.data()};
+    ceres::NumericDiffOptions nd;
+    const ceres::GradientChecker checker(&err, &manifolds, nd);
+    ceres::GradientChecker::ProbeResults res;
+    checker.Probe(params, 1e-5, &res);
+    ASSERT_TRUE(res.return_value);
+    worst = std::max(worst, worst_error(res));
+    // td = 0: the plain residual; otherwise it differs by (f / sigma) td v.
+    const ReprojectionError plain(bearing, T_c_b, 200.0, 0.5);
+    double r_plain[2], r_td[2];
+    ASSERT_TRUE(plain.Evaluate(params, r_plain, nullptr));
+    ASSERT_TRUE(err.Evaluate(params, r_td, nullptr));
+    EXPECT_NEAR(r_td[0] - r_plain[0], 400.0 * td[0] * v.x(), 1e-9);
+    EXPECT_NEAR(r_td[1] - r_plain[1], 400.0 * td[0] * v.y(), 1e-9);
+  }
+  std::printf("TimeOffsetReprojectionError: worst Jacobian error %.2e\n", worst);
+  EXPECT_LT(worst, 1e-5);
+  EXPECT_THROW(TimeOffsetReprojectionError(Eigen::Vector3d(0, 0, 1), Eigen::Vector2d(NAN, 0), calib::SE3(), 200, 0.5),
+               std::invalid_argument);
+}
+
 TEST(RotationOnlyError, GradientCheckerAndZeroAtTheTrueRotation) {
   std::mt19937 rng(4);
   std::normal_distribution<double> n(0.0, 1.0);

@@ -36,6 +36,26 @@ class ReprojectionError final : public ceres::SizedCostFunction<2, 7, 3> {
 
 namespace evio::backend {
 
+// ReprojectionError with an unknown camera-IMU time offset td (s, parameter block of size 1, in the
+// sense of Kalibr's timeshift_cam_imu: a correction added to the calibrated shift). The observation
+// stamped t shows the scene at t + td, so at t the feature was where it was seen minus td times its
+// image velocity v (undistorted normalised plane, 1/s; from the track's previous frame), as in
+// VINS-Mono's online temporal calibration (Qin and Shen, IROS 2018):
+//   r = (f / sigma) (pi(p_c) - (pi(b) - td v)).
+// Parameter blocks: pose (7), landmark (3), td (1).
+class TimeOffsetReprojectionError final : public ceres::SizedCostFunction<2, 7, 3, 1> {
+ public:
+  // As ReprojectionError; velocity: finite. Throws std::invalid_argument otherwise.
+  TimeOffsetReprojectionError(const Eigen::Vector3d& bearing_c, const Eigen::Vector2d& velocity, const calib::SE3& T_c_b,
+                              double focal_px, double sigma_px);
+  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override;
+
+ private:
+  ReprojectionError reprojection_;
+  Eigen::Vector2d velocity_;
+  double scale_;  // f / sigma
+};
+
 // Rotation-only residual between two keyframes observing the same (untriangulated) track, for
 // motion without parallax: the bearing of keyframe i, rotated into keyframe j's camera by the
 // relative rotation of the two poses (translation ignored: landmarks at infinity), against the
