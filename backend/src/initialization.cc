@@ -22,12 +22,13 @@ bool StaticInitOptions::Validate(std::string* why) const {
   if (!(max_gyro_noise_ratio > 0) || !(max_accel_noise_ratio > 0)) return fail("noise ratios must be > 0");
   if (!(gravity_mps2 > 0)) return fail("gravity_mps2 must be > 0 m/s^2");
   if (!(max_gravity_error > 0)) return fail("max_gravity_error must be > 0 m/s^2");
+  if (still_tail_ns < 0 || still_tail_ns > window_ns) return fail("still_tail_ns must be in [0, window_ns]");
   return true;
 }
 
 std::optional<VioState> static_initialization(const std::vector<ImuSample>& imu, int64_t t_begin_ns,
                                               const calib::ImuNoise& noise, const StaticInitOptions& o, std::string* why,
-                                              double* bias_gyro_sigma_radps) {
+                                              InitialSigmas* sigmas) {
   auto fail = [why](const std::string& m) -> std::optional<VioState> {
     if (why) *why = m;
     return std::nullopt;
@@ -96,7 +97,7 @@ std::optional<VioState> static_initialization(const std::vector<ImuSample>& imu,
     VioState s;
     s.t_ns = w.back()->t_ns;
     s.T_w_b = calib::SE3(Eigen::Quaterniond::FromTwoVectors(mean.normalized(), Eigen::Vector3d::UnitZ()), Eigen::Vector3d::Zero());
-    if (bias_gyro_sigma_radps) *bias_gyro_sigma_radps = -1.0;
+    if (sigmas) *sigmas = InitialSigmas{};
     return s;  // gyro bias unknown while rotating: zero
   }
   if (std_a.maxCoeff() > o.max_accel_noise_ratio * accel_sigma) {
@@ -107,12 +108,34 @@ std::optional<VioState> static_initialization(const std::vector<ImuSample>& imu,
     return fail("mean specific force " + std::to_string(ma.norm()) + " m/s^2 is not gravity (" +
                 std::to_string(o.gravity_mps2) + ")");
   }
+  if (o.still_tail_ns > 0) {
+    Eigen::Vector3d tg = Eigen::Vector3d::Zero(), ta = Eigen::Vector3d::Zero();
+    int nt = 0;
+    for (const ImuSample& m : imu) {
+      if (m.t_ns < t_last - o.still_tail_ns || m.t_ns > t_last) continue;
+      tg += m.gyro;
+      ta += m.accel;
+      ++nt;
+    }
+    if (nt > 0) {
+      const double se = 1.0 / std::sqrt(static_cast<double>(nt));
+      const double dg = (tg / nt - mg).cwiseAbs().maxCoeff(), da = (ta / nt - ma).cwiseAbs().maxCoeff();
+      if (dg > o.max_gyro_noise_ratio * gyro_sigma * se || da > o.max_accel_noise_ratio * accel_sigma * se) {
+        return fail("moving at the window's end: the last " + std::to_string(static_cast<double>(o.still_tail_ns) * 1e-9) +
+                    " s differ from the window's mean by " + std::to_string(dg) + " rad/s, " + std::to_string(da) + " m/s^2");
+      }
+    }
+  }
   VioState s;
   s.t_ns = t_last;
   // R_w_b maps the measured up direction (specific force at rest = -g) onto world +z; yaw 0.
   s.T_w_b = calib::SE3(Eigen::Quaterniond::FromTwoVectors(ma.normalized(), Eigen::Vector3d::UnitZ()), Eigen::Vector3d::Zero());
   s.bias_gyro = mg;
-  if (bias_gyro_sigma_radps) *bias_gyro_sigma_radps = std::max(std_g.maxCoeff(), gyro_sigma) / std::sqrt(static_cast<double>(n));
+  if (sigmas) {
+    sigmas->bias_gyro_radps = std::max(std_g.maxCoeff(), gyro_sigma) / std::sqrt(static_cast<double>(n));
+    sigmas->velocity_mps = o.max_accel_noise_ratio * noise.accelerometer_noise_density *
+                           std::sqrt(static_cast<double>(o.window_ns) * 1e-9);
+  }
   return s;
 }
 

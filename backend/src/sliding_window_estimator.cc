@@ -105,10 +105,12 @@ SlidingWindowEstimator::SlidingWindowEstimator(const SlidingWindowOptions& optio
 
 SlidingWindowEstimator::~SlidingWindowEstimator() = default;
 
-void SlidingWindowEstimator::initialize(const VioState& state, double bias_gyro_sigma_radps) {
-  if (!std::isfinite(bias_gyro_sigma_radps)) throw std::invalid_argument("initialize: gyro bias sigma must be finite");
+void SlidingWindowEstimator::initialize(const VioState& state, const InitialSigmas& sigmas) {
+  if (!std::isfinite(sigmas.bias_gyro_radps) || !std::isfinite(sigmas.velocity_mps)) {
+    throw std::invalid_argument("initialize: initial sigmas must be finite");
+  }
   initial_ = state;
-  initial_bias_gyro_sigma_ = bias_gyro_sigma_radps;
+  initial_sigmas_ = sigmas;
   latest_ = state;
 }
 
@@ -494,9 +496,10 @@ bool SlidingWindowEstimator::add_frame(const FeatureObservations& frame) {
     S_pose.topLeftCorner(3, 3) = Eigen::LLT<Eigen::Matrix3d>(info_rot).matrixU();
     S_pose.bottomRightCorner(3, 3) = Eigen::Matrix3d::Identity() / options_.init_sigma_position_m;
     Eigen::MatrixXd S_sb = Eigen::MatrixXd::Zero(9, 9);
-    S_sb.diagonal() << Eigen::Vector3d::Constant(1.0 / options_.init_sigma_velocity_mps),
-        Eigen::Vector3d::Constant(1.0 / (initial_bias_gyro_sigma_ > 0
-                                             ? initial_bias_gyro_sigma_
+    S_sb.diagonal() << Eigen::Vector3d::Constant(
+        1.0 / (initial_sigmas_.velocity_mps > 0 ? initial_sigmas_.velocity_mps : options_.init_sigma_velocity_mps)),
+        Eigen::Vector3d::Constant(1.0 / (initial_sigmas_.bias_gyro_radps > 0
+                                             ? initial_sigmas_.bias_gyro_radps
                                              : std::sqrt(std::pow(options_.init_bias_gyro_turn_on_radps, 2) +
                                                          std::pow(noise_.gyroscope_random_walk, 2) * options_.init_bias_horizon_s))),
         Eigen::Vector3d::Constant(1.0 / std::sqrt(std::pow(options_.init_bias_accel_turn_on_mps2, 2) +

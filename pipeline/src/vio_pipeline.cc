@@ -194,7 +194,7 @@ struct VioPipeline::Impl {
       need = next_imu < imu.size() ? imu[next_imu].t_ns : kNever;  // the estimator's next sample
     } else if (!pending.empty()) {
       // The initialisation's first frame, and the static window that ends there.
-      need = pending.front().t_ns - std::max(opt.init_imu_history_ns, opt.static_init.window_ns);
+      need = pending.front().t_ns - std::max(opt.init_imu_history_ns, 2 * opt.static_init.window_ns);
     } else if (!use_frames && have_events) {
       need = next_obs + shift - opt.init_imu_history_ns;  // the next corner frame
     } else if (use_frames && prev_frame_t >= 0) {
@@ -247,7 +247,7 @@ struct VioPipeline::Impl {
     if (pending.back().t_ns - t0 < opt.init_window_ns && !final_attempt) return;
     std::optional<VioState> s;
     std::string why;
-    double bias_gyro_sigma = -1.0;  // rad/s, from the static initialiser when it measured the bias
+    backend::InitialSigmas sigmas;  // from the static initialiser when the body was still
     VioInitMethod method = opt.init;
     if (opt.init == VioInitMethod::kGiven) {
       if (!initial_state) {
@@ -264,10 +264,23 @@ struct VioPipeline::Impl {
     if (opt.init == VioInitMethod::kAuto || opt.init == VioInitMethod::kStatic) {
       // A still body gives no events: the first frame comes once it moves, so the static window
       // that ends at the first frame comes first; then the one that starts there (frames while still).
+      // The motion may have begun a little before the first frame: the latest still window
+      // ending up to one window before it (in steps of half the still tail); the estimator
+      // propagates that state to the first frame with the IMU.
+      // A still window first (it measures the gyro bias), then the rotation-in-place case.
       std::string why_before;
-      s = backend::static_initialization(imu, t0 - opt.static_init.window_ns, noise, opt.static_init, &why_before,
-                                         &bias_gyro_sigma);
-      if (!s) s = backend::static_initialization(imu, t0, noise, opt.static_init, &why, &bias_gyro_sigma);
+      backend::StaticInitOptions still = opt.static_init;
+      still.allow_rotation = false;
+      const int64_t step = std::max<int64_t>(opt.static_init.still_tail_ns / 2, 10'000'000);
+      for (int64_t t_end = t0; !s && t_end >= t0 - opt.static_init.window_ns; t_end -= step) {
+        s = backend::static_initialization(imu, t_end - opt.static_init.window_ns, noise, still,
+                                           t_end == t0 ? &why_before : nullptr, &sigmas);
+      }
+      if (!s && opt.static_init.allow_rotation) {
+        s = backend::static_initialization(imu, t0 - opt.static_init.window_ns, noise, opt.static_init, &why_before,
+                                           &sigmas);
+      }
+      if (!s) s = backend::static_initialization(imu, t0, noise, opt.static_init, &why, &sigmas);
       if (!s) why = "before the first frame: " + why_before + "; after it: " + why;
       method = VioInitMethod::kStatic;
     }
@@ -296,7 +309,7 @@ struct VioPipeline::Impl {
              (method == VioInitMethod::kStatic ? "static" : method == VioInitMethod::kAlignment ? "visual-inertial alignment"
                                                                                                : "the given initial state"));
     est = std::make_unique<backend::SlidingWindowEstimator>(opt.window, cal, noise);
-    est->initialize(*s, method == VioInitMethod::kStatic ? bias_gyro_sigma : -1.0);
+    est->initialize(*s, method == VioInitMethod::kStatic ? sigmas : backend::InitialSigmas{});
     while (next_imu < imu.size() && imu[next_imu].t_ns < s->t_ns - opt.init_imu_history_ns) ++next_imu;
     for (const auto& f : pending)
       if (f.t_ns >= s->t_ns) feed(f);

@@ -91,8 +91,10 @@ TEST(StaticInitialization, GyroBiasStandardErrorAndWindowCoverage) {
   t.duration_s = 1.5;
   const auto imu = imu_of(t, 6);
   std::string why;
-  double sigma = 0;
-  const auto s = static_initialization(imu, 0, davis_imu(), StaticInitOptions{}, &why, &sigma);
+  InitialSigmas sg;
+  const auto s = static_initialization(imu, 0, davis_imu(), StaticInitOptions{}, &why, &sg);
+  const double sigma = sg.bias_gyro_radps;
+  EXPECT_NEAR(sg.velocity_mps, 3 * 0.002 * 1.0, 1e-12);  // 3 x density x sqrt(1 s)
   ASSERT_TRUE(s.has_value()) << why;
   // 0.0003 rad/s/sqrt(Hz) over 1 s: 3e-4 rad/s (the measured spread may be a little larger).
   std::printf("gyro bias standard error %.3e rad/s, error %.3e rad/s\n", sigma,
@@ -101,13 +103,24 @@ TEST(StaticInitialization, GyroBiasStandardErrorAndWindowCoverage) {
   EXPECT_LT(sigma, 0.0003 * 1.1);
   EXPECT_LT((s->bias_gyro - Eigen::Vector3d(0.01, -0.02, 0.005)).cwiseAbs().maxCoeff(), 4 * sigma);
   // The window [-0.7 s, 0.3 s] holds 0.3 s of samples.
-  EXPECT_FALSE(static_initialization(imu, -700'000'000, davis_imu(), StaticInitOptions{}, &why, &sigma).has_value());
+  EXPECT_FALSE(static_initialization(imu, -700'000'000, davis_imu(), StaticInitOptions{}, &why, &sg).has_value());
   EXPECT_NE(why.find("covers only"), std::string::npos) << why;
+  // Still, then a 0.5 m/s^2 push in the last 60 ms of the window: within the spread test, caught
+  // by the still-tail test; without it (still_tail_ns 0) accepted.
+  std::vector<ImuSample> pushed = imu;
+  for (ImuSample& m : pushed)
+    if (m.t_ns > 940'000'000) m.accel.x() += 0.5;
+  EXPECT_FALSE(static_initialization(pushed, 0, davis_imu(), StaticInitOptions{}, &why).has_value());
+  EXPECT_NE(why.find("moving at the window's end"), std::string::npos) << why;
+  StaticInitOptions no_tail;
+  no_tail.still_tail_ns = 0;
+  EXPECT_TRUE(static_initialization(pushed, 0, davis_imu(), no_tail, &why).has_value()) << why;
   // Rotating in place: the bias is unknown (zero) and so is its sigma (-1).
   t.angle_amplitude_rad = Eigen::Vector3d(0.3, 0.2, 0.5);
   t.angle_frequency_hz = Eigen::Vector3d(0.7, 1.1, 1.0);
-  ASSERT_TRUE(static_initialization(imu_of(t, 7), 0, davis_imu(), StaticInitOptions{}, &why, &sigma).has_value()) << why;
-  EXPECT_EQ(sigma, -1.0);
+  ASSERT_TRUE(static_initialization(imu_of(t, 7), 0, davis_imu(), StaticInitOptions{}, &why, &sg).has_value()) << why;
+  EXPECT_EQ(sg.bias_gyro_radps, -1.0);
+  EXPECT_EQ(sg.velocity_mps, -1.0);
 }
 
 }  // namespace

@@ -32,18 +32,33 @@ struct StaticInitOptions {
   // the integrated gyro into the body frame at the window's end must be constant; the gyro bias is
   // then unknown (zero).
   bool allow_rotation = true;
+  // The body must be still up to the window's end: the mean gyro and specific force of the last
+  // still_tail_ns must agree with the window's within max_*_noise_ratio standard errors of the
+  // white noise (a motion that starts inside the window passes the spread test but not this one),
+  // ns, >= 0 (0: no check). Not applied to a rotation in place (an unknown gyro bias makes the
+  // gyro-compensated specific force drift over the window).
+  int64_t still_tail_ns = 100'000'000;
   bool Validate(std::string* why) const;
+};
+
+// What an initialiser measured well: sigmas for the estimator's first prior (<= 0: not measured,
+// the estimator's options apply).
+struct InitialSigmas {
+  double bias_gyro_radps = -1.0;  // rad/s per axis
+  double velocity_mps = -1.0;     // m/s per axis
 };
 
 // State at the end of the window [t_begin_ns, t_begin_ns + window_ns], or nullopt with *why
 // (fewer than 10 samples or samples spanning less than 80% of the window, not still, gravity
 // magnitude off).
-// bias_gyro_sigma_radps (optional out): the standard error of the gyro bias per axis, rad/s: the
-// larger of the measured spread and the noise model's white-noise sigma, over sqrt(samples), when
-// the body was still; -1 when it rotated in place (bias unknown, returned as zero).
+// sigmas (optional out): when the body was still, the standard error of the gyro bias per axis
+// (rad/s: the larger of the measured spread and the noise model's white-noise sigma, over
+// sqrt(samples)) and of the zero velocity (m/s: max_accel_noise_ratio x the accelerometer noise
+// density x sqrt(window), what the stillness test lets through); both -1 when it rotated in place
+// (bias unknown, returned as zero; the velocity is only known from the accelerometer's tilt).
 std::optional<VioState> static_initialization(const std::vector<ImuSample>& imu, int64_t t_begin_ns,
                                               const calib::ImuNoise& noise, const StaticInitOptions& options,
-                                              std::string* why = nullptr, double* bias_gyro_sigma_radps = nullptr);
+                                              std::string* why = nullptr, InitialSigmas* sigmas = nullptr);
 
 // Moving start: a linear visual-inertial alignment in the spirit of Martinelli's closed form
 // (IJCV 2014) and Kaiser et al. (RA-L 2017). Over the first frames of a window, the IMU gives the

@@ -54,6 +54,7 @@
 
 #include <Eigen/Core>
 
+#include "evio/backend/initialization.h"
 #include "evio/backend/motion_model_selection.h"
 #include "evio/calib/calibration_io.h"
 #include "evio/sensors/measurements.h"
@@ -187,10 +188,10 @@ class SlidingWindowEstimator {
   ~SlidingWindowEstimator();
 
   // Initial state (from an initialiser or a known start). Frames before its time are ignored.
-  // bias_gyro_sigma_radps > 0: the initial gyro bias was measured (e.g. static_initialization's
-  // standard error, rad/s per axis) and the first keyframe's gyro bias prior uses that sigma
-  // instead of the turn-on sigma of the options; <= 0: the turn-on sigma.
-  void initialize(const VioState& state, double bias_gyro_sigma_radps = -1.0);
+  // sigmas: what the initialiser measured (e.g. static_initialization's standard errors); each
+  // one > 0 replaces, in the first keyframe's prior, the gyro bias turn-on sigma or
+  // init_sigma_velocity_mps of the options. Throws std::invalid_argument on non-finite sigmas.
+  void initialize(const VioState& state, const InitialSigmas& sigmas = {});
   bool initialized() const { return initial_.has_value(); }
 
   // IMU samples in time order (body clock).
@@ -244,7 +245,7 @@ class SlidingWindowEstimator {
   calib::ImuNoise noise_;
   double focal_px_;
   std::optional<VioState> initial_;
-  double initial_bias_gyro_sigma_ = -1.0;  // rad/s; <= 0: from the options' turn-on sigma
+  InitialSigmas initial_sigmas_;  // <= 0: from the options
   std::vector<ImuSample> imu_;                  // pruned to the window
   std::deque<std::unique_ptr<Keyframe>> window_;
   std::unordered_map<int64_t, Landmark> landmarks_;
