@@ -171,13 +171,23 @@ EventFrame EventFrameBuilder::build_frame(EventSpan events, int64_t t_ref_ns) {
   const float w_max = static_cast<float>(width_ - 1), h_max = static_cast<float>(height_ - 1);
   float* a = acc.ptr<float>();
   size_t outside = 0;
+  // Knot step of the current event, min(d / h, last_step) for d = t - t_knot0_: advanced as the
+  // (time-ordered) events pass the knots, which avoids a 64-bit division per event.
+  int64_t i = 0, i_t = 0;  // step, and its start i * h
   for (const Event& e : events) {
     const Eigen::Vector3f& b = bearings_[static_cast<size_t>(e.y) * width_ + e.x];
     Eigen::Vector3f p;
     if (compensate) {
       const int64_t d = e.t_ns - t_knot0_;
-      const int64_t i = std::min(d / h, last_step);
-      const float s = static_cast<float>(d - i * h) * inv_h;
+      if (d < i_t) {  // out of order: start over
+        i = std::min(d / h, last_step);
+        i_t = i * h;
+      }
+      while (i < last_step && d - i_t >= h) {
+        ++i;
+        i_t += h;
+      }
+      const float s = static_cast<float>(d - i_t) * inv_h;
       const Eigen::Matrix3f& M0 = knots_[static_cast<size_t>(i)];
       const Eigen::Matrix3f& M1 = knots_[static_cast<size_t>(i) + 1];
       const Eigen::Vector3f p0 = M0 * b;
