@@ -39,6 +39,25 @@ inline bool parse_coord(const char*& p, const char* end, uint32_t* v) {
 
 constexpr int64_t kPow10[] = {1, 10, 100, 1000, 10000, 100000, 1000000, 10000000, 100000000, 1000000000};
 
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__
+constexpr bool kLittleEndian = false;
+#else
+constexpr bool kLittleEndian = true;
+#endif
+
+// Eight ASCII digits in a little-endian 64-bit word (first character in the lowest byte).
+inline bool all_digits8(uint64_t w) {
+  return (w & 0xF0F0F0F0F0F0F0F0ull) == 0x3030303030303030ull &&
+         ((w + 0x0606060606060606ull) & 0xF0F0F0F0F0F0F0F0ull) == 0x3030303030303030ull;
+}
+// Their value (first character most significant), by pairwise combination (SWAR).
+inline uint64_t digits8_value(uint64_t w) {
+  w -= 0x3030303030303030ull;
+  w = (w * 10 + (w >> 8)) & 0x00FF00FF00FF00FFull;           // pairs
+  w = (w * 100 + (w >> 16)) & 0x0000FFFF0000FFFFull;         // quads
+  return (w * 10000 + (w >> 32)) & 0x00000000FFFFFFFFull;    // eight
+}
+
 // Fast path for the common record form `S[.F] X Y P` as written by the ECD and `evio simulate`:
 // single spaces, an unsigned time of at most 9 integer digits and at most `exponent` fraction
 // digits, pixel coordinates of 1..5 digits, polarity 0 or 1, nothing else on the line. Gives
@@ -54,6 +73,11 @@ inline bool parse_record_fast(const char* p, const char* end, int exponent, int6
   int kept = 0;
   if (p < end && *p == '.') {
     const char* fb = ++p;
+    uint64_t chunk;
+    if (kLittleEndian && end - p >= 8 && (std::memcpy(&chunk, p, 8), all_digits8(chunk))) {  // nanosecond fractions: 8 digits at once
+      frac = digits8_value(chunk);
+      p += 8;
+    }
     while (p < end && static_cast<unsigned>(*p - '0') < 10u) frac = frac * 10 + static_cast<unsigned>(*p++ - '0');
     kept = static_cast<int>(p - fb);
     if (kept > exponent) return false;
@@ -230,9 +254,13 @@ size_t EcdEventReader::read(EventBuffer* out, size_t max_events) {
       continue;
     }
     last_t_ns_ = e.t_ns;
-    e.x = static_cast<uint16_t>(x);
-    e.y = static_cast<uint16_t>(y);
-    v.push_back(e);
+    // Written field by field into the buffer: a copy of the stack-assembled Event stalled on store
+    // forwarding (its fields are stored in pieces and read back as one 16-byte load).
+    Event& out_e = v.emplace_back();
+    out_e.t_ns = e.t_ns;
+    out_e.x = static_cast<uint16_t>(x);
+    out_e.y = static_cast<uint16_t>(y);
+    out_e.polarity = e.polarity;
     ++n;
   }
   report_.records += static_cast<int64_t>(v.size() - n0);
