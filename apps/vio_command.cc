@@ -56,7 +56,8 @@ std::string tracker_yaml(const char* key, const frontend::FeatureTrackerOptions&
   y << key << ": {grid_cols: " << tk.grid_cols << ", grid_rows: " << tk.grid_rows << ", max_features: " << tk.max_features
     << ", max_per_cell: " << tk.max_per_cell << ", fast_threshold: " << tk.fast_threshold
     << ", min_distance_px: " << tk.min_distance_px << ", klt_window_px: " << tk.klt_window_px
-    << ", klt_pyramid_levels: " << tk.klt_pyramid_levels << ", forward_backward_max_px: " << num(tk.forward_backward_max_px)
+    << ", klt_pyramid_levels: " << tk.klt_pyramid_levels << ", klt_max_iterations: " << tk.klt_max_iterations
+    << ", klt_epsilon_px: " << num(tk.klt_epsilon_px) << ", forward_backward_max_px: " << num(tk.forward_backward_max_px)
     << ", template_max_age_frames: " << tk.template_max_age_frames
     << ", ransac: " << frontend::ransac_model_name(tk.ransac)
     << ", ransac_threshold_px: " << num(tk.ransac_threshold_px) << ", min_tracks_before_detection: " << tk.min_tracks_before_detection
@@ -67,8 +68,8 @@ std::string tracker_yaml(const char* key, const frontend::FeatureTrackerOptions&
 // Reads a feature-tracker section over *t; fails with file:line on invalid settings.
 void parse_tracker(const Section& s, frontend::FeatureTrackerOptions* t) {
   s.allow({"grid_cols", "grid_rows", "max_features", "max_per_cell", "fast_threshold", "min_distance_px",
-           "klt_window_px", "klt_pyramid_levels", "forward_backward_max_px", "ransac", "ransac_threshold_px",
-           "min_tracks_before_detection", "template_max_age_frames", "seed"});
+           "klt_window_px", "klt_pyramid_levels", "klt_max_iterations", "klt_epsilon_px", "forward_backward_max_px", "ransac",
+           "ransac_threshold_px", "min_tracks_before_detection", "template_max_age_frames", "seed"});
   t->grid_cols = s.integer("grid_cols", t->grid_cols, 1, 100);
   t->grid_rows = s.integer("grid_rows", t->grid_rows, 1, 100);
   t->max_features = s.integer("max_features", t->max_features, 1, 100000);
@@ -77,6 +78,8 @@ void parse_tracker(const Section& s, frontend::FeatureTrackerOptions* t) {
   t->min_distance_px = s.integer("min_distance_px", t->min_distance_px, 0, 1000);
   t->klt_window_px = s.integer("klt_window_px", t->klt_window_px, 3, 255);
   t->klt_pyramid_levels = s.integer("klt_pyramid_levels", t->klt_pyramid_levels, 0, 8);
+  t->klt_max_iterations = s.integer("klt_max_iterations", t->klt_max_iterations, 1, 1000);
+  t->klt_epsilon_px = s.number("klt_epsilon_px", t->klt_epsilon_px, Range::kPositive, "px");
   t->forward_backward_max_px = s.number("forward_backward_max_px", t->forward_backward_max_px, Range::kPositive, "px");
   t->template_max_age_frames = s.integer("template_max_age_frames", t->template_max_age_frames, 1, 100000);
   const std::string r = s.string("ransac", frontend::ransac_model_name(t->ransac), {"two_point", "five_point", "none"});

@@ -83,80 +83,186 @@ std::unique_ptr<LinearPrior> LinearPrior::anchor(std::vector<PriorBlock> blocks,
   return std::make_unique<LinearPrior>(std::move(blocks), std::move(J), Eigen::VectorXd::Zero(n));
 }
 
+namespace {
+
+// Pseudo-inverse of a symmetric positive semi-definite matrix by eigen-decomposition: eigenvalues
+// below eps * max(1, |largest|) count as zero (unobserved directions contribute nothing).
+Eigen::MatrixXd psd_pseudo_inverse(const Eigen::MatrixXd& A, double eps) {
+  const Eigen::MatrixXd S = 0.5 * (A + A.transpose());
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(S);
+  const double tol = eps * std::max(1.0, es.eigenvalues().cwiseAbs().maxCoeff());
+  Eigen::VectorXd inv = es.eigenvalues();
+  for (int i = 0; i < inv.size(); ++i) inv(i) = inv(i) > tol ? 1.0 / inv(i) : 0.0;
+  return es.eigenvectors() * inv.asDiagonal() * es.eigenvectors().transpose();
+}
+
+}  // namespace
+
 std::unique_ptr<LinearPrior> marginalize(ceres::Problem* problem, const std::vector<ceres::ResidualBlockId>& residual_blocks,
                                          const std::vector<const double*>& removed,
                                          const std::function<bool(const double*)>& is_pose, MarginalizationStats* stats,
                                          double eps) {
-  // Column layout: removed blocks first, then kept blocks in first-seen order.
-  struct Col {
-    int offset = 0;
+  // Every parameter block the residuals touch, and per residual the blocks it touches.
+  struct Block {
+    const double* p = nullptr;
     int tangent = 0;
     int size = 0;
+    bool removed = false;
+    bool first_stage = false;  // removed and eliminated on its own (see below)
+    int offset = -1;           // column in the reduced system [second-stage removed | kept]
   };
-  std::unordered_map<const double*, Col> cols;
+  std::vector<Block> blocks;
+  std::unordered_map<const double*, int> index;
+  auto block_of = [&](const double* p, bool is_removed) {
+    const auto it = index.find(p);
+    if (it != index.end()) return it->second;
+    Block b;
+    b.p = p;
+    b.size = problem->ParameterBlockSize(p);
+    b.tangent = problem->ParameterBlockTangentSize(p);
+    b.removed = is_removed;
+    blocks.push_back(b);
+    index.emplace(p, static_cast<int>(blocks.size()) - 1);
+    return static_cast<int>(blocks.size()) - 1;
+  };
+  for (const double* p : removed) block_of(p, true);
+  const size_t n_removed = blocks.size();
+  std::vector<std::vector<int>> touches(residual_blocks.size());
   std::vector<const double*> kept;
-  int m = 0;
-  for (const double* p : removed) {
-    const int size = problem->ParameterBlockSize(p);
-    const int t = problem->ParameterBlockTangentSize(p);
-    cols[p] = {m, t, size};
-    m += t;
-  }
-  int n = m;
-  int rows = 0;
-  for (ceres::ResidualBlockId id : residual_blocks) {
+  for (size_t r = 0; r < residual_blocks.size(); ++r) {
     std::vector<double*> params;
-    problem->GetParameterBlocksForResidualBlock(id, &params);
+    problem->GetParameterBlocksForResidualBlock(residual_blocks[r], &params);
     for (double* p : params) {
-      if (cols.count(p)) continue;
-      const int size = problem->ParameterBlockSize(p);
-      const int t = problem->ParameterBlockTangentSize(p);
-      cols[p] = {n, t, size};
-      n += t;
-      kept.push_back(p);
+      const size_t before = blocks.size();
+      touches[r].push_back(block_of(p, false));
+      if (blocks.size() > before) kept.push_back(p);
     }
-    rows += problem->GetCostFunctionForResidualBlock(id)->num_residuals();
   }
   if (kept.empty()) return nullptr;
-  // Stacked Jacobian and residual.
-  Eigen::MatrixXd J = Eigen::MatrixXd::Zero(rows, n);
-  Eigen::VectorXd r = Eigen::VectorXd::Zero(rows);
-  int row = 0;
-  for (ceres::ResidualBlockId id : residual_blocks) {
-    std::vector<double*> params;
-    problem->GetParameterBlocksForResidualBlock(id, &params);
+
+  // Two-stage elimination. Removed blocks that share no residual with another removed block of the
+  // first stage (typically the landmarks of finished tracks, coupled only to poses) form the first
+  // stage: H_mm is block diagonal over them, so each is eliminated on its own with the
+  // pseudo-inverse of its diagonal block. The remaining removed blocks (the oldest keyframe's pose)
+  // are eliminated from the reduced system next. With an invertible H_mm this is the same Schur
+  // complement as one pseudo-inverse of the whole H_mm, at a fraction of the cost.
+  {
+    std::vector<size_t> order(n_removed);
+    for (size_t i = 0; i < n_removed; ++i) order[i] = i;
+    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return blocks[a].tangent < blocks[b].tangent; });
+    std::vector<std::vector<int>> removed_neighbours(n_removed);
+    for (const auto& t : touches)
+      for (int a : t)
+        for (int b : t)
+          if (a != b && blocks[static_cast<size_t>(a)].removed && blocks[static_cast<size_t>(b)].removed)
+            removed_neighbours[static_cast<size_t>(a)].push_back(b);
+    for (size_t i : order) {
+      bool free = true;
+      for (int nb : removed_neighbours[i]) free = free && !blocks[static_cast<size_t>(nb)].first_stage;
+      blocks[i].first_stage = free;
+    }
+  }
+  int m = 0, m2 = 0, n = 0;  // removed dims, second-stage removed dims, reduced system dims
+  for (Block& b : blocks) {
+    if (b.removed) m += b.tangent;
+    if (b.removed && !b.first_stage) {
+      b.offset = n;
+      n += b.tangent;
+      m2 += b.tangent;
+    }
+  }
+  for (Block& b : blocks) {
+    if (!b.removed) {
+      b.offset = n;
+      n += b.tangent;
+    }
+  }
+  const int k = n - m2;
+
+  // H = J^T J and g = J^T r, accumulated per residual block: the reduced system over
+  // [second-stage removed | kept], and per first-stage block its diagonal block, gradient and
+  // couplings to the reduced blocks.
+  struct FirstStage {
+    Eigen::MatrixXd D;
+    Eigen::VectorXd g;
+    std::vector<std::pair<int, Eigen::MatrixXd>> couple;  // (block, t_first x t_block)
+  };
+  std::vector<FirstStage> first(blocks.size());  // used at the first-stage blocks
+  Eigen::MatrixXd H = Eigen::MatrixXd::Zero(n, n);
+  Eigen::VectorXd g = Eigen::VectorXd::Zero(n);
+  using RowMajor = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  std::vector<RowMajor> jac;
+  std::vector<double*> jp;
+  Eigen::VectorXd res;
+  for (size_t r = 0; r < residual_blocks.size(); ++r) {
+    const ceres::ResidualBlockId id = residual_blocks[r];
+    const std::vector<int>& t = touches[r];
     const int nr = problem->GetCostFunctionForResidualBlock(id)->num_residuals();
-    std::vector<Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> jac(params.size());
-    std::vector<double*> jp(params.size());
-    for (size_t i = 0; i < params.size(); ++i) {
-      jac[i].resize(nr, cols[params[i]].tangent);
+    jac.resize(t.size());
+    jp.resize(t.size());
+    for (size_t i = 0; i < t.size(); ++i) {
+      jac[i].resize(nr, blocks[static_cast<size_t>(t[i])].tangent);
       jp[i] = jac[i].data();
     }
+    res.resize(nr);
     double cost = 0;
-    Eigen::VectorXd res(nr);
     if (!problem->EvaluateResidualBlock(id, true, &cost, res.data(), jp.data())) {
       throw std::runtime_error("marginalisation: a residual block failed to evaluate");
     }
-    r.segment(row, nr) = res;
-    for (size_t i = 0; i < params.size(); ++i) J.block(row, cols[params[i]].offset, nr, cols[params[i]].tangent) += jac[i];
-    row += nr;
+    for (size_t i = 0; i < t.size(); ++i) {
+      const Block& bi = blocks[static_cast<size_t>(t[i])];
+      if (bi.first_stage) {
+        FirstStage& f = first[t[i]];
+        if (f.D.size() == 0) {
+          f.D = Eigen::MatrixXd::Zero(bi.tangent, bi.tangent);
+          f.g = Eigen::VectorXd::Zero(bi.tangent);
+        }
+        f.g += jac[i].transpose() * res;
+        for (size_t j = 0; j < t.size(); ++j) {
+          const Block& bj = blocks[static_cast<size_t>(t[j])];
+          if (j == i) {
+            f.D += jac[i].transpose() * jac[i];
+          } else if (!bj.first_stage) {
+            auto c = std::find_if(f.couple.begin(), f.couple.end(), [&](const auto& e) { return e.first == t[j]; });
+            if (c == f.couple.end()) {
+              f.couple.emplace_back(t[j], Eigen::MatrixXd::Zero(bi.tangent, bj.tangent));
+              c = f.couple.end() - 1;
+            }
+            c->second += jac[i].transpose() * jac[j];
+          }
+        }
+        continue;
+      }
+      g.segment(bi.offset, bi.tangent) += jac[i].transpose() * res;
+      for (size_t j = 0; j < t.size(); ++j) {
+        const Block& bj = blocks[static_cast<size_t>(t[j])];
+        if (bj.first_stage) continue;
+        H.block(bi.offset, bj.offset, bi.tangent, bj.tangent) += jac[i].transpose() * jac[j];
+      }
+    }
   }
-  const Eigen::MatrixXd H = J.transpose() * J;
-  const Eigen::VectorXd g = J.transpose() * r;
-  const int k = n - m;
+  // First stage: H -= C^T D^+ C, g -= C^T D^+ g_b over the blocks each one couples to.
+  for (const FirstStage& f : first) {
+    if (f.D.size() == 0) continue;
+    const Eigen::MatrixXd Dinv = psd_pseudo_inverse(f.D, eps);
+    for (const auto& [j, Cj] : f.couple) {
+      const Block& bj = blocks[static_cast<size_t>(j)];
+      const Eigen::MatrixXd CjT_Dinv = Cj.transpose() * Dinv;
+      g.segment(bj.offset, bj.tangent) -= CjT_Dinv * f.g;
+      for (const auto& [l, Cl] : f.couple) {
+        const Block& bl = blocks[static_cast<size_t>(l)];
+        H.block(bj.offset, bl.offset, bj.tangent, bl.tangent) -= CjT_Dinv * Cl;
+      }
+    }
+  }
+  // Second stage.
   Eigen::MatrixXd Hs = H.bottomRightCorner(k, k);
   Eigen::VectorXd gs = g.tail(k);
-  if (m > 0) {
-    // Pseudo-inverse of H_mm by eigen-decomposition (unobserved directions contribute nothing).
-    const Eigen::MatrixXd Hmm = 0.5 * (H.topLeftCorner(m, m) + H.topLeftCorner(m, m).transpose());
-    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(Hmm);
-    const double tol = eps * std::max(1.0, es.eigenvalues().cwiseAbs().maxCoeff());
-    Eigen::VectorXd inv = es.eigenvalues();
-    for (int i = 0; i < m; ++i) inv(i) = inv(i) > tol ? 1.0 / inv(i) : 0.0;
-    const Eigen::MatrixXd Hmm_inv = es.eigenvectors() * inv.asDiagonal() * es.eigenvectors().transpose();
-    const Eigen::MatrixXd Hkm = H.bottomLeftCorner(k, m);
+  if (m2 > 0) {
+    const Eigen::MatrixXd Hmm_inv = psd_pseudo_inverse(H.topLeftCorner(m2, m2), eps);
+    const Eigen::MatrixXd Hkm = H.bottomLeftCorner(k, m2);
     Hs -= Hkm * Hmm_inv * Hkm.transpose();
-    gs -= Hkm * Hmm_inv * g.head(m);
+    gs -= Hkm * Hmm_inv * g.head(m2);
   }
   Hs = 0.5 * (Hs + Hs.transpose());
   Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(Hs);
@@ -174,14 +280,14 @@ std::unique_ptr<LinearPrior> marginalize(ceres::Problem* problem, const std::vec
   }
   const Eigen::MatrixXd Jstar = s.asDiagonal() * es.eigenvectors().transpose();
   const Eigen::VectorXd rstar = s_inv.asDiagonal() * es.eigenvectors().transpose() * gs;
-  std::vector<PriorBlock> blocks;
+  std::vector<PriorBlock> prior_blocks;
   for (const double* p : kept) {
     PriorBlock b;
     b.parameters = p;
-    b.size = cols[p].size;
+    b.size = blocks[static_cast<size_t>(index.at(p))].size;
     b.is_pose = is_pose(p);
     b.x0.assign(p, p + b.size);
-    blocks.push_back(std::move(b));
+    prior_blocks.push_back(std::move(b));
   }
   if (stats) {
     stats->removed_dims = m;
@@ -189,7 +295,7 @@ std::unique_ptr<LinearPrior> marginalize(ceres::Problem* problem, const std::vec
     stats->residual_blocks = static_cast<int>(residual_blocks.size());
     stats->rank = rank;
   }
-  return std::make_unique<LinearPrior>(std::move(blocks), Jstar, rstar);
+  return std::make_unique<LinearPrior>(std::move(prior_blocks), Jstar, rstar);
 }
 
 }  // namespace evio::backend

@@ -36,6 +36,7 @@ struct Data {
   const std::vector<Vector3d>& b0;
   const std::vector<Vector3d>& b1;
   double f, inv_s2;
+  std::vector<Vector3d> x0, x1;  // b0 / b0.z and b1 / b1.z (normalised image points)
 };
 
 // S/R residual: |r|^2 = e^2 (px^2), the 4-D distance to {(x, pi(R x))}.
@@ -94,20 +95,22 @@ Matrix3d refine_rotation(Matrix3d R, const Data& d, double cap, double* cost) {
   return R;
 }
 
-// Sampson distance (px, signed) of the epipolar constraint x1^T [t]x R x0 = 0.
-double sampson(const Matrix3d& R, const Vector3d& t, const Vector3d& b0, const Vector3d& b1, double f) {
-  const Vector3d x0 = b0 / b0.z(), x1 = b1 / b1.z();
-  const Matrix3d E = skew(t) * R;
+// Sampson distance (px, signed) of the epipolar constraint x1^T E x0 = 0, E = [t]x R, for the
+// normalised image points x0 = b0 / b0.z, x1 = b1 / b1.z.
+double sampson(const Matrix3d& E, const Vector3d& x0, const Vector3d& x1, double f) {
   const Vector3d Ex0 = E * x0, Etx1 = E.transpose() * x1;
   const double den = Ex0.head<2>().squaredNorm() + Etx1.head<2>().squaredNorm();
   if (!(den > 1e-24)) return 0.0;
   return f * x1.dot(Ex0) / std::sqrt(den);
 }
 
+Matrix3d essential(const Matrix3d& R, const Vector3d& t) { return skew(t) * R; }
+
 double general_cost(const Matrix3d& R, const Vector3d& t, const Data& d, double cap) {
+  const Matrix3d E = essential(R, t);
   double c = 0;
-  for (size_t i = 0; i < d.b0.size(); ++i) {
-    const double e = sampson(R, t, d.b0[i], d.b1[i], d.f);
+  for (size_t i = 0; i < d.x0.size(); ++i) {
+    const double e = sampson(E, d.x0[i], d.x1[i], d.f);
     c += std::min(e * e * d.inv_s2, cap);
   }
   return c;
@@ -146,20 +149,27 @@ void refine_general(Matrix3d* R, Vector3d* t, const Data& d, double cap, double*
   for (int it = 0; it < 15; ++it) {
     Eigen::Matrix<double, 5, 5> H = Eigen::Matrix<double, 5, 5>::Zero();
     Eigen::Matrix<double, 5, 1> g = Eigen::Matrix<double, 5, 1>::Zero();
-    Matrix3d Rp[5], Rm[5];
-    Vector3d tp[5], tm[5];
+    // The essential matrices of the central differences, once per iteration.
+    Matrix3d Ep[5], Em[5];
     for (int k = 0; k < 5; ++k) {
       Eigen::Matrix<double, 5, 1> x = Eigen::Matrix<double, 5, 1>::Zero();
       x(k) = h;
-      apply(*R, *t, x, &Rp[k], &tp[k]);
-      apply(*R, *t, -x, &Rm[k], &tm[k]);
+      Matrix3d Rk;
+      Vector3d tk;
+      apply(*R, *t, x, &Rk, &tk);
+      Ep[k] = essential(Rk, tk);
+      apply(*R, *t, -x, &Rk, &tk);
+      Em[k] = essential(Rk, tk);
     }
-    for (size_t i = 0; i < d.b0.size(); ++i) {
-      const double e = sampson(*R, *t, d.b0[i], d.b1[i], d.f);
+    const Matrix3d E = essential(*R, *t);
+    for (size_t i = 0; i < d.x0.size(); ++i) {
+      const Vector3d& x0 = d.x0[i];
+      const Vector3d& x1 = d.x1[i];
+      const double e = sampson(E, x0, x1, d.f);
       if (e * e * d.inv_s2 >= cap) continue;
       Eigen::Matrix<double, 1, 5> J;
       for (int k = 0; k < 5; ++k) {
-        J(k) = (sampson(Rp[k], tp[k], d.b0[i], d.b1[i], d.f) - sampson(Rm[k], tm[k], d.b0[i], d.b1[i], d.f)) / (2 * h);
+        J(k) = (sampson(Ep[k], x0, x1, d.f) - sampson(Em[k], x0, x1, d.f)) / (2 * h);
       }
       H += J.transpose() * J;
       g += J.transpose() * e;
@@ -214,7 +224,13 @@ TwoViewGric two_view_gric(const std::vector<Vector3d>& b0, const std::vector<Vec
   }
   out.n = static_cast<int>(c0.size());
   if (out.n < kMinCorrespondences || !(focal_px > 0) || !(sigma_px > 0)) return out;
-  const Data d{c0, c1, focal_px, 1.0 / (sigma_px * sigma_px)};
+  Data d{c0, c1, focal_px, 1.0 / (sigma_px * sigma_px), {}, {}};
+  d.x0.reserve(c0.size());
+  d.x1.reserve(c1.size());
+  for (size_t i = 0; i < c0.size(); ++i) {
+    d.x0.push_back(c0[i] / c0[i].z());
+    d.x1.push_back(c1[i] / c1[i].z());
+  }
   const double n = out.n;
   const double lambda1 = std::log(kR), lambda2 = std::log(kR * n);
   const double cap2 = kLambda3 * (kR - 2), cap3 = kLambda3 * (kR - 3);

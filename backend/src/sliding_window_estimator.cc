@@ -568,18 +568,55 @@ void SlidingWindowEstimator::solve() {
   PoseManifold manifold;
   const auto loss = make_loss(options_.loss, options_.loss_scale);
   ceres::Problem problem(problem_options());
+  // The landmarks in the solve: triangulated and seen from two or more window keyframes.
+  std::vector<int64_t> used_tracks;
+  for (auto& [track, lm] : landmarks_) {
+    if (!lm.triangulated) continue;
+    int n = 0;
+    for (auto& k : window_) n += k->obs.count(track) ? 1 : 0;
+    if (n >= 2) used_tracks.push_back(track);
+  }
+  std::sort(used_tracks.begin(), used_tracks.end());
+  // The solve works on copies of the parameters in one buffer, [landmarks by track id | per
+  // keyframe pose, speed/bias], copied back afterwards: Ceres orders the blocks of an ordering group
+  // by address, and the buffer's fixed layout keeps the result independent of heap addresses.
+  std::vector<double> buf(3 * used_tracks.size() + 16 * window_.size() + 1);
+  std::unordered_map<const double*, double*> at;  // live block -> its copy in buf
+  std::vector<std::pair<double*, int>> live;       // live block, size (to copy back)
+  size_t off = 0;
+  auto stage = [&](double* p, int size) {
+    std::copy(p, p + size, buf.data() + off);
+    at[p] = buf.data() + off;
+    live.emplace_back(p, size);
+    off += static_cast<size_t>(size);
+  };
+  for (int64_t track : used_tracks) stage(landmarks_.at(track).p.data(), 3);
   for (auto& k : window_) {
-    problem.AddParameterBlock(k->pose.data(), 7, &manifold);
-    problem.AddParameterBlock(k->sb.data(), 9);
+    stage(k->pose.data(), 7);
+    stage(k->sb.data(), 9);
+  }
+  if (options_.estimate_time_offset) stage(time_offset_.data(), 1);
+  auto in_buf = [&](const double* p) {
+    const auto it = at.find(p);
+    return it != at.end() ? it->second : const_cast<double*>(p);
+  };
+  for (auto& k : window_) {
+    problem.AddParameterBlock(in_buf(k->pose.data()), 7, &manifold);
+    problem.AddParameterBlock(in_buf(k->sb.data()), 9);
   }
   for (size_t i = 1; i < window_.size(); ++i) {
     Keyframe& a = *window_[i - 1];
     Keyframe& b = *window_[i];
-    problem.AddResidualBlock(b.imu_error.get(), nullptr, {a.pose.data(), a.sb.data(), b.pose.data(), b.sb.data()});
+    problem.AddResidualBlock(b.imu_error.get(), nullptr,
+                             {in_buf(a.pose.data()), in_buf(a.sb.data()), in_buf(b.pose.data()), in_buf(b.sb.data())});
   }
+  std::vector<double*> outside;  // prior blocks not in the window (not expected)
   if (prior_) {
     std::vector<double*> blocks;
-    for (const PriorBlock& pb : prior_->blocks()) blocks.push_back(const_cast<double*>(pb.parameters));
+    for (const PriorBlock& pb : prior_->blocks()) {
+      blocks.push_back(in_buf(pb.parameters));
+      if (!at.count(pb.parameters)) outside.push_back(blocks.back());
+    }
     problem.AddResidualBlock(prior_.get(), nullptr, blocks);
   }
   // Rotation-only links of untriangulated tracks.
@@ -589,31 +626,40 @@ void SlidingWindowEstimator::solve() {
     for (auto& [track, cost] : b.rot) {
       const auto lit = landmarks_.find(track);
       if (lit != landmarks_.end() && lit->second.triangulated) continue;
-      problem.AddResidualBlock(cost.get(), loss.get(), a.pose.data(), b.pose.data());
+      problem.AddResidualBlock(cost.get(), loss.get(), in_buf(a.pose.data()), in_buf(b.pose.data()));
     }
   }
-  int used = 0;
   for (auto& [track, lm] : landmarks_) {
-    if (!lm.triangulated) continue;
-    int n = 0;
-    for (auto& k : window_) n += k->obs.count(track) ? 1 : 0;
-    if (n < 2) continue;
-    ++used;
+    if (!at.count(lm.p.data())) continue;  // not used
     for (auto& k : window_) {
       if (options_.estimate_time_offset) {
         const auto it = k->reproj_td.find(track);
         if (it == k->reproj_td.end()) continue;
-        problem.AddResidualBlock(it->second.get(), loss.get(), k->pose.data(), lm.p.data(), time_offset_.data());
+        problem.AddResidualBlock(it->second.get(), loss.get(), in_buf(k->pose.data()), in_buf(lm.p.data()),
+                                 in_buf(time_offset_.data()));
         continue;
       }
       const auto it = k->reproj.find(track);
       if (it == k->reproj.end()) continue;
-      problem.AddResidualBlock(it->second.get(), loss.get(), k->pose.data(), lm.p.data());
+      problem.AddResidualBlock(it->second.get(), loss.get(), in_buf(k->pose.data()), in_buf(lm.p.data()));
     }
   }
-  stats_.solve_landmarks.push_back(used);
+  stats_.solve_landmarks.push_back(static_cast<int>(used_tracks.size()));
   ceres::Solver::Options so;
   so.linear_solver_type = ceres::DENSE_SCHUR;
+  // Eliminate exactly the landmarks (group 0), keep poses and speed/bias blocks (group 1): every
+  // eliminated row is then a 2-row reprojection error on a 3-D landmark and a 6-D pose tangent,
+  // which Ceres' fixed-size <2, 3, 6> Schur eliminator handles (its automatic ordering also
+  // eliminates some 9-D speed/bias blocks, which falls back to the slow dynamic-size one).
+  auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
+  for (int64_t track : used_tracks) ordering->AddElementToGroup(in_buf(landmarks_.at(track).p.data()), 0);
+  for (auto& k : window_) {
+    ordering->AddElementToGroup(in_buf(k->pose.data()), 1);
+    ordering->AddElementToGroup(in_buf(k->sb.data()), 1);
+  }
+  if (options_.estimate_time_offset) ordering->AddElementToGroup(in_buf(time_offset_.data()), 1);
+  for (double* p : outside) ordering->AddElementToGroup(p, 1);
+  so.linear_solver_ordering = ordering;
   so.max_num_iterations = options_.max_iterations;
   so.num_threads = 1;
   so.logging_type = ceres::SILENT;
@@ -621,13 +667,14 @@ void SlidingWindowEstimator::solve() {
   if (options_.max_solver_time_s > 0) so.max_solver_time_in_seconds = options_.max_solver_time_s;
   ceres::Solver::Summary summary;
   ceres::Solve(so, &problem, &summary);
+  for (const auto& [p, size] : live) std::copy(at[p], at[p] + size, p);
   latest_cov_.reset();
   if (options_.compute_covariance) {
     ceres::Covariance::Options co;
     co.algorithm_type = ceres::DENSE_SVD;
     co.null_space_rank = -1;  // pseudo-inverse: the gauge is fixed by the prior, but be safe
     ceres::Covariance cov(co);
-    const double* pose = window_.back()->pose.data();
+    const double* pose = in_buf(window_.back()->pose.data());
     const std::vector<std::pair<const double*, const double*>> blocks = {{pose, pose}};
     if (cov.Compute(blocks, &problem)) {
       Eigen::Matrix<double, 6, 6, Eigen::RowMajor> c;

@@ -78,7 +78,7 @@ bool BackgroundActivityFilter::accept(const Event& e) {
   const int r = options_.radius;
   int64_t* centre = last_.data() + static_cast<size_t>(e.y + r) * stride_ + (e.x + r);
   int support = 0;
-  for (int dy = -r; dy <= r; ++dy) {
+  for (int dy = -r; dy <= r && support < options_.min_support; ++dy) {  // enough support: done
     const int64_t* row = centre + static_cast<ptrdiff_t>(dy) * stride_;
     for (int dx = -r; dx <= r; ++dx) {
       if (dx == 0 && dy == 0) continue;

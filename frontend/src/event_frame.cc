@@ -3,12 +3,47 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <stdexcept>
 
 #include "evio/calib/geometry.h"
 
 namespace evio::frontend {
+namespace {
+
+// The q-th smallest (0-based) of v[0, m), all positive finite floats, by radix selection on their
+// bit patterns (ordered like the values for positive floats): three counting passes over 11, 11
+// and 10 bits, each keeping only the bucket that holds rank q. The same value as std::nth_element,
+// in linear time. Reorders v.
+float select_positive(std::vector<float>* v, size_t m, size_t q) {
+  static_assert(sizeof(float) == sizeof(uint32_t), "32-bit floats");
+  float* a = v->data();
+  constexpr int kShift[3] = {21, 10, 0};
+  constexpr uint32_t kMask[3] = {0x7ff, 0x7ff, 0x3ff};
+  uint32_t count[2048];
+  size_t n = m;
+  for (int pass = 0; pass < 3; ++pass) {
+    std::fill(count, count + kMask[pass] + 1, 0u);
+    for (size_t i = 0; i < n; ++i) {
+      uint32_t b;
+      std::memcpy(&b, &a[i], sizeof(b));
+      ++count[(b >> kShift[pass]) & kMask[pass]];
+    }
+    uint32_t bucket = 0;
+    while (q >= count[bucket]) q -= count[bucket++];
+    size_t kept = 0;
+    for (size_t i = 0; i < n; ++i) {
+      uint32_t b;
+      std::memcpy(&b, &a[i], sizeof(b));
+      if (((b >> kShift[pass]) & kMask[pass]) == bucket) a[kept++] = a[i];
+    }
+    n = kept;
+  }
+  return a[0];  // every value left has the same bits
+}
+
+}  // namespace
 
 bool EventFrameOptions::Validate(std::string* why) const {
   auto fail = [why](const char* msg) {
@@ -171,32 +206,58 @@ EventFrame EventFrameBuilder::build_frame(EventSpan events, int64_t t_ref_ns) {
   const float w_max = static_cast<float>(width_ - 1), h_max = static_cast<float>(height_ - 1);
   float* a = acc.ptr<float>();
   size_t outside = 0;
+  // Knot step of the current event, min(d / h, last_step) for d = t - t_knot0_: advanced as the
+  // (time-ordered) events pass the knots, which avoids a 64-bit division per event.
+  int64_t i = 0, i_t = 0;  // step, and its start i * h
+  const float vx = v_over_d.x(), vy = v_over_d.y(), vz = v_over_d.z();
   for (const Event& e : events) {
     const Eigen::Vector3f& b = bearings_[static_cast<size_t>(e.y) * width_ + e.x];
-    Eigen::Vector3f p;
+    float px, py, pz;
     if (compensate) {
       const int64_t d = e.t_ns - t_knot0_;
-      const int64_t i = std::min(d / h, last_step);
-      const float s = static_cast<float>(d - i * h) * inv_h;
-      const Eigen::Matrix3f& M0 = knots_[static_cast<size_t>(i)];
-      const Eigen::Matrix3f& M1 = knots_[static_cast<size_t>(i) + 1];
-      const Eigen::Vector3f p0 = M0 * b;
-      p = p0 + s * (M1 * b - p0);
+      if (d < i_t) {  // out of order: start over
+        i = std::min(d / h, last_step);
+        i_t = i * h;
+      }
+      while (i < last_step && d - i_t >= h) {
+        ++i;
+        i_t += h;
+      }
+      const float s = static_cast<float>(d - i_t) * inv_h;
+      // p = M0 b + s (M1 b - M0 b), in scalars (Eigen's temporaries went through the stack), summed
+      // in Eigen's order, a0 + (a1 + a2), so the frames stay bit-identical.
+      const float* M0 = knots_[static_cast<size_t>(i)].data();  // column-major
+      const float* M1 = knots_[static_cast<size_t>(i) + 1].data();
+      const float bx = b.x(), by = b.y(), bz = b.z();
+      const float p0x = M0[0] * bx + (M0[3] * by + M0[6] * bz);
+      const float p0y = M0[1] * bx + (M0[4] * by + M0[7] * bz);
+      const float p0z = M0[2] * bx + (M0[5] * by + M0[8] * bz);
+      const float p1x = M1[0] * bx + (M1[3] * by + M1[6] * bz);
+      const float p1y = M1[1] * bx + (M1[4] * by + M1[7] * bz);
+      const float p1z = M1[2] * bx + (M1[5] * by + M1[8] * bz);
+      px = p0x + s * (p1x - p0x);
+      py = p0y + s * (p1y - p0y);
+      pz = p0z + s * (p1z - p0z);
       if (translate) {
         // Point at z-depth D along b, moved by the camera displacement: P_ref = (D / b_z) R b +
         // v (t_k - t_ref); scaled by b_z / D (projection is scale-free).
         const float dt_s = static_cast<float>(static_cast<double>(e.t_ns - t_ref_ns) * 1e-9);
-        p += v_over_d * (dt_s * b.z());
+        const float k = dt_s * bz;
+        px += vx * k;
+        py += vy * k;
+        pz += vz * k;
       }
     } else {
-      p = b;
+      px = b.x();
+      py = b.y();
+      pz = b.z();
     }
-    if (!(p.z() > 1e-6f)) {  // also catches NaN bearings
+    if (!(pz > 1e-6f)) {  // also catches NaN bearings
       ++outside;
       continue;
     }
-    const float iz = 1.0f / p.z();
-    const float u = fx_ * p.x() * iz + cx_, v = fy_ * p.y() * iz + cy_;
+    const float iz = 1.0f / pz;
+    const float u = fx_ * px * iz + cx_, v = fy_ * py * iz + cy_;
     if (!(u >= 0.0f && v >= 0.0f && u <= w_max && v <= h_max)) {
       ++outside;
       continue;
@@ -231,9 +292,7 @@ EventFrame EventFrameBuilder::build_frame(EventSpan events, int64_t t_ref_ns) {
     }
     if (m > 0) {
       const size_t q = static_cast<size_t>(std::floor(o_.clip_percentile * static_cast<double>(m - 1)));
-      std::nth_element(scratch_.begin(), scratch_.begin() + static_cast<std::ptrdiff_t>(q),
-                       scratch_.begin() + static_cast<std::ptrdiff_t>(m));
-      c = scratch_[q];
+      c = select_positive(&scratch_, m, q);
     }
     if (!(c > 0.0f)) {
       f.image.setTo(o_.use_polarity ? 128 : 0);

@@ -132,6 +132,7 @@ bool FeatureTrackerOptions::Validate(std::string* why) const {
   if (klt_pyramid_levels < 0 || klt_pyramid_levels > 8)
     return fail("klt_pyramid_levels must be in 0..8");
   if (klt_max_iterations < 1) return fail("klt_max_iterations must be >= 1");
+  if (!(klt_epsilon_px > 0) || !std::isfinite(klt_epsilon_px)) return fail("klt_epsilon_px must be positive and finite");
   if (!(forward_backward_max_px > 0) || !std::isfinite(forward_backward_max_px))
     return fail("forward_backward_max_px must be positive and finite");
   if (ransac != RansacModel::kNone && ransac != RansacModel::kTwoPoint &&
@@ -235,7 +236,7 @@ FeatureObservations FeatureTracker::track(int64_t t_ns, const cv::Mat& frame,
                                                  /*withDerivatives=*/true, cv::BORDER_REFLECT_101,
                                                  cv::BORDER_CONSTANT, /*tryReuseInputImage=*/false);
   const cv::TermCriteria term(cv::TermCriteria::COUNT | cv::TermCriteria::EPS,
-                              options_.klt_max_iterations, 0.01);
+                              options_.klt_max_iterations, options_.klt_epsilon_px);
 
   if (!tracks_.empty() && !prev_pyramid_.empty()) {
     const size_t n = tracks_.size();

@@ -37,6 +37,68 @@ inline bool parse_coord(const char*& p, const char* end, uint32_t* v) {
   return p != b;
 }
 
+constexpr int64_t kPow10[] = {1, 10, 100, 1000, 10000, 100000, 1000000, 10000000, 100000000, 1000000000};
+
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__
+constexpr bool kLittleEndian = false;
+#else
+constexpr bool kLittleEndian = true;
+#endif
+
+// Eight ASCII digits in a little-endian 64-bit word (first character in the lowest byte).
+inline bool all_digits8(uint64_t w) {
+  return (w & 0xF0F0F0F0F0F0F0F0ull) == 0x3030303030303030ull &&
+         ((w + 0x0606060606060606ull) & 0xF0F0F0F0F0F0F0F0ull) == 0x3030303030303030ull;
+}
+// Their value (first character most significant), by pairwise combination (SWAR).
+inline uint64_t digits8_value(uint64_t w) {
+  w -= 0x3030303030303030ull;
+  w = (w * 10 + (w >> 8)) & 0x00FF00FF00FF00FFull;           // pairs
+  w = (w * 100 + (w >> 16)) & 0x0000FFFF0000FFFFull;         // quads
+  return (w * 10000 + (w >> 32)) & 0x00000000FFFFFFFFull;    // eight
+}
+
+// Fast path for the common record form `S[.F] X Y P` as written by the ECD and `evio simulate`:
+// single spaces, an unsigned time of at most 9 integer digits and at most `exponent` fraction
+// digits, pixel coordinates of 1..5 digits, polarity 0 or 1, nothing else on the line. Gives
+// exactly what the general parser gives for such lines; false for anything else, which the general
+// parser then handles (and reports).
+inline bool parse_record_fast(const char* p, const char* end, int exponent, int64_t* t_ns, uint32_t* x, uint32_t* y,
+                              int8_t* polarity, PolarityConvention* conv) {
+  const char* b = p;
+  uint64_t ip = 0;
+  while (p < end && static_cast<unsigned>(*p - '0') < 10u) ip = ip * 10 + static_cast<unsigned>(*p++ - '0');
+  if (p == b || p - b > 9) return false;
+  uint64_t frac = 0;
+  int kept = 0;
+  if (p < end && *p == '.') {
+    const char* fb = ++p;
+    uint64_t chunk;
+    if (kLittleEndian && end - p >= 8 && (std::memcpy(&chunk, p, 8), all_digits8(chunk))) {  // nanosecond fractions: 8 digits at once
+      frac = digits8_value(chunk);
+      p += 8;
+    }
+    while (p < end && static_cast<unsigned>(*p - '0') < 10u) frac = frac * 10 + static_cast<unsigned>(*p++ - '0');
+    kept = static_cast<int>(p - fb);
+    if (kept > exponent) return false;
+  }
+  if (end - p < 6 || *p != ' ') return false;  // " X Y P" at least
+  const auto coord = [&](uint32_t* v) {
+    const char* c = ++p;  // past the space
+    uint32_t a = 0;
+    while (p < end && static_cast<unsigned>(*p - '0') < 10u) a = a * 10 + static_cast<uint32_t>(*p++ - '0');
+    *v = a;
+    return p != c && p - c <= 5 && p < end && *p == ' ';
+  };
+  if (!coord(x) || !coord(y)) return false;
+  ++p;
+  if (end - p != 1 || (*p != '0' && *p != '1')) return false;
+  *polarity = *p == '1' ? 1 : -1;
+  *conv = *p == '1' ? PolarityConvention::kUnknown : PolarityConvention::kZeroOne;
+  *t_ns = static_cast<int64_t>(ip) * kPow10[exponent] + static_cast<int64_t>(frac) * kPow10[exponent - kept];
+  return true;
+}
+
 std::string existing(const fs::path& p) {
   std::error_code ec;
   return fs::is_regular_file(p, ec) ? p.string() : std::string();
@@ -84,6 +146,73 @@ void EcdEventReader::bad(const char* kind, std::string_view line, const std::str
       .bad(kind, lines_.line_number(), problem + " in " + quote_line(line), event_form(report_));
 }
 
+// The general record parser: any whitespace or commas, any time form, polarity 0/1 or -1/+1.
+// False for comments, blank lines and bad lines (reported).
+bool EcdEventReader::parse_general(std::string_view line, Event* e, uint32_t* x, uint32_t* y, PolarityConvention* conv) {
+  const char* p = line.data();
+  const char* end = p + line.size();
+  p = skip_space(p, end);
+  if (p == end || *p == '#' || *p == '%') return false;
+
+  if (!detail::parse_time(p, end, exponent_, &e->t_ns) || (p < end && !is_space(*p))) {
+    bad("malformed", line, "time is not a number");
+    return false;
+  }
+  p = skip_space(p, end);
+  const bool has_x = parse_coord(p, end, x);
+  if (has_x && p < end && *p == '.') {
+    bad("malformed", line, "fractional pixel coordinate (undistorted events are not integer pixels)");
+    return false;
+  }
+  if (!has_x || p == end || !is_space(*p)) {
+    bad("malformed", line, "expected 4 columns, found " + std::to_string(detail::count_tokens(line)) +
+                               (has_x ? "" : " or x is not a non-negative integer"));
+    return false;
+  }
+  p = skip_space(p, end);
+  const bool has_y = parse_coord(p, end, y);
+  if (has_y && p < end && *p == '.') {
+    bad("malformed", line, "fractional pixel coordinate (undistorted events are not integer pixels)");
+    return false;
+  }
+  if (!has_y || p == end || !is_space(*p)) {
+    bad("malformed", line, "expected 4 columns, found " + std::to_string(detail::count_tokens(line)) +
+                               (has_y ? "" : " or y is not a non-negative integer"));
+    return false;
+  }
+  p = skip_space(p, end);
+  // Polarity: 0/1 or -1/+1 (also "+1"); the two conventions may not mix within one file.
+  bool polarity_ok = true;
+  if (p < end && *p == '1') {
+    e->polarity = 1;
+    ++p;
+  } else if (p < end && *p == '0') {
+    e->polarity = -1;
+    *conv = PolarityConvention::kZeroOne;
+    ++p;
+  } else if (end - p >= 2 && p[0] == '-' && p[1] == '1') {
+    e->polarity = -1;
+    *conv = PolarityConvention::kMinusPlusOne;
+    p += 2;
+  } else if (end - p >= 2 && p[0] == '+' && p[1] == '1') {
+    e->polarity = 1;
+    *conv = PolarityConvention::kMinusPlusOne;
+    p += 2;
+  } else {
+    polarity_ok = false;
+  }
+  p = skip_space(p, end);
+  if (!polarity_ok || p != end) {
+    if (detail::count_tokens(line) != 4) {
+      bad("malformed", line, "expected 4 columns, found " + std::to_string(detail::count_tokens(line)));
+    } else {
+      bad("polarity", line, "polarity is not 0, 1, -1 or +1");
+    }
+    return false;
+  }
+  return true;
+}
+
 size_t EcdEventReader::read(EventBuffer* out, size_t max_events) {
   std::vector<Event>& v = out->events();
   const size_t n0 = v.size();
@@ -95,67 +224,13 @@ size_t EcdEventReader::read(EventBuffer* out, size_t max_events) {
   while (n < max_events && lines_.next(&line)) {
     const char* p = line.data();
     const char* end = p + line.size();
-    p = skip_space(p, end);
-    if (p == end || *p == '#' || *p == '%') continue;
-
     Event e;
-    if (!detail::parse_time(p, end, exponent_, &e.t_ns) || (p < end && !is_space(*p))) {
-      bad("malformed", line, "time is not a number");
-      continue;
-    }
-    p = skip_space(p, end);
     uint32_t x = 0, y = 0;
-    const bool has_x = parse_coord(p, end, &x);
-    if (has_x && p < end && *p == '.') {
-      bad("malformed", line, "fractional pixel coordinate (undistorted events are not integer pixels)");
-      continue;
-    }
-    if (!has_x || p == end || !is_space(*p)) {
-      bad("malformed", line, "expected 4 columns, found " + std::to_string(detail::count_tokens(line)) +
-                                 (has_x ? "" : " or x is not a non-negative integer"));
-      continue;
-    }
-    p = skip_space(p, end);
-    const bool has_y = parse_coord(p, end, &y);
-    if (has_y && p < end && *p == '.') {
-      bad("malformed", line, "fractional pixel coordinate (undistorted events are not integer pixels)");
-      continue;
-    }
-    if (!has_y || p == end || !is_space(*p)) {
-      bad("malformed", line, "expected 4 columns, found " + std::to_string(detail::count_tokens(line)) +
-                                 (has_y ? "" : " or y is not a non-negative integer"));
-      continue;
-    }
-    p = skip_space(p, end);
-    // Polarity: 0/1 or -1/+1 (also "+1"); the two conventions may not mix within one file.
     PolarityConvention conv = PolarityConvention::kUnknown;
-    bool polarity_ok = true;
-    if (p < end && *p == '1') {
-      e.polarity = 1;
-      ++p;
-    } else if (p < end && *p == '0') {
-      e.polarity = -1;
-      conv = PolarityConvention::kZeroOne;
-      ++p;
-    } else if (end - p >= 2 && p[0] == '-' && p[1] == '1') {
-      e.polarity = -1;
-      conv = PolarityConvention::kMinusPlusOne;
-      p += 2;
-    } else if (end - p >= 2 && p[0] == '+' && p[1] == '1') {
-      e.polarity = 1;
-      conv = PolarityConvention::kMinusPlusOne;
-      p += 2;
-    } else {
-      polarity_ok = false;
-    }
-    p = skip_space(p, end);
-    if (!polarity_ok || p != end) {
-      if (detail::count_tokens(line) != 4) {
-        bad("malformed", line, "expected 4 columns, found " + std::to_string(detail::count_tokens(line)));
-      } else {
-        bad("polarity", line, "polarity is not 0, 1, -1 or +1");
-      }
-      continue;
+    if (exponent_ >= 0 && exponent_ <= 9 && parse_record_fast(p, end, exponent_, &e.t_ns, &x, &y, &e.polarity, &conv)) {
+      // the common form
+    } else if (!parse_general(line, &e, &x, &y, &conv)) {
+      continue;  // comment, blank or bad line (reported)
     }
     if (conv != PolarityConvention::kUnknown && conv != report_.polarity) {
       if (report_.polarity != PolarityConvention::kUnknown) {
@@ -179,9 +254,13 @@ size_t EcdEventReader::read(EventBuffer* out, size_t max_events) {
       continue;
     }
     last_t_ns_ = e.t_ns;
-    e.x = static_cast<uint16_t>(x);
-    e.y = static_cast<uint16_t>(y);
-    v.push_back(e);
+    // Written field by field into the buffer: a copy of the stack-assembled Event stalled on store
+    // forwarding (its fields are stored in pieces and read back as one 16-byte load).
+    Event& out_e = v.emplace_back();
+    out_e.t_ns = e.t_ns;
+    out_e.x = static_cast<uint16_t>(x);
+    out_e.y = static_cast<uint16_t>(y);
+    out_e.polarity = e.polarity;
     ++n;
   }
   report_.records += static_cast<int64_t>(v.size() - n0);

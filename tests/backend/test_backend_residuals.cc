@@ -2,7 +2,10 @@
 // PoseManifold), known residual values, and marginalisation: on a linear-Gaussian problem the
 // prior from the Schur complement reproduces the full problem's solution and covariance of the
 // kept variables.
+#include <array>
 #include <cmath>
+#include <map>
+#include <memory>
 #include <random>
 
 #include <ceres/ceres.h>
@@ -273,6 +276,67 @@ TEST(Marginalization, SchurPriorReproducesTheFullSolutionOfKeptVariables) {
     EXPECT_NEAR(y1[i], x1[i], 1e-8);
     EXPECT_NEAR(y2[i], x2[i], 1e-8);
   }
+}
+
+// The two-stage elimination (landmark-like blocks, which share no residual, first; then the rest of
+// the removed blocks) gives the Schur complement of one dense elimination of all removed blocks.
+TEST(Marginalization, TwoStageEliminationEqualsTheDenseSchurComplement) {
+  std::mt19937 rng(17);
+  std::normal_distribution<double> n(0.0, 1.0);
+  auto rnd = [&](int r, int c) {
+    Eigen::MatrixXd m(r, c);
+    for (int i = 0; i < r; ++i)
+      for (int j = 0; j < c; ++j) m(i, j) = n(rng);
+    return m;
+  };
+  // Removed: a "pose" p and landmarks l1, l2 (each seen from p and a kept pose); kept: k1, k2.
+  std::array<double, 3> p{0.1, 0.2, 0.3}, l1{1, 2, 3}, l2{-1, 0, 2}, k1{0.5, 0.5, 0.5}, k2{0, -1, 1};
+  std::vector<std::unique_ptr<LinearResidual>> costs;
+  ceres::Problem::Options po;
+  po.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  ceres::Problem pm(po);
+  std::vector<ceres::ResidualBlockId> ids;
+  std::vector<std::vector<double*>> params = {{p.data()}, {p.data(), l1.data()}, {k1.data(), l1.data()},
+                                              {p.data(), l2.data()}, {k2.data(), l2.data()}, {p.data(), k1.data()},
+                                              {k1.data(), k2.data()}};
+  for (const auto& ps : params) {
+    const int nb = static_cast<int>(ps.size());
+    costs.push_back(std::make_unique<LinearResidual>(rnd(2 + 2 * nb, 3 * nb), rnd(2 + 2 * nb, 1), nb));
+    ids.push_back(pm.AddResidualBlock(costs.back().get(), nullptr, ps));
+  }
+  MarginalizationStats st;
+  auto prior = marginalize(&pm, ids, {p.data(), l1.data(), l2.data()}, [](const double*) { return false; }, &st);
+  ASSERT_TRUE(prior);
+  EXPECT_EQ(st.removed_dims, 9);
+  EXPECT_EQ(st.kept_dims, 6);
+  // Dense reference over [p l1 l2 | k1 k2].
+  std::map<const double*, int> col = {{p.data(), 0}, {l1.data(), 3}, {l2.data(), 6}, {k1.data(), 9}, {k2.data(), 12}};
+  Eigen::MatrixXd H = Eigen::MatrixXd::Zero(15, 15);
+  Eigen::VectorXd g = Eigen::VectorXd::Zero(15);
+  for (size_t i = 0; i < params.size(); ++i) {
+    const int nr = costs[i]->num_residuals();
+    Eigen::MatrixXd J = Eigen::MatrixXd::Zero(nr, 15);
+    Eigen::VectorXd r(nr);
+    std::vector<Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>> jac(params[i].size());
+    std::vector<double*> jp;
+    for (auto& j : jac) {
+      j.resize(nr, 3);
+      jp.push_back(j.data());
+    }
+    ASSERT_TRUE(costs[i]->Evaluate(params[i].data(), r.data(), jp.data()));
+    for (size_t b = 0; b < params[i].size(); ++b) J.middleCols(col[params[i][b]], 3) = jac[b];
+    H += J.transpose() * J;
+    g += J.transpose() * r;
+  }
+  const Eigen::MatrixXd Hmm_inv = H.topLeftCorner(9, 9).inverse();
+  const Eigen::MatrixXd Hs = H.bottomRightCorner(6, 6) - H.bottomLeftCorner(6, 9) * Hmm_inv * H.topRightCorner(9, 6);
+  const Eigen::VectorXd gs = g.tail(6) - H.bottomLeftCorner(6, 9) * Hmm_inv * g.head(9);
+  // The prior's blocks are in first-seen order (k1, k2).
+  ASSERT_EQ(prior->blocks().size(), 2u);
+  EXPECT_EQ(prior->blocks()[0].parameters, k1.data());
+  const Eigen::MatrixXd& Js = prior->jacobian();
+  EXPECT_LT((Js.transpose() * Js - Hs).norm(), 1e-8 * Hs.norm());
+  EXPECT_LT((Js.transpose() * prior->residual0() - gs).norm(), 1e-8 * std::max(1.0, gs.norm()));
 }
 
 }  // namespace

@@ -1,7 +1,7 @@
 // Marginalisation into a linear prior (the Schur complement of the Gauss-Newton system, as in
 // OKVIS / VINS-Mono): the residual blocks connected to the variables being removed are linearised
-// at the current estimate, H = J^T J and g = J^T r are formed over [removed | kept] tangent
-// coordinates, the removed part is eliminated (H* = H_kk - H_km H_mm^+ H_mk, g* likewise), and
+// at the current estimate, H = J^T J and g = J^T r are formed (block by block) over [removed | kept]
+// tangent coordinates, the removed part is eliminated (H* = H_kk - H_km H_mm^+ H_mk, g* likewise), and
 // H*, g* are factored back into a residual r(x) = r* + J* dx with J*^T J* = H*, J*^T r* = g*.
 // dx is the tangent difference of each kept block from its value at marginalisation time:
 // poses Minus(x, x0) (PoseManifold), Euclidean blocks x - x0.
@@ -59,7 +59,11 @@ struct MarginalizationStats {
 // Linearises `residual_blocks` (all must be in `problem`, with loss functions applied) at the
 // current parameter values, eliminates the blocks in `removed` and returns the prior on every
 // other block those residuals touch (kept blocks in first-seen order; `is_pose(block)` says which
-// blocks are 7-double poses). Eigenvalues of H_mm and H* below eps * max are treated as zero.
+// blocks are 7-double poses). Removed blocks that share no residual with each other (landmarks
+// of finished tracks) are eliminated first, each with the pseudo-inverse of its own diagonal block,
+// then the other removed blocks from the reduced system (the same Schur complement as one
+// pseudo-inverse of H_mm when H_mm is invertible). Eigenvalues below eps * max of the matrix being
+// inverted (each such block, the rest of H_mm, H*) are treated as zero.
 // Returns null when no kept block remains.
 std::unique_ptr<LinearPrior> marginalize(ceres::Problem* problem,
                                          const std::vector<ceres::ResidualBlockId>& residual_blocks,

@@ -66,7 +66,8 @@ struct FeatureTrackerOptions {
   int min_distance_px = 8;  // minimum distance of a new feature to any other feature (px)
   int klt_window_px = 21;     // KLT search window side (px, odd, >= 3)
   int klt_pyramid_levels = 3; // pyramid levels above full resolution (OpenCV maxLevel; 0 = none)
-  int klt_max_iterations = 30;  // per pyramid level (count); also stops at 0.01 px updates
+  int klt_max_iterations = 30;  // per pyramid level (count); also stops at klt_epsilon_px updates
+  double klt_epsilon_px = 0.01;  // KLT stops when an update moves the feature less than this (px, > 0)
   // Forward-backward check: a track is dropped when tracking the new position back into the
   // previous frame lands farther than this from where it started (px).
   double forward_backward_max_px = 1.0;

@@ -46,6 +46,7 @@ class EcdEventReader {
 
  private:
   void bad(const char* kind, std::string_view line, const std::string& problem);
+  bool parse_general(std::string_view line, Event* e, uint32_t* x, uint32_t* y, PolarityConvention* conv);
 
   TextReadOptions options_;
   LineReader lines_;
