@@ -55,7 +55,9 @@ std::string config_yaml(const MosaicConfig& c) {
     << ", initial_gradient_std: " << num(m.initial_gradient_std) << ", measurement_std_abs: " << num(m.measurement_std_abs)
     << ", measurement_relative_std: " << num(m.measurement_relative_std) << ", min_tau_ms: " << num(m.min_tau_s * 1e3)
     << ", min_speed_px_s: " << num(m.min_speed_px_s) << ", seen_min_observations: " << m.seen_min_observations
-    << ", seen_max_gradient_std: " << num(m.seen_max_gradient_std) << ", max_path_px: " << num(m.max_path_px) << ", reconstruct_ms: " << num(c.reconstruct_period_ns * 1e-6)
+    << ", seen_max_gradient_std: " << num(m.seen_max_gradient_std) << ", max_path_px: " << num(m.max_path_px) << ", reconstruct_events: " << c.reconstruct_events << ", reconstruct_ms: " << num(c.reconstruct_period_ns * 1e-6)
+    << ", reconstruct_latency_events: " << c.reconstruct_latency_events << ", threads: " << c.threads
+    << ", footprint_ms: " << num(c.footprint_period_ns * 1e-6)
     << ", full_reconstruct_every: " << c.full_reconstruct_every
     << ", poisson_weighting: " << mapping::poisson_weighting_name(c.output_weighting)
     << ", weight_reference_std: " << num(m.weight_reference_std) << ", viewed_edge_weight: " << num(m.viewed_edge_weight)
@@ -85,6 +87,12 @@ std::string config_yaml(const MosaicConfig& c) {
   return y.str();
 }
 
+// A duration given in milliseconds under `key` (the config's *_ms keys), in ns. (Section::time_ns
+// reads seconds: `reconstruct_ms: 20` was 20 s.)
+int64_t ms_ns(const Section& s, const std::string& key, int64_t def_ns, Range r) {
+  return std::llround(s.number(key, static_cast<double>(def_ns) * 1e-6, r, "ms") * 1e6);
+}
+
 }  // namespace
 
 MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_yaml) {
@@ -99,7 +107,8 @@ MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_y
     if (top.has("mosaic")) {
       const Section s = top.child("mosaic", false, "a map");
       s.allow({"width", "height", "contrast_threshold", "initial_gradient_std", "measurement_std_abs",
-               "measurement_relative_std", "min_tau_ms", "min_speed_px_s", "reconstruct_ms", "full_reconstruct_every",
+               "measurement_relative_std", "min_tau_ms", "min_speed_px_s", "reconstruct_events", "reconstruct_ms",
+               "reconstruct_latency_events", "threads", "footprint_ms", "full_reconstruct_every",
                "seen_min_observations", "seen_max_gradient_std", "max_path_px", "poisson_weighting", "weight_reference_std", "viewed_edge_weight", "weight_floor",
                "pcg_tolerance", "pcg_max_iterations", "pcg_preconditioner"});
       auto& m = c.mosaic;
@@ -111,7 +120,12 @@ MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_y
       m.measurement_relative_std = s.number("measurement_relative_std", m.measurement_relative_std, Range::kNonNegative, "");
       m.min_tau_s = s.number("min_tau_ms", m.min_tau_s * 1e3, Range::kPositive, "ms") * 1e-3;
       m.min_speed_px_s = s.number("min_speed_px_s", m.min_speed_px_s, Range::kNonNegative, "px/s");
-      c.reconstruct_period_ns = s.time_ns("reconstruct_ms", c.reconstruct_period_ns, Range::kPositive);
+      c.reconstruct_events = s.integer("reconstruct_events", static_cast<int>(c.reconstruct_events), 1, 1000000000);
+      c.reconstruct_period_ns = ms_ns(s, "reconstruct_ms", c.reconstruct_period_ns, Range::kPositive);
+      c.reconstruct_latency_events =
+          s.integer("reconstruct_latency_events", static_cast<int>(c.reconstruct_latency_events), 0, 1000000000);
+      c.threads = s.integer("threads", c.threads, 1, 2);
+      c.footprint_period_ns = ms_ns(s, "footprint_ms", c.footprint_period_ns, Range::kPositive);
       c.full_reconstruct_every = s.integer("full_reconstruct_every", c.full_reconstruct_every, 1, 1000000);
       m.seen_min_observations = s.integer("seen_min_observations", m.seen_min_observations, 1, 1000000);
       m.max_path_px = s.number("max_path_px", m.max_path_px, Range::kPositive, "mosaic px");
@@ -145,7 +159,7 @@ MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_y
       t.batch_size = s.integer("batch_size", t.batch_size, 1, 1000000);
       c.event_stride = s.integer("event_stride", c.event_stride, 1, 1000000);
       t.linearize_max_spread_rad = s.number("linearize_max_spread_rad", t.linearize_max_spread_rad, Range::kNonNegative, "rad");
-      t.max_batch_duration_ns = s.time_ns("max_batch_ms", t.max_batch_duration_ns, Range::kPositive);
+      t.max_batch_duration_ns = ms_ns(s, "max_batch_ms", t.max_batch_duration_ns, Range::kPositive);
       const std::string mm = s.string("motion_model", frontend::rotation_motion_model_name(t.motion_model),
                                       {"random_walk", "constant_velocity"});
       t.motion_model = mm == "random_walk" ? frontend::RotationMotionModel::kRandomWalk
@@ -171,21 +185,21 @@ MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_y
                "gyro_step_ms"});
       c.calibrate_contrast = s.boolean("calibrate_contrast", c.calibrate_contrast);
       c.min_contrast_ratio = s.number("min_contrast_ratio", c.min_contrast_ratio, Range::kUnit, "");
-      c.bootstrap_ns = s.time_ns("duration_ms", c.bootstrap_ns, Range::kNonNegative);
-      c.bootstrap_window_ns = s.time_ns("window_ms", c.bootstrap_window_ns, Range::kPositive);
+      c.bootstrap_ns = ms_ns(s, "duration_ms", c.bootstrap_ns, Range::kNonNegative);
+      c.bootstrap_window_ns = ms_ns(s, "window_ms", c.bootstrap_window_ns, Range::kPositive);
       c.bootstrap_window_events = s.integer("window_events", c.bootstrap_window_events, 1000, 100000000);
       c.cmax.blur_sigma_px = s.number("blur_px", c.cmax.blur_sigma_px, Range::kPositive, "px");
       c.calibration_sample_stride = s.integer("calibration_sample_stride", c.calibration_sample_stride, 1, 1000000);
       c.calibration_min_texel_updates = s.integer("calibration_min_texel_updates", c.calibration_min_texel_updates, 0, 1000000);
       c.calibration_min_samples = s.integer("calibration_min_samples", c.calibration_min_samples, 1, 100000000);
-      c.gyro_bootstrap_window_ns = s.time_ns("gyro_window_ms", c.gyro_bootstrap_window_ns, Range::kPositive);
-      c.gyro_integration_step_ns = s.time_ns("gyro_step_ms", c.gyro_integration_step_ns, Range::kPositive);
+      c.gyro_bootstrap_window_ns = ms_ns(s, "gyro_window_ms", c.gyro_bootstrap_window_ns, Range::kPositive);
+      c.gyro_integration_step_ns = ms_ns(s, "gyro_step_ms", c.gyro_integration_step_ns, Range::kPositive);
     }
     if (top.has("output")) {
       const Section s = top.child("output", false, "a map");
       s.allow({"trajectory_ms", "snapshot_ms", "gamma", "low_percentile", "high_percentile", "transparent_unseen"});
-      c.trajectory_period_ns = s.time_ns("trajectory_ms", c.trajectory_period_ns, Range::kPositive);
-      c.snapshot_period_ns = s.time_ns("snapshot_ms", c.snapshot_period_ns, Range::kNonNegative);
+      c.trajectory_period_ns = ms_ns(s, "trajectory_ms", c.trajectory_period_ns, Range::kPositive);
+      c.snapshot_period_ns = ms_ns(s, "snapshot_ms", c.snapshot_period_ns, Range::kNonNegative);
       c.display.gamma = s.number("gamma", c.display.gamma, Range::kPositive, "");
       c.display.low_percentile = s.number("low_percentile", c.display.low_percentile, Range::kNonNegative, "%");
       c.display.high_percentile = s.number("high_percentile", c.display.high_percentile, Range::kPositive, "%");
@@ -210,6 +224,7 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
     cfg.mosaic.width = args.width;
     cfg.mosaic.height = args.width / 2;
   }
+  if (args.threads > 0) cfg.threads = args.threads;
   if (args.snapshot_s > 0) cfg.snapshot_period_ns = static_cast<int64_t>(std::llround(args.snapshot_s * 1e9));
   {
     std::string why;

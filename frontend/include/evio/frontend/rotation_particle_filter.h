@@ -37,6 +37,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include "evio/calib/fast_math.h"
 #include "evio/sensors/measurements.h"
 
 namespace evio::frontend {
@@ -44,20 +45,9 @@ namespace evio::frontend {
 class EventUndistorter;
 
 namespace detail {
-// atan2 with a degree-11 odd minimax polynomial for atan on [0, 1]: |error| < 1e-5 rad (tested
-// against std::atan2), no library call; used per event and particle for the projection.
-inline float fast_atan2(float y, float x) {
-  constexpr float kPiF = 3.14159265358979323846f;
-  const float ax = x < 0 ? -x : x, ay = y < 0 ? -y : y;
-  const float mx = ax > ay ? ax : ay, mn = ax > ay ? ay : ax;
-  const float a = mn / (mx + 1e-30f);
-  const float s = a * a;
-  float r = ((((-0.01172120f * s + 0.05265332f) * s - 0.11643287f) * s + 0.19354346f) * s - 0.33262347f) * s * a +
-            0.99997726f * a;
-  r = ay > ax ? 0.5f * kPiF - r : r;
-  r = x < 0 ? kPiF - r : r;
-  return y < 0 ? -r : r;
-}
+// atan2 by a minimax polynomial (|error| < 1e-5 rad), used per event and particle for the
+// projection: calib::fast_atan2.
+using calib::fast_atan2;
 }  // namespace detail
 
 // A read-only view of an equirectangular log-intensity mosaic (calib::Equirectangular
