@@ -64,7 +64,11 @@ std::string config_yaml(const MosaicConfig& c) {
     << ", weight_floor: " << num(m.weighted_poisson.weight_floor) << ", pcg_tolerance: " << num(m.weighted_poisson.tolerance)
     << ", pcg_max_iterations: " << m.weighted_poisson.max_iterations
     << ", pcg_preconditioner: " << mapping::poisson_preconditioner_name(m.weighted_poisson.preconditioner) << "}\n";
-  y << "tracker: {particles: " << t.num_particles << ", batch_size: " << t.batch_size << ", event_stride: " << t.event_stride
+  // min_particles: as resolved for the run (run_mosaic), else as configured (-1 = by input).
+  y << "tracker: {particles: " << t.num_particles
+    << ", min_particles: " << (t.min_particles > 0 ? t.min_particles : c.min_particles)
+    << ", kld_bin_rad: " << num(t.kld_bin_rad) << ", kld_epsilon: " << num(t.kld_epsilon) << ", kld_z: " << num(t.kld_z)
+    << ", batch_size: " << t.batch_size << ", event_stride: " << t.event_stride
     << ", max_batch_ms: " << num(t.max_batch_duration_ns * 1e-6)
     << ", motion_model: " << frontend::rotation_motion_model_name(t.motion_model)
     << ", measurement_model: " << frontend::rotation_measurement_model_name(t.measurement_model)
@@ -151,10 +155,14 @@ MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_y
     c.tracker.contrast_threshold = c.mosaic.contrast_threshold;  // unless tracker.contrast_threshold says otherwise
     if (top.has("tracker")) {
       const Section s = top.child("tracker", false, "a map");
-      s.allow({"particles", "batch_size", "max_batch_ms", "motion_model", "measurement_model", "contrast_threshold", "event_stride", "linearize_max_spread_rad", "motion_noise_rad_per_sqrt_s",
+      s.allow({"particles", "min_particles", "kld_bin_rad", "kld_epsilon", "kld_z", "batch_size", "max_batch_ms", "motion_model", "measurement_model", "contrast_threshold", "event_stride", "linearize_max_spread_rad", "motion_noise_rad_per_sqrt_s",
                "gyro_noise_rad_per_sqrt_s", "likelihood_std", "outlier_probability", "resample_ess_fraction", "seed"});
       auto& t = c.tracker;
       t.num_particles = s.integer("particles", t.num_particles, 1, 1000000);
+      c.min_particles = s.integer("min_particles", c.min_particles, -1, 1000000);
+      t.kld_bin_rad = s.number("kld_bin_rad", t.kld_bin_rad, Range::kPositive, "rad");
+      t.kld_epsilon = s.number("kld_epsilon", t.kld_epsilon, Range::kPositive, "");
+      t.kld_z = s.number("kld_z", t.kld_z, Range::kPositive, "");
       t.contrast_threshold = s.number("contrast_threshold", c.mosaic.contrast_threshold, Range::kPositive, "log units");
       t.batch_size = s.integer("batch_size", t.batch_size, 1, 1000000);
       c.event_stride = s.integer("event_stride", c.event_stride, 1, 1000000);
@@ -219,6 +227,10 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
   if (args.batch > 0) cfg.tracker.batch_size = args.batch;
   if (args.stride > 0) cfg.event_stride = args.stride;
   cfg.tracker.event_stride = cfg.event_stride > 0 ? cfg.event_stride : (args.use_imu ? 4 : 1);
+  // The adaptive particle count's floor: as configured, else 20 with the gyro and 40 without, never
+  // above the particle count (a --particles below it gives a fixed count).
+  cfg.tracker.min_particles = std::min(cfg.min_particles >= 0 ? cfg.min_particles : (args.use_imu ? 20 : 40),
+                                       cfg.tracker.num_particles);
   cfg.use_gyro = args.use_imu;
   if (args.width > 0) {
     cfg.mosaic.width = args.width;
@@ -308,7 +320,9 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
       << ", \"tracker_contrast\": " << num(bs.tracker_contrast) << ", \"contrast_samples\": " << bs.contrast_samples << "}"
       << ",\n  \"tracker\": {\"events_used\": " << st.events_used << ", \"skipped_no_previous\": " << st.skipped_no_previous
       << ", \"skipped_unknown_map\": " << st.skipped_unknown_map << ", \"skipped_stride\": " << st.skipped_stride << ", \"batches\": " << st.batches
-      << ", \"resamples\": " << st.resamples << ", \"linearized_batches\": " << st.linearized_batches << ", \"gyro_predictions\": " << st.gyro_predictions << "}"
+      << ", \"resamples\": " << st.resamples << ", \"linearized_batches\": " << st.linearized_batches << ", \"gyro_predictions\": " << st.gyro_predictions
+      << ", \"mean_particles\": " << num(st.weighted_batches > 0 ? static_cast<double>(st.particle_batches) / static_cast<double>(st.weighted_batches) : 0.0)
+      << ", \"particle_evaluations\": " << st.particle_evaluations << "}"
       << ",\n  \"mapper\": {\"events_mapped\": " << ms.events_mapped << ", \"reconstructions\": " << ms.reconstructions
       << ", \"seen_pixels\": " << seen << ", \"seen_fraction\": " << num(ms.seen_fraction)
       << "},\n  \"poisson\": {\"weighting\": \"" << mapping::poisson_weighting_name(rec.weighting)

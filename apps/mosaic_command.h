@@ -29,6 +29,9 @@ struct MosaicConfig : pipeline::MosaicPipelineOptions {
   // tracker.event_stride when the YAML and --stride leave it unset (0): 4 with --use-imu (as
   // accurate as 1 on poster_rotation and 2x faster), 1 without (the stride costs accuracy there).
   int event_stride = 0;
+  // tracker.min_particles when the YAML leaves it unset or -1: the adaptive particle count
+  // (KLD-sampling) down to 20 particles with --use-imu and 40 without (frontend/rotation_particle_filter.h).
+  int min_particles = -1;
   mapping::LogImageDisplayOptions display;            // output.{gamma, low_percentile, high_percentile, transparent_unseen}
 };
 

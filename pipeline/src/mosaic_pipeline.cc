@@ -149,6 +149,8 @@ struct Mapper {
     for (size_t k = 0; k < n; ++k) map_event(ev[k], R, w, static_cast<float>(static_cast<double>(ev[k].t_ns - t_ref) * 1e-9));
   }
 
+
+
   // The camera's field of view at R_w_c on the mosaic, for the weighted solve's viewed-but-event-free
   // texels (GradientMosaicOptions::viewed_edge_weight): the bearings of every third sensor pixel
   // in both directions (the last row and column included), each marking its 4 x 4 nearest texels.
@@ -161,7 +163,8 @@ struct Mapper {
     for (int y = 0; y < H; y = next(y, H))
       for (int x = 0; x < W; x = next(x, W)) {
         if (!undistorter.valid(x, y)) continue;
-        mosaic.mark_viewed(proj.project((R * undistorter.bearing(x, y)).cast<double>()));
+        mosaic.mark_viewed(calib::fast_equirectangular_project(R * undistorter.bearing(x, y), proj.width(), proj.height())
+                               .cast<double>());
       }
   }
 
