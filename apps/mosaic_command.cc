@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -89,6 +90,13 @@ std::string config_yaml(const MosaicConfig& c) {
     << ", high_percentile: " << num(c.display.high_percentile)
     << ", transparent_unseen: " << (c.display.transparent_unseen ? "true" : "false") << "}\n";
   return y.str();
+}
+
+// CPU time of the process (all threads), s.
+double process_cpu_s() {
+  timespec ts{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
 }
 
 // A duration given in milliseconds under `key` (the config's *_ms keys), in ns. (Section::time_ns
@@ -275,6 +283,7 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
   // Stream the events in chunks: the pipeline keeps only the current bootstrap window or tracker batch.
   Progress progress("evio mosaic", args.progress, "events");
   const auto wall0 = std::chrono::steady_clock::now();
+  const double cpu0 = process_cpu_s();
   EventBuffer chunk;
   int64_t events = 0, t0 = 0, t_last = 0;
   for (;;) {
@@ -295,6 +304,7 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
   const mapping::MosaicReconstruction& rec = result.reconstruction;
   const pipeline::MosaicStats& ms = result.stats;
   const double processing_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
+  const double cpu_s = process_cpu_s() - cpu0;  // every thread's CPU time over the same span
   const double duration_s = static_cast<double>(t_last - t0) * 1e-9;
   const calib::Equirectangular proj(cfg.mosaic.width, cfg.mosaic.height);
 
@@ -312,6 +322,8 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
       << ",\n  \"processing_time_s\": " << num(processing_s) << ",\n  \"sequence_duration_s\": " << num(duration_s)
       << ",\n  \"real_time_factor\": " << num(duration_s > 0 ? processing_s / duration_s : 0)
       << ",\n  \"events_per_s\": " << num(processing_s > 0 ? events / processing_s : 0)
+      << ",\n  \"cpu_time_s\": " << num(cpu_s) << ",\n  \"events_per_cpu_s\": " << num(cpu_s > 0 ? events / cpu_s : 0)
+      << ",\n  \"threads\": " << cfg.threads
       << ",\n  \"use_imu\": " << (args.use_imu ? "true" : "false") << ",\n  \"particles\": " << cfg.tracker.num_particles
       << ",\n  \"batch_size\": " << cfg.tracker.batch_size << ",\n  \"event_stride\": " << cfg.tracker.event_stride
       << ",\n  \"measurement_model\": \"" << frontend::rotation_measurement_model_name(cfg.tracker.measurement_model) << "\"" << ",\n  \"mosaic_size\": [" << cfg.mosaic.width << ", "
@@ -336,7 +348,8 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
       << (args.use_imu ? "gyro" : "contrast maximisation") << " " << num((bs.t_end_ns - t0) * 1e-9) << " s\n";
   out << "speed         " << num(processing_s) << " s processing, real-time factor "
       << num(duration_s > 0 ? processing_s / duration_s : 0) << " (one core), "
-      << num(processing_s > 0 ? events / processing_s / 1e6 : 0) << " M events/s\n";
+      << num(processing_s > 0 ? events / processing_s / 1e6 : 0) << " M events/s; CPU time " << num(cpu_s) << " s, "
+      << num(cpu_s > 0 ? events / cpu_s / 1e6 : 0) << " M events per CPU second\n";
   out << "mosaic        " << cfg.mosaic.width << "x" << cfg.mosaic.height << ", "
       << num(100.0 * static_cast<double>(seen) / static_cast<double>(rec.seen.size())) << "% seen\n";
 
