@@ -316,6 +316,10 @@ int main(int argc, char** argv) {
       ->check(CLI::PositiveNumber);
   mosaic_cmd->add_option("--width", mosaic.width, "Mosaic width in px; height = width / 2 (overrides mosaic.width)")
       ->check(CLI::Range(8, 32768));
+  mosaic_cmd->add_option("--threads", mosaic.threads,
+                         "1, or 2: the mapper (gradient EKF, Poisson solves) on a second thread; identical output "
+                         "(overrides mosaic.threads)")
+      ->check(CLI::Range(1, 2));
   mosaic_cmd->add_option("--snapshots-every", mosaic.snapshot_s, "Write snapshots/panorama_NNNNNN.png every this many s")
       ->check(CLI::NonNegativeNumber);
   mosaic_cmd->add_option("--gt", mosaic.gt,

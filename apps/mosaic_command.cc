@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -55,14 +56,20 @@ std::string config_yaml(const MosaicConfig& c) {
     << ", initial_gradient_std: " << num(m.initial_gradient_std) << ", measurement_std_abs: " << num(m.measurement_std_abs)
     << ", measurement_relative_std: " << num(m.measurement_relative_std) << ", min_tau_ms: " << num(m.min_tau_s * 1e3)
     << ", min_speed_px_s: " << num(m.min_speed_px_s) << ", seen_min_observations: " << m.seen_min_observations
-    << ", seen_max_gradient_std: " << num(m.seen_max_gradient_std) << ", max_path_px: " << num(m.max_path_px) << ", reconstruct_ms: " << num(c.reconstruct_period_ns * 1e-6)
+    << ", seen_max_gradient_std: " << num(m.seen_max_gradient_std) << ", max_path_px: " << num(m.max_path_px) << ", reconstruct_events: " << c.reconstruct_events << ", reconstruct_ms: " << num(c.reconstruct_period_ns * 1e-6)
+    << ", reconstruct_latency_events: " << c.reconstruct_latency_events << ", threads: " << c.threads
+    << ", footprint_ms: " << num(c.footprint_period_ns * 1e-6)
     << ", full_reconstruct_every: " << c.full_reconstruct_every
     << ", poisson_weighting: " << mapping::poisson_weighting_name(c.output_weighting)
     << ", weight_reference_std: " << num(m.weight_reference_std) << ", viewed_edge_weight: " << num(m.viewed_edge_weight)
     << ", weight_floor: " << num(m.weighted_poisson.weight_floor) << ", pcg_tolerance: " << num(m.weighted_poisson.tolerance)
     << ", pcg_max_iterations: " << m.weighted_poisson.max_iterations
     << ", pcg_preconditioner: " << mapping::poisson_preconditioner_name(m.weighted_poisson.preconditioner) << "}\n";
-  y << "tracker: {particles: " << t.num_particles << ", batch_size: " << t.batch_size << ", event_stride: " << t.event_stride
+  // min_particles: as resolved for the run (run_mosaic), else as configured (-1 = by input).
+  y << "tracker: {particles: " << t.num_particles
+    << ", min_particles: " << (t.min_particles > 0 ? t.min_particles : c.min_particles)
+    << ", kld_bin_rad: " << num(t.kld_bin_rad) << ", kld_epsilon: " << num(t.kld_epsilon) << ", kld_z: " << num(t.kld_z)
+    << ", batch_size: " << t.batch_size << ", event_stride: " << t.event_stride
     << ", max_batch_ms: " << num(t.max_batch_duration_ns * 1e-6)
     << ", motion_model: " << frontend::rotation_motion_model_name(t.motion_model)
     << ", measurement_model: " << frontend::rotation_measurement_model_name(t.measurement_model)
@@ -85,6 +92,19 @@ std::string config_yaml(const MosaicConfig& c) {
   return y.str();
 }
 
+// CPU time of the process (all threads), s.
+double process_cpu_s() {
+  timespec ts{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+}
+
+// A duration given in milliseconds under `key` (the config's *_ms keys), in ns. (Section::time_ns
+// reads seconds: `reconstruct_ms: 20` was 20 s.)
+int64_t ms_ns(const Section& s, const std::string& key, int64_t def_ns, Range r) {
+  return std::llround(s.number(key, static_cast<double>(def_ns) * 1e-6, r, "ms") * 1e6);
+}
+
 }  // namespace
 
 MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_yaml) {
@@ -99,7 +119,8 @@ MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_y
     if (top.has("mosaic")) {
       const Section s = top.child("mosaic", false, "a map");
       s.allow({"width", "height", "contrast_threshold", "initial_gradient_std", "measurement_std_abs",
-               "measurement_relative_std", "min_tau_ms", "min_speed_px_s", "reconstruct_ms", "full_reconstruct_every",
+               "measurement_relative_std", "min_tau_ms", "min_speed_px_s", "reconstruct_events", "reconstruct_ms",
+               "reconstruct_latency_events", "threads", "footprint_ms", "full_reconstruct_every",
                "seen_min_observations", "seen_max_gradient_std", "max_path_px", "poisson_weighting", "weight_reference_std", "viewed_edge_weight", "weight_floor",
                "pcg_tolerance", "pcg_max_iterations", "pcg_preconditioner"});
       auto& m = c.mosaic;
@@ -111,7 +132,12 @@ MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_y
       m.measurement_relative_std = s.number("measurement_relative_std", m.measurement_relative_std, Range::kNonNegative, "");
       m.min_tau_s = s.number("min_tau_ms", m.min_tau_s * 1e3, Range::kPositive, "ms") * 1e-3;
       m.min_speed_px_s = s.number("min_speed_px_s", m.min_speed_px_s, Range::kNonNegative, "px/s");
-      c.reconstruct_period_ns = s.time_ns("reconstruct_ms", c.reconstruct_period_ns, Range::kPositive);
+      c.reconstruct_events = s.integer("reconstruct_events", static_cast<int>(c.reconstruct_events), 1, 1000000000);
+      c.reconstruct_period_ns = ms_ns(s, "reconstruct_ms", c.reconstruct_period_ns, Range::kPositive);
+      c.reconstruct_latency_events =
+          s.integer("reconstruct_latency_events", static_cast<int>(c.reconstruct_latency_events), 0, 1000000000);
+      c.threads = s.integer("threads", c.threads, 1, 2);
+      c.footprint_period_ns = ms_ns(s, "footprint_ms", c.footprint_period_ns, Range::kPositive);
       c.full_reconstruct_every = s.integer("full_reconstruct_every", c.full_reconstruct_every, 1, 1000000);
       m.seen_min_observations = s.integer("seen_min_observations", m.seen_min_observations, 1, 1000000);
       m.max_path_px = s.number("max_path_px", m.max_path_px, Range::kPositive, "mosaic px");
@@ -137,15 +163,19 @@ MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_y
     c.tracker.contrast_threshold = c.mosaic.contrast_threshold;  // unless tracker.contrast_threshold says otherwise
     if (top.has("tracker")) {
       const Section s = top.child("tracker", false, "a map");
-      s.allow({"particles", "batch_size", "max_batch_ms", "motion_model", "measurement_model", "contrast_threshold", "event_stride", "linearize_max_spread_rad", "motion_noise_rad_per_sqrt_s",
+      s.allow({"particles", "min_particles", "kld_bin_rad", "kld_epsilon", "kld_z", "batch_size", "max_batch_ms", "motion_model", "measurement_model", "contrast_threshold", "event_stride", "linearize_max_spread_rad", "motion_noise_rad_per_sqrt_s",
                "gyro_noise_rad_per_sqrt_s", "likelihood_std", "outlier_probability", "resample_ess_fraction", "seed"});
       auto& t = c.tracker;
       t.num_particles = s.integer("particles", t.num_particles, 1, 1000000);
+      c.min_particles = s.integer("min_particles", c.min_particles, -1, 1000000);
+      t.kld_bin_rad = s.number("kld_bin_rad", t.kld_bin_rad, Range::kPositive, "rad");
+      t.kld_epsilon = s.number("kld_epsilon", t.kld_epsilon, Range::kPositive, "");
+      t.kld_z = s.number("kld_z", t.kld_z, Range::kPositive, "");
       t.contrast_threshold = s.number("contrast_threshold", c.mosaic.contrast_threshold, Range::kPositive, "log units");
       t.batch_size = s.integer("batch_size", t.batch_size, 1, 1000000);
       c.event_stride = s.integer("event_stride", c.event_stride, 1, 1000000);
       t.linearize_max_spread_rad = s.number("linearize_max_spread_rad", t.linearize_max_spread_rad, Range::kNonNegative, "rad");
-      t.max_batch_duration_ns = s.time_ns("max_batch_ms", t.max_batch_duration_ns, Range::kPositive);
+      t.max_batch_duration_ns = ms_ns(s, "max_batch_ms", t.max_batch_duration_ns, Range::kPositive);
       const std::string mm = s.string("motion_model", frontend::rotation_motion_model_name(t.motion_model),
                                       {"random_walk", "constant_velocity"});
       t.motion_model = mm == "random_walk" ? frontend::RotationMotionModel::kRandomWalk
@@ -171,21 +201,21 @@ MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_y
                "gyro_step_ms"});
       c.calibrate_contrast = s.boolean("calibrate_contrast", c.calibrate_contrast);
       c.min_contrast_ratio = s.number("min_contrast_ratio", c.min_contrast_ratio, Range::kUnit, "");
-      c.bootstrap_ns = s.time_ns("duration_ms", c.bootstrap_ns, Range::kNonNegative);
-      c.bootstrap_window_ns = s.time_ns("window_ms", c.bootstrap_window_ns, Range::kPositive);
+      c.bootstrap_ns = ms_ns(s, "duration_ms", c.bootstrap_ns, Range::kNonNegative);
+      c.bootstrap_window_ns = ms_ns(s, "window_ms", c.bootstrap_window_ns, Range::kPositive);
       c.bootstrap_window_events = s.integer("window_events", c.bootstrap_window_events, 1000, 100000000);
       c.cmax.blur_sigma_px = s.number("blur_px", c.cmax.blur_sigma_px, Range::kPositive, "px");
       c.calibration_sample_stride = s.integer("calibration_sample_stride", c.calibration_sample_stride, 1, 1000000);
       c.calibration_min_texel_updates = s.integer("calibration_min_texel_updates", c.calibration_min_texel_updates, 0, 1000000);
       c.calibration_min_samples = s.integer("calibration_min_samples", c.calibration_min_samples, 1, 100000000);
-      c.gyro_bootstrap_window_ns = s.time_ns("gyro_window_ms", c.gyro_bootstrap_window_ns, Range::kPositive);
-      c.gyro_integration_step_ns = s.time_ns("gyro_step_ms", c.gyro_integration_step_ns, Range::kPositive);
+      c.gyro_bootstrap_window_ns = ms_ns(s, "gyro_window_ms", c.gyro_bootstrap_window_ns, Range::kPositive);
+      c.gyro_integration_step_ns = ms_ns(s, "gyro_step_ms", c.gyro_integration_step_ns, Range::kPositive);
     }
     if (top.has("output")) {
       const Section s = top.child("output", false, "a map");
       s.allow({"trajectory_ms", "snapshot_ms", "gamma", "low_percentile", "high_percentile", "transparent_unseen"});
-      c.trajectory_period_ns = s.time_ns("trajectory_ms", c.trajectory_period_ns, Range::kPositive);
-      c.snapshot_period_ns = s.time_ns("snapshot_ms", c.snapshot_period_ns, Range::kNonNegative);
+      c.trajectory_period_ns = ms_ns(s, "trajectory_ms", c.trajectory_period_ns, Range::kPositive);
+      c.snapshot_period_ns = ms_ns(s, "snapshot_ms", c.snapshot_period_ns, Range::kNonNegative);
       c.display.gamma = s.number("gamma", c.display.gamma, Range::kPositive, "");
       c.display.low_percentile = s.number("low_percentile", c.display.low_percentile, Range::kNonNegative, "%");
       c.display.high_percentile = s.number("high_percentile", c.display.high_percentile, Range::kPositive, "%");
@@ -205,11 +235,16 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
   if (args.batch > 0) cfg.tracker.batch_size = args.batch;
   if (args.stride > 0) cfg.event_stride = args.stride;
   cfg.tracker.event_stride = cfg.event_stride > 0 ? cfg.event_stride : (args.use_imu ? 4 : 1);
+  // The adaptive particle count's floor: as configured, else 20 with the gyro and 40 without, never
+  // above the particle count (a --particles below it gives a fixed count).
+  cfg.tracker.min_particles = std::min(cfg.min_particles >= 0 ? cfg.min_particles : (args.use_imu ? 20 : 40),
+                                       cfg.tracker.num_particles);
   cfg.use_gyro = args.use_imu;
   if (args.width > 0) {
     cfg.mosaic.width = args.width;
     cfg.mosaic.height = args.width / 2;
   }
+  if (args.threads > 0) cfg.threads = args.threads;
   if (args.snapshot_s > 0) cfg.snapshot_period_ns = static_cast<int64_t>(std::llround(args.snapshot_s * 1e9));
   {
     std::string why;
@@ -248,6 +283,7 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
   // Stream the events in chunks: the pipeline keeps only the current bootstrap window or tracker batch.
   Progress progress("evio mosaic", args.progress, "events");
   const auto wall0 = std::chrono::steady_clock::now();
+  const double cpu0 = process_cpu_s();
   EventBuffer chunk;
   int64_t events = 0, t0 = 0, t_last = 0;
   for (;;) {
@@ -268,6 +304,7 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
   const mapping::MosaicReconstruction& rec = result.reconstruction;
   const pipeline::MosaicStats& ms = result.stats;
   const double processing_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
+  const double cpu_s = process_cpu_s() - cpu0;  // every thread's CPU time over the same span
   const double duration_s = static_cast<double>(t_last - t0) * 1e-9;
   const calib::Equirectangular proj(cfg.mosaic.width, cfg.mosaic.height);
 
@@ -285,6 +322,8 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
       << ",\n  \"processing_time_s\": " << num(processing_s) << ",\n  \"sequence_duration_s\": " << num(duration_s)
       << ",\n  \"real_time_factor\": " << num(duration_s > 0 ? processing_s / duration_s : 0)
       << ",\n  \"events_per_s\": " << num(processing_s > 0 ? events / processing_s : 0)
+      << ",\n  \"cpu_time_s\": " << num(cpu_s) << ",\n  \"events_per_cpu_s\": " << num(cpu_s > 0 ? events / cpu_s : 0)
+      << ",\n  \"threads\": " << cfg.threads
       << ",\n  \"use_imu\": " << (args.use_imu ? "true" : "false") << ",\n  \"particles\": " << cfg.tracker.num_particles
       << ",\n  \"batch_size\": " << cfg.tracker.batch_size << ",\n  \"event_stride\": " << cfg.tracker.event_stride
       << ",\n  \"measurement_model\": \"" << frontend::rotation_measurement_model_name(cfg.tracker.measurement_model) << "\"" << ",\n  \"mosaic_size\": [" << cfg.mosaic.width << ", "
@@ -293,7 +332,9 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
       << ", \"tracker_contrast\": " << num(bs.tracker_contrast) << ", \"contrast_samples\": " << bs.contrast_samples << "}"
       << ",\n  \"tracker\": {\"events_used\": " << st.events_used << ", \"skipped_no_previous\": " << st.skipped_no_previous
       << ", \"skipped_unknown_map\": " << st.skipped_unknown_map << ", \"skipped_stride\": " << st.skipped_stride << ", \"batches\": " << st.batches
-      << ", \"resamples\": " << st.resamples << ", \"linearized_batches\": " << st.linearized_batches << ", \"gyro_predictions\": " << st.gyro_predictions << "}"
+      << ", \"resamples\": " << st.resamples << ", \"linearized_batches\": " << st.linearized_batches << ", \"gyro_predictions\": " << st.gyro_predictions
+      << ", \"mean_particles\": " << num(st.weighted_batches > 0 ? static_cast<double>(st.particle_batches) / static_cast<double>(st.weighted_batches) : 0.0)
+      << ", \"particle_evaluations\": " << st.particle_evaluations << "}"
       << ",\n  \"mapper\": {\"events_mapped\": " << ms.events_mapped << ", \"reconstructions\": " << ms.reconstructions
       << ", \"seen_pixels\": " << seen << ", \"seen_fraction\": " << num(ms.seen_fraction)
       << "},\n  \"poisson\": {\"weighting\": \"" << mapping::poisson_weighting_name(rec.weighting)
@@ -307,7 +348,8 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
       << (args.use_imu ? "gyro" : "contrast maximisation") << " " << num((bs.t_end_ns - t0) * 1e-9) << " s\n";
   out << "speed         " << num(processing_s) << " s processing, real-time factor "
       << num(duration_s > 0 ? processing_s / duration_s : 0) << " (one core), "
-      << num(processing_s > 0 ? events / processing_s / 1e6 : 0) << " M events/s\n";
+      << num(processing_s > 0 ? events / processing_s / 1e6 : 0) << " M events/s; CPU time " << num(cpu_s) << " s, "
+      << num(cpu_s > 0 ? events / cpu_s / 1e6 : 0) << " M events per CPU second\n";
   out << "mosaic        " << cfg.mosaic.width << "x" << cfg.mosaic.height << ", "
       << num(100.0 * static_cast<double>(seen) / static_cast<double>(rec.seen.size())) << "% seen\n";
 

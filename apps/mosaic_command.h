@@ -2,7 +2,7 @@
 // al., BMVC 2014). A particle filter on SO(3) (frontend::RotationParticleFilter) tracks the camera
 // against the log-intensity mosaic, which a pixel-wise EKF on its gradient
 // (mapping::GradientMosaic) builds from the tracked rotation, reconstructed by Poisson
-// integration every `reconstruct_ms`. Bootstrap over the first `bootstrap.duration_ms`: the gyro
+// integration every `reconstruct_events` events (at the latest every `reconstruct_ms`). Bootstrap over the first `bootstrap.duration_ms`: the gyro
 // (--use-imu) or the angular velocity of rotational contrast maximisation per window.
 // Writes rotation.tum, panorama.png (8-bit grey + alpha: unseen texels transparent; percentile
 // range over the seen texels, gamma), panorama_seen.png (seen coverage), panorama_log.tiff (float
@@ -29,6 +29,9 @@ struct MosaicConfig : pipeline::MosaicPipelineOptions {
   // tracker.event_stride when the YAML and --stride leave it unset (0): 4 with --use-imu (as
   // accurate as 1 on poster_rotation and 2x faster), 1 without (the stride costs accuracy there).
   int event_stride = 0;
+  // tracker.min_particles when the YAML leaves it unset or -1: the adaptive particle count
+  // (KLD-sampling) down to 20 particles with --use-imu and 40 without (frontend/rotation_particle_filter.h).
+  int min_particles = -1;
   mapping::LogImageDisplayOptions display;            // output.{gamma, low_percentile, high_percentile, transparent_unseen}
 };
 
@@ -49,6 +52,7 @@ struct MosaicArgs {
   int stride = 0;          // > 0 overrides tracker.event_stride
   int width = 0;           // > 0 overrides mosaic.width (height = width / 2)
   double snapshot_s = 0;   // > 0 overrides output.snapshot_ms
+  int threads = 0;         // > 0 overrides mosaic.threads (1, or 2: the mapper on a second thread)
   bool progress = true;
 };
 

@@ -119,6 +119,12 @@ bool RotationParticleFilterOptions::Validate(std::string* why) const {
     return fail(why, "outlier density eps/outlier_range " + num(outlier_probability / outlier_range) +
                          " is not below the Gaussian peak (1-eps)/(sqrt(2 pi) likelihood_std) " + num(std::exp(peak)) +
                          ": every event would be an outlier");
+  if (min_particles < 0 || min_particles > num_particles)
+    return fail(why, "min_particles " + std::to_string(min_particles) + " (expected 0..num_particles " +
+                         std::to_string(num_particles) + ")");
+  if (!(kld_bin_rad > 0) || !std::isfinite(kld_bin_rad)) return fail(why, "kld_bin_rad " + num(kld_bin_rad) + " (expected > 0 rad)");
+  if (!(kld_epsilon > 0) || !std::isfinite(kld_epsilon)) return fail(why, "kld_epsilon " + num(kld_epsilon) + " (expected > 0)");
+  if (!(kld_z > 0) || !std::isfinite(kld_z)) return fail(why, "kld_z " + num(kld_z) + " (expected > 0)");
   if (!(resample_ess_fraction >= 0 && resample_ess_fraction <= 1))
     return fail(why, "resample_ess_fraction " + num(resample_ess_fraction) + " (expected in [0, 1])");
   if (!(initial_spread_rad >= 0) || !std::isfinite(initial_spread_rad))
@@ -406,6 +412,9 @@ void RotationParticleFilter::process_batch(const LogIntensityMapView& map) {
   const size_t m = starget_.size();
   if (m > 0) {
     const size_t np = particles_.size();
+    stats_.particle_evaluations += static_cast<int64_t>(np * m);
+    stats_.particle_batches += static_cast<int64_t>(np);
+    ++stats_.weighted_batches;
     rot_.resize(9 * np);
     for (size_t i = 0; i < np; ++i) {
       const Eigen::Matrix3f R = particles_[i].toRotationMatrix().cast<float>();
@@ -646,24 +655,71 @@ void RotationParticleFilter::set_particles(const std::vector<Eigen::Quaterniond>
 }
 
 // Systematic resampling (Kitagawa 1996): one uniform offset, N evenly spaced pointers into the
-// cumulative weights.
+// cumulative weights; with min_particles, N = num_particles and then KLD-sampling's count.
 void RotationParticleFilter::resample() {
+  // Adaptive: back to num_particles, then down to KLD-sampling's count; fixed: the current count.
+  const bool adaptive = options_.min_particles > 0 && options_.min_particles < options_.num_particles;
   const size_t n = particles_.size();
-  const double step = 1.0 / static_cast<double>(n);
+  const size_t n_out = adaptive ? static_cast<size_t>(options_.num_particles) : n;
+  const double step = 1.0 / static_cast<double>(n_out);
   double u = step * static_cast<double>(next_u64() >> 11) * (1.0 / 9007199254740992.0);
-  std::vector<Eigen::Quaterniond> out(n);
+  // KLD-sampling bins the predicted cloud (Fox: the samples after the motion model), i.e. the
+  // particles before resampling with a non-negligible weight (> 0.1 / n): resampled duplicates
+  // would under-count its spread.
+  const size_t n_new = adaptive ? adaptive_count() : n_out;
+  std::vector<Eigen::Quaterniond> out(n_out);
   double cum = w_[0];
   size_t k = 0;
-  for (size_t i = 0; i < n; ++i) {
+  for (size_t i = 0; i < n_out; ++i) {
     while (u > cum && k + 1 < n) cum += w_[++k];
     out[i] = particles_[k];
     u += step;
   }
+  if (n_new < n_out) {  // a systematic subsample: every (n_out / n_new)-th of the ordered resampled set
+    std::vector<Eigen::Quaterniond> sub(n_new);
+    for (size_t i = 0; i < n_new; ++i) sub[i] = out[(2 * i + 1) * n_out / (2 * n_new)];
+    out.swap(sub);
+  }
   particles_.swap(out);
-  std::fill(w_.begin(), w_.end(), step);
-  std::fill(log_w_.begin(), log_w_.end(), std::log(step));
+  const double w = 1.0 / static_cast<double>(particles_.size());
+  w_.assign(particles_.size(), w);
+  log_w_.assign(particles_.size(), std::log(w));
   ++stats_.resamples;
   compute_mean();
+}
+
+// KLD-sampling's particle count (see min_particles): bins of kld_bin_rad on the rotation offsets
+// Log(mean^T R_i) (first order: 2 vec(q) with q sign-aligned to the mean) of the particles whose
+// weight exceeds 0.1 / n.
+size_t RotationParticleFilter::adaptive_count() const {
+  const size_t n_max = static_cast<size_t>(options_.num_particles);
+  const Eigen::Quaterniond mc = mean_.conjugate();
+  const double inv_bin = 1.0 / options_.kld_bin_rad;
+  const double w_min = 0.1 / static_cast<double>(particles_.size());
+  std::vector<uint64_t> bins;
+  bins.reserve(particles_.size());
+  for (size_t i = 0; i < particles_.size(); ++i) {
+    if (!(w_[i] > w_min)) continue;
+    Eigen::Quaterniond q = mc * particles_[i];
+    if (q.w() < 0) q.coeffs() = -q.coeffs();
+    uint64_t key = 0;
+    for (int a = 0; a < 3; ++a) {
+      const double c = std::clamp(std::floor(2.0 * q.vec()[a] * inv_bin), -1048575.0, 1048575.0);
+      key = (key << 21) | static_cast<uint64_t>(static_cast<int64_t>(c) + 1048576);
+    }
+    bins.push_back(key);
+  }
+  std::sort(bins.begin(), bins.end());
+  const size_t k = static_cast<size_t>(std::unique(bins.begin(), bins.end()) - bins.begin());
+  double n_kld = 0;
+  if (k > 1) {
+    const double km1 = static_cast<double>(k - 1);
+    const double a = 2.0 / (9.0 * km1);
+    const double b = 1.0 - a + std::sqrt(a) * options_.kld_z;
+    n_kld = km1 / (2.0 * options_.kld_epsilon) * b * b * b;
+  }
+  const double lo = static_cast<double>(options_.min_particles);
+  return static_cast<size_t>(std::ceil(std::clamp(n_kld, lo, static_cast<double>(n_max))));
 }
 
 }  // namespace evio::frontend

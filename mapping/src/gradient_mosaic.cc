@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 
 #include <Eigen/Geometry>
@@ -305,10 +306,11 @@ void GradientMosaic::edge_weights(ImageD* wx, ImageD* wy) const {
   }
 }
 
-MosaicReconstruction GradientMosaic::reconstruct(ReconstructMode mode, PoissonWeighting weighting) {
+// The solve shared by reconstruct() and reconstruct_map(): updates log_intensity_ and returns the
+// re-solved region (empty when nothing changed).
+PixelRect GradientMosaic::solve(ReconstructMode mode, PoissonWeighting weighting, MosaicReconstruction* out) {
   const int W = options_.width, H = options_.height;
   const bool periodic = options_.poisson.boundary == PoissonBoundary::kPeriodicU;
-  MosaicReconstruction out;
   const bool dirty = dirty_x1_ >= dirty_x0_;
   bool full = mode == ReconstructMode::kFull || !solved_once_ || weighting == PoissonWeighting::kInformation;
   PixelRect rect;
@@ -323,34 +325,61 @@ MosaicReconstruction GradientMosaic::reconstruct(ReconstructMode mode, PoissonWe
     const int side = std::max(rect.width, rect.height);
     if (mode == ReconstructMode::kAuto && side > options_.poisson.max_region_side) full = true;
   }
+  PixelRect solved{0, 0, 0, 0};
   if (full) {
     update_edges(0, 0, W, H);
     solver_.solve(edge_gu_, edge_gv_, &log_intensity_);
     if (weighting == PoissonWeighting::kInformation) {
-      out.unweighted_log_intensity = log_intensity_.cast<float>();
+      out->unweighted_log_intensity = log_intensity_.cast<float>();
       ImageD wx, wy;
       edge_weights(&wx, &wy);
-      out.weighted_stats = weighted_solver_.solve(edge_gu_, edge_gv_, wx, wy, &log_intensity_, &log_intensity_);
+      out->weighted_stats = weighted_solver_.solve(edge_gu_, edge_gv_, wx, wy, &log_intensity_, &log_intensity_);
     }
-    out.weighting = weighting;
+    out->weighting = weighting;
     solved_once_ = true;
-    out.full_solve = true;
-    out.region = PixelRect{0, 0, W, H};
+    out->full_solve = true;
+    out->region = PixelRect{0, 0, W, H};
+    solved = out->region;
   } else if (dirty) {
     update_edges(rect.x - 1, rect.y - 1, rect.width + 1, rect.height + 1);
-    solver_.solve_region(edge_gu_, edge_gv_, rect, &log_intensity_);
-    out.full_solve = (rect.width == W && rect.height == H) ||
-                     std::max(rect.width, rect.height) > options_.poisson.max_region_side;  // solver fell back
-    out.region = rect;
+    solved = solver_.solve_region(edge_gu_, edge_gv_, rect, &log_intensity_);
+    out->full_solve = solved.width == W && solved.height == H;  // whole image, or the solver fell back
+    out->region = rect;
   } else {
-    out.full_solve = false;
-    out.region = PixelRect{0, 0, 0, 0};
+    out->full_solve = false;
+    out->region = PixelRect{0, 0, 0, 0};
   }
   dirty_x0_ = dirty_y0_ = 0;
   dirty_x1_ = dirty_y1_ = -1;
+  return solved;
+}
+
+MosaicReconstruction GradientMosaic::reconstruct(ReconstructMode mode, PoissonWeighting weighting) {
+  MosaicReconstruction out;
+  solve(mode, weighting, &out);
   out.log_intensity = log_intensity_.cast<float>();
   out.seen = seen_mask();
   return out;
+}
+
+PixelRect GradientMosaic::reconstruct_map(ReconstructMode mode, std::vector<float>* map) {
+  const int W = options_.width, H = options_.height;
+  MosaicReconstruction info;
+  PixelRect r = solve(mode, PoissonWeighting::kNone, &info);
+  const size_t n = static_cast<size_t>(W) * static_cast<size_t>(H);
+  if (map->size() != n) {
+    map->resize(n);
+    r = PixelRect{0, 0, W, H};
+  }
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  for (int j = std::max(r.y, 0); j < std::min(r.y + r.height, H); ++j) {
+    float* row = map->data() + static_cast<size_t>(j) * static_cast<size_t>(W);
+    for (int t = 0; t < r.width; ++t) {
+      const int i = (((r.x + t) % W) + W) % W;
+      row[i] = is_seen(state_[index(i, j)]) ? static_cast<float>(log_intensity_(j, i)) : nan;
+    }
+  }
+  return r;
 }
 
 Eigen::Vector2d mosaic_pixel_velocity(const calib::Equirectangular& projection, const Eigen::Matrix3d& R_w_c,

@@ -305,7 +305,7 @@ void PoissonSolver::solve_laplacian(const ImageD& f, ImageD* L) const {
   }
 }
 
-void PoissonSolver::solve_region(const ImageD& gx, const ImageD& gy, const PixelRect& rect, ImageD* L,
+PixelRect PoissonSolver::solve_region(const ImageD& gx, const ImageD& gy, const PixelRect& rect, ImageD* L,
                                  const ImageD* weight) const {
   if (L == nullptr) throw std::invalid_argument("Poisson solver: null output");
   check_size("gx", gx.rows(), gx.cols(), width_, height_);
@@ -338,7 +338,7 @@ void PoissonSolver::solve_region(const ImageD& gx, const ImageD& gy, const Pixel
   y0 = std::min(y0, H - h);
   if ((w == W && h == H) || w > options_.max_region_side || h > options_.max_region_side) {
     solve(gx, gy, L, weight);
-    return;
+    return PixelRect{0, 0, W, H};
   }
 
   auto col = [&](int t) { return periodic ? (x0 + t) % W : x0 + t; };
@@ -372,6 +372,7 @@ void PoissonSolver::solve_region(const ImageD& gx, const ImageD& gy, const Pixel
   const Eigen::MatrixXd delta = separable_solve(*cache_->get(H, false, y0, h), *cache_->get(W, periodic, x0, w), r);
   for (int tj = 0; tj < h; ++tj)
     for (int ti = 0; ti < w; ++ti) (*L)(y0 + tj, col(ti)) += delta(tj, ti);
+  return PixelRect{x0, y0, w, h};
 }
 
 }  // namespace evio::mapping

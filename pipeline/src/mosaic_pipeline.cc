@@ -3,11 +3,18 @@
 #include <algorithm>
 #include <climits>
 #include <cmath>
+#include <condition_variable>
+#include <cstring>
+#include <deque>
+#include <exception>
 #include <limits>
+#include <mutex>
 #include <stdexcept>
+#include <thread>
 #include <utility>
 
 #include "evio/calib/equirectangular.h"
+#include "evio/calib/fast_math.h"
 #include "evio/calib/geometry.h"
 #include "evio/calib/log.h"
 #include "evio/frontend/event_filters.h"
@@ -23,7 +30,11 @@ bool MosaicPipelineOptions::Validate(std::string* why) const {
   if (!mosaic.Validate(&w)) return fail("mosaic: " + w);
   if (!tracker.Validate(&w)) return fail("tracker: " + w);
   if (!cmax.Validate(&w)) return fail("cmax: " + w);
+  if (reconstruct_events < 1) return fail("reconstruct_events must be >= 1");
   if (reconstruct_period_ns <= 0) return fail("reconstruct_period_ns must be > 0");
+  if (reconstruct_latency_events < 0) return fail("reconstruct_latency_events must be >= 0");
+  if (threads != 1 && threads != 2) return fail("threads must be 1 or 2");
+  if (footprint_period_ns <= 0) return fail("footprint_period_ns must be > 0");
   if (full_reconstruct_every < 1) return fail("full_reconstruct_every must be >= 1");
   if (output_weighting != mapping::PoissonWeighting::kNone && output_weighting != mapping::PoissonWeighting::kInformation)
     return fail("output_weighting must be kNone or kInformation");
@@ -58,16 +69,257 @@ const MosaicPipelineOptions& checked(const MosaicPipelineOptions& o) {
   return o;
 }
 
-// Log intensity of a reconstruction for the tracker: NaN where unseen.
-void to_map(const mapping::MosaicReconstruction& rec, std::vector<float>* map) {
-  const auto& L = rec.log_intensity;
-  map->resize(static_cast<size_t>(L.size()));
-  for (Eigen::Index j = 0; j < L.rows(); ++j)
-    for (Eigen::Index i = 0; i < L.cols(); ++i)
-      (*map)[static_cast<size_t>(j * L.cols() + i)] = rec.seen(j, i) ? L(j, i) : std::nanf("");
+// The tracker's map (NaN = unseen) as a reconstruction for the snapshot callback.
+mapping::MosaicReconstruction map_snapshot(const std::vector<float>& map, int width, int height) {
+  mapping::MosaicReconstruction rec;
+  rec.log_intensity.resize(height, width);
+  rec.seen.resize(height, width);
+  for (Eigen::Index k = 0; k < rec.log_intensity.size(); ++k) {
+    const float v = map[static_cast<size_t>(k)];
+    const bool seen = !std::isnan(v);
+    rec.log_intensity.data()[k] = seen ? v : 0.0f;
+    rec.seen.data()[k] = seen ? 1 : 0;
+  }
+  rec.full_solve = false;
+  return rec;
 }
 
+// The mapping half: the gradient EKF mosaic fed by events under given rotations, the camera's
+// footprint for the weighted solve, and the tracker's reconstructions (double-buffered maps).
+// Called directly during the bootstrap; during tracking it runs the steps of MapperBlocks in
+// order, on the caller's thread or on its own (MapperQueue).
+struct Mapper {
+  Mapper(const MosaicPipelineOptions& o, const frontend::EventUndistorter& u, int W, int H)
+      : opt(o),
+        undistorter(u),
+        W(W),
+        H(H),
+        mosaic(o.mosaic),
+        proj(o.mosaic.width, o.mosaic.height),
+        last_t(static_cast<size_t>(W) * static_cast<size_t>(H), INT64_MIN),
+        last_uv(static_cast<size_t>(W) * static_cast<size_t>(H)) {}
+
+  const MosaicPipelineOptions& opt;
+  const frontend::EventUndistorter& undistorter;
+  const int W, H;
+  mapping::GradientMosaic mosaic;
+  const calib::Equirectangular proj;
+
+  // Per sensor pixel the time and mosaic position of its previous event (a path's start).
+  std::vector<int64_t> last_t;
+  std::vector<Eigen::Vector2f> last_uv;
+  struct Segment {
+    Eigen::Vector2d from, to;
+    int polarity;
+  };
+  std::vector<Segment> boot_segments;  // calibration samples of the bootstrap
+  bool collect_segments = false;
+  int64_t events_mapped = 0;
+
+  // The tracker's maps: maps[front] is read by the tracker, a reconstruction is written into the
+  // other one after copying over it the region of the previous reconstruction (which only the
+  // front has).
+  std::vector<float> maps[2];
+  mapping::PixelRect last_region{0, 0, 0, 0};
+
+  // The event's direction is R_w_c (b + dt w_c x b): R_w_c at a nearby time, rotated to the
+  // event's time to first order (dt |w_c| is a few mrad at most within a particle-filter batch).
+  // Single precision and calib::fast_atan2 for the projection (0.002 texel of the double one).
+  void map_event(const Event& e, const Eigen::Matrix3f& R_w_c, const Eigen::Vector3f& w_c, float dt) {
+    if (e.x >= W || e.y >= H || !undistorter.valid(e.x, e.y)) return;
+    const size_t p = static_cast<size_t>(e.y) * static_cast<size_t>(W) + e.x;
+    const int64_t prev = last_t[p];
+    const Eigen::Vector3f& b = undistorter.bearing(e.x, e.y);
+    const Eigen::Vector2f uv = calib::fast_equirectangular_project(R_w_c * (b + dt * w_c.cross(b)), proj.width(), proj.height());
+    last_t[p] = e.t_ns;
+    const Eigen::Vector2f uv_prev = last_uv[p];
+    last_uv[p] = uv;
+    if (prev == INT64_MIN) return;
+    if (mosaic.update_segment(uv_prev.cast<double>(), uv.cast<double>(), static_cast<double>(e.t_ns - prev) * 1e-9,
+                              e.polarity) == mapping::MosaicUpdate::kApplied) {
+      ++events_mapped;
+      if (collect_segments && (events_mapped % opt.calibration_sample_stride) == 0)
+        boot_segments.push_back({uv_prev.cast<double>(), uv.cast<double>(), e.polarity});
+    }
+  }
+
+  void map_events(const Event* ev, size_t n, const Eigen::Matrix3d& R_w_c, const Eigen::Vector3d& w_c, int64_t t_ref) {
+    const Eigen::Matrix3f R = R_w_c.cast<float>();
+    const Eigen::Vector3f w = w_c.cast<float>();
+    for (size_t k = 0; k < n; ++k) map_event(ev[k], R, w, static_cast<float>(static_cast<double>(ev[k].t_ns - t_ref) * 1e-9));
+  }
+
+
+
+  // The camera's field of view at R_w_c on the mosaic, for the weighted solve's viewed-but-event-free
+  // texels (GradientMosaicOptions::viewed_edge_weight): the bearings of every third sensor pixel
+  // in both directions (the last row and column included), each marking its 4 x 4 nearest texels.
+  // At DAVIS240C (f = 200 px) and 1024 texels per turn, 3 sensor px are 2.4 texels on the equator
+  // and 4 texels at 53 deg latitude, the spacing mark_viewed covers without gaps.
+  void mark_footprint(const Eigen::Matrix3d& R_w_c) {
+    constexpr int kStride = 3;
+    const Eigen::Matrix3f R = R_w_c.cast<float>();
+    auto next = [](int v, int n) { return v == n - 1 ? n : std::min(v + kStride, n - 1); };
+    for (int y = 0; y < H; y = next(y, H))
+      for (int x = 0; x < W; x = next(x, W)) {
+        if (!undistorter.valid(x, y)) continue;
+        mosaic.mark_viewed(calib::fast_equirectangular_project(R * undistorter.bearing(x, y), proj.width(), proj.height())
+                               .cast<double>());
+      }
+  }
+
+  // A reconstruction into maps[target] (the bootstrap's: into both, whole).
+  void reconstruct(mapping::GradientMosaic::ReconstructMode mode, int target) {
+    std::vector<float>& dst = maps[target];
+    const std::vector<float>& src = maps[1 - target];
+    if (dst.size() == src.size() && last_region.width > 0 && last_region.height > 0) {
+      const mapping::PixelRect& r = last_region;
+      for (int j = std::max(r.y, 0); j < std::min(r.y + r.height, mosaic.height()); ++j) {
+        const size_t row = static_cast<size_t>(j) * static_cast<size_t>(mosaic.width());
+        for (int t = 0; t < r.width; ++t) {
+          const size_t k = row + static_cast<size_t>((((r.x + t) % mosaic.width()) + mosaic.width()) % mosaic.width());
+          dst[k] = src[k];
+        }
+      }
+    }
+    last_region = mosaic.reconstruct_map(mode, &dst);
+  }
+};
+
+// A run of mapper steps in tracker order, with the events they map.
+struct MapperBlock {
+  enum class Kind { kEvents, kFootprint, kReconstruct };
+  struct Step {
+    Kind kind;
+    size_t end;                 // kEvents: maps events [previous kEvents' end, end)
+    Eigen::Matrix3d R_w_c;      // kEvents: the rotation at t_ref; kFootprint: the footprint's rotation
+    Eigen::Vector3d w_c;        // kEvents: camera-frame angular velocity, rad/s
+    int64_t t_ref;              // kEvents
+    mapping::GradientMosaic::ReconstructMode mode;  // kReconstruct
+    int target;                 // kReconstruct: the map written
+  };
+  std::vector<Event> events;
+  std::vector<Step> steps;
+  bool empty() const { return steps.empty(); }
+  void clear() {
+    events.clear();
+    steps.clear();
+  }
+};
+
+// Runs MapperBlocks on the Mapper in submission order: inline (threads = 1) or on one worker
+// thread (threads = 2). reconstructions_done() counts finished kReconstruct steps; wait_for()
+// blocks until a count is reached (rethrowing a worker exception).
+class MapperQueue {
+ public:
+  MapperQueue(Mapper* mapper, bool threaded) : mapper_(mapper), threaded_(threaded) {}
+  ~MapperQueue() { stop(); }
+
+  void submit(MapperBlock* block) {
+    if (block->empty()) return;
+    if (!threaded_) {
+      run(*block);
+      block->clear();
+      return;
+    }
+    std::unique_lock<std::mutex> lock(mutex_);
+    if (!worker_.joinable()) worker_ = std::thread([this] { loop(); });
+    if (free_.empty()) free_.emplace_back();
+    MapperBlock b = std::move(free_.back());
+    free_.pop_back();
+    std::swap(b, *block);
+    block->clear();
+    queue_.push_back(std::move(b));
+    ++submitted_;
+    cv_work_.notify_one();
+  }
+  // Blocks until at least n reconstructions are done.
+  void wait_reconstructions(int64_t n) {
+    if (!threaded_) return;
+    std::unique_lock<std::mutex> lock(mutex_);
+    cv_done_.wait(lock, [&] { return reconstructions_done_ >= n || error_; });
+    if (error_) std::rethrow_exception(error_);
+  }
+  // Blocks until every submitted block has run.
+  void drain() {
+    if (!threaded_) return;
+    std::unique_lock<std::mutex> lock(mutex_);
+    cv_done_.wait(lock, [&] { return finished_ == submitted_ || error_; });
+    if (error_) std::rethrow_exception(error_);
+  }
+  void stop() {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      stop_ = true;
+      cv_work_.notify_one();
+    }
+    if (worker_.joinable()) worker_.join();
+  }
+
+ private:
+  void run(const MapperBlock& b) {
+    size_t begin = 0;
+    for (const MapperBlock::Step& s : b.steps) {
+      switch (s.kind) {
+        case MapperBlock::Kind::kEvents:
+          mapper_->map_events(b.events.data() + begin, s.end - begin, s.R_w_c, s.w_c, s.t_ref);
+          begin = s.end;
+          break;
+        case MapperBlock::Kind::kFootprint:
+          mapper_->mark_footprint(s.R_w_c);
+          break;
+        case MapperBlock::Kind::kReconstruct:
+          mapper_->reconstruct(s.mode, s.target);
+          if (threaded_) {
+            std::lock_guard<std::mutex> lock(mutex_);
+            ++reconstructions_done_;
+            cv_done_.notify_all();
+          }
+          break;
+      }
+    }
+  }
+  void loop() {
+    std::unique_lock<std::mutex> lock(mutex_);
+    for (;;) {
+      cv_work_.wait(lock, [&] { return stop_ || !queue_.empty(); });
+      if (queue_.empty()) return;  // stop_ and nothing left
+      MapperBlock b = std::move(queue_.front());
+      queue_.pop_front();
+      lock.unlock();
+      try {
+        run(b);
+      } catch (...) {
+        lock.lock();
+        error_ = std::current_exception();
+        cv_done_.notify_all();
+        return;
+      }
+      b.clear();
+      lock.lock();
+      free_.push_back(std::move(b));
+      ++finished_;
+      cv_done_.notify_all();
+    }
+  }
+
+  Mapper* mapper_;
+  const bool threaded_;
+  std::thread worker_;
+  std::mutex mutex_;
+  std::condition_variable cv_work_, cv_done_;
+  std::deque<MapperBlock> queue_;
+  std::vector<MapperBlock> free_;
+  int64_t submitted_ = 0, finished_ = 0, reconstructions_done_ = 0;
+  bool stop_ = false;
+  std::exception_ptr error_;
+};
+
 }  // namespace
+
+// Tracker events per MapperBlock between reconstructions (a block is also closed at each
+// reconstruction): the mapper thread is woken about once per this many events.
+constexpr size_t kMapperBlockEvents = 4096;
 
 struct MosaicPipeline::Impl {
   Impl(const MosaicPipelineOptions& o, const calib::CameraCalibration& camera)
@@ -78,10 +330,8 @@ struct MosaicPipeline::Impl {
         shift(camera.time_shift_ns),
         q_c_b(camera.T_c_b.rotation),
         undistorter(camera.camera),
-        mosaic(o.mosaic),
-        proj(o.mosaic.width, o.mosaic.height),
-        last_t(static_cast<size_t>(W) * static_cast<size_t>(H), INT64_MIN),
-        last_uv(static_cast<size_t>(W) * static_cast<size_t>(H)) {
+        mapper(o, undistorter, W, H),
+        queue(&mapper, o.threads > 1) {
     cmax = opt.cmax;
     cmax.width = W;
     cmax.height = H;
@@ -100,8 +350,8 @@ struct MosaicPipeline::Impl {
   const int64_t shift;  // t_imu = t_cam + shift
   const Eigen::Quaterniond q_c_b;
   const frontend::EventUndistorter undistorter;
-  mapping::GradientMosaic mosaic;
-  const calib::Equirectangular proj;
+  Mapper mapper;
+  MapperQueue queue;
   mapping::RotationalCmaxOptions cmax;
 
   Phase phase = Phase::kStart;
@@ -119,16 +369,6 @@ struct MosaicPipeline::Impl {
   size_t next_imu = 0;       // tracking: the next sample for the particle filter
   bool imu_started = false;  // tracking: next_imu positioned at the tracking start
 
-  // Mapper: per sensor pixel the time and mosaic position of its previous event (a path's start).
-  std::vector<int64_t> last_t;
-  std::vector<Eigen::Vector2d> last_uv;
-  struct Segment {
-    Eigen::Vector2d from, to;
-    int polarity;
-  };
-  std::vector<Segment> boot_segments;  // calibration samples of the bootstrap
-  bool collect_segments = false;
-
   int64_t t_viewed = INT64_MIN;  // the last mark_footprint
 
   // Bootstrap.
@@ -138,10 +378,14 @@ struct MosaicPipeline::Impl {
 
   // Tracking.
   std::unique_ptr<frontend::RotationParticleFilter> pf;
-  std::vector<float> map;
   frontend::LogIntensityMapView view;
-  mapping::MosaicReconstruction rec;
-  int64_t next_rec = 0, next_snap = INT64_MAX;
+  int front = 0;                       // mapper.maps[front] is the tracker's map
+  MapperBlock block;                   // mapper steps not yet submitted
+  int64_t rec_point = 0;               // events processed at the last reconstruction's point
+  int64_t rec_t = 0;                   // and its time
+  int64_t recs_submitted = 0;          // reconstructions of the tracking phase submitted
+  int64_t recs_in_use = 0;             // and switched to by the tracker
+  int64_t next_snap = INT64_MAX;
 
   MosaicResult result;
 
@@ -170,28 +414,10 @@ struct MosaicPipeline::Impl {
     return frontend::RotationParticleFilter::camera_rate_from_imu(*it, q_c_b);
   }
 
-  // ---- mapper and trajectory ------------------------------------------------------------------
+  // ---- trajectory ------------------------------------------------------------------------------
 
-  // The event's direction is R_w_c (b + dt w_c x b): R_w_c at a nearby time, rotated to the
-  // event's time to first order (dt |w_c| is a few mrad at most within a particle-filter batch).
-  void map_event(const Event& e, const Eigen::Matrix3d& R_w_c, const Eigen::Vector3d& w_c, double dt) {
-    if (e.x >= W || e.y >= H || !undistorter.valid(e.x, e.y)) return;
-    const size_t p = static_cast<size_t>(e.y) * static_cast<size_t>(W) + e.x;
-    const int64_t prev = last_t[p];
-    const Eigen::Vector3d b = undistorter.bearing(e.x, e.y).cast<double>();
-    const Eigen::Vector2d uv = proj.project(R_w_c * (b + dt * w_c.cross(b)));
-    last_t[p] = e.t_ns;
-    const Eigen::Vector2d uv_prev = last_uv[p];
-    last_uv[p] = uv;
-    if (prev == INT64_MIN) return;
-    if (mosaic.update_segment(uv_prev, uv, static_cast<double>(e.t_ns - prev) * 1e-9, e.polarity) ==
-        mapping::MosaicUpdate::kApplied) {
-      ++result.stats.events_mapped;
-      if (collect_segments && (result.stats.events_mapped % opt.calibration_sample_stride) == 0)
-        boot_segments.push_back({uv_prev, uv, e.polarity});
-    }
-  }
-
+  // A trajectory pose (at most one per trajectory_period_ns) and, with the weighted final solve,
+  // the camera's footprint every footprint_period_ns: marked now (bootstrap) or as a mapper step.
   void record(int64_t t, const Eigen::Matrix3d& R_w_c) {
     Trajectory& rotation = result.rotation;
     if (!rotation.empty() && t - rotation.t_end_ns() < opt.trajectory_period_ns) return;
@@ -200,33 +426,21 @@ struct MosaicPipeline::Impl {
     T.translation.setZero();
     rotation.push_back({t, T});
     if (opt.output_weighting == mapping::PoissonWeighting::kInformation &&
-        (t_viewed == INT64_MIN || t - t_viewed >= opt.reconstruct_period_ns)) {
+        (t_viewed == INT64_MIN || t - t_viewed >= opt.footprint_period_ns)) {
       t_viewed = t;
-      mark_footprint(R_w_c);
+      if (phase == Phase::kTracking) {
+        block.steps.push_back({MapperBlock::Kind::kFootprint, block.events.size(), R_w_c, Eigen::Vector3d::Zero(), 0,
+                               mapping::GradientMosaic::ReconstructMode::kAuto, 0});
+      } else {
+        mapper.mark_footprint(R_w_c);
+      }
     }
   }
 
-  // The camera's field of view at R_w_c on the mosaic, for the weighted solve's viewed-but-event-free
-  // texels (GradientMosaicOptions::viewed_edge_weight): the bearings of every third sensor pixel
-  // in both directions (the last row and column included), each marking its 4 x 4 nearest texels.
-  // At DAVIS240C (f = 200 px) and 1024 texels per turn, 3 sensor px are 2.4 texels on the equator
-  // and 4 texels at 53 deg latitude, the spacing mark_viewed covers without gaps.
-  void mark_footprint(const Eigen::Matrix3d& R_w_c) {
-    constexpr int kStride = 3;
-    const Eigen::Matrix3f R = R_w_c.cast<float>();
-    auto next = [](int v, int n) { return v == n - 1 ? n : std::min(v + kStride, n - 1); };
-    for (int y = 0; y < H; y = next(y, H))
-      for (int x = 0; x < W; x = next(x, W)) {
-        if (!undistorter.valid(x, y)) continue;
-        mosaic.mark_viewed(proj.project((R * undistorter.bearing(x, y)).cast<double>()));
-      }
-  }
-
-  mapping::MosaicReconstruction reconstruct_for_tracker() {
+  mapping::GradientMosaic::ReconstructMode next_reconstruct_mode() {
     const bool full = result.stats.reconstructions % opt.full_reconstruct_every == 0;
     ++result.stats.reconstructions;
-    return mosaic.reconstruct(full ? mapping::GradientMosaic::ReconstructMode::kFull
-                                   : mapping::GradientMosaic::ReconstructMode::kAuto);
+    return full ? mapping::GradientMosaic::ReconstructMode::kFull : mapping::GradientMosaic::ReconstructMode::kAuto;
   }
 
   // ---- bootstrap: rotation from the gyro or from contrast-maximisation rates ---------------------
@@ -268,7 +482,7 @@ struct MosaicPipeline::Impl {
       const Event& e = ev[k];
       const Eigen::Vector3d w_c = opt.use_gyro ? gyro_c_at(e.t_ns) : omega_c;
       const Eigen::Matrix3d R_e = R * calib::so3_exp(w_c * (static_cast<double>(e.t_ns - tw0) * 1e-9));
-      map_event(e, R_e, Eigen::Vector3d::Zero(), 0.0);
+      mapper.map_event(e, R_e.cast<float>(), Eigen::Vector3f::Zero(), 0.0f);
     }
     // Advance R to the window's end (gyro: integrate the samples inside).
     if (opt.use_gyro) {
@@ -289,9 +503,12 @@ struct MosaicPipeline::Impl {
 
   // The bootstrap mosaic's reconstruction, the tracker's contrast and the particle filter at t_track0.
   void end_bootstrap(int64_t t_track0) {
-    rec = reconstruct_for_tracker();
-    to_map(rec, &map);
-    collect_segments = false;
+    mapper.reconstruct(next_reconstruct_mode(), 0);  // maps[0], whole
+    mapper.maps[1] = mapper.maps[0];
+    mapper.last_region = mapping::PixelRect{0, 0, 0, 0};
+    front = 0;
+    const std::vector<float>& map = mapper.maps[0];
+    mapper.collect_segments = false;
     MosaicBootstrapStats& bs = result.stats.bootstrap;
     bs.t_end_ns = t_track0;
     double contrast_used = opt.tracker.contrast_threshold;
@@ -302,9 +519,9 @@ struct MosaicPipeline::Impl {
         const int iu = static_cast<int>(std::floor(uv.x())), iv = static_cast<int>(std::floor(uv.y()));
         if (iv < 0 || iv >= opt.mosaic.height) return false;
         const int w = opt.mosaic.width;
-        return mosaic.observations(((iu % w) + w) % w, iv) >= static_cast<uint32_t>(opt.calibration_min_texel_updates);
+        return mapper.mosaic.observations(((iu % w) + w) % w, iv) >= static_cast<uint32_t>(opt.calibration_min_texel_updates);
       };
-      for (const Segment& sg : boot_segments) {
+      for (const Mapper::Segment& sg : mapper.boot_segments) {
         if (!mature(sg.from) || !mature(sg.to)) continue;
         const float a = v0.sample(static_cast<float>(sg.to.x()), static_cast<float>(sg.to.y()));
         const float b = v0.sample(static_cast<float>(sg.from.x()), static_cast<float>(sg.from.y()));
@@ -322,7 +539,7 @@ struct MosaicPipeline::Impl {
                     std::to_string(contrast_used));
       }
     }
-    boot_segments = {};
+    mapper.boot_segments = {};
     bs.tracker_contrast = contrast_used;
     frontend::RotationParticleFilterOptions tracker_options = opt.tracker;
     tracker_options.contrast_threshold = contrast_used;
@@ -330,8 +547,9 @@ struct MosaicPipeline::Impl {
     pf->reset(Eigen::Quaterniond(R), t_track0);
     view.width = opt.mosaic.width;
     view.height = opt.mosaic.height;
-    view.data = map.data();
-    next_rec = t_track0 + opt.reconstruct_period_ns;
+    view.data = mapper.maps[front].data();
+    rec_point = processed;
+    rec_t = t_track0;
     next_snap = opt.snapshot_period_ns > 0 ? t_track0 : INT64_MAX;
     phase = Phase::kTracking;
   }
@@ -366,22 +584,41 @@ struct MosaicPipeline::Impl {
     const Eigen::Matrix3d R_pf = pf->mean().toRotationMatrix();
     const Eigen::Vector3d w_c = pf->angular_velocity_c();
     const int64_t t_pf = pf->time_ns();
-    for (size_t k = 0; k < n; ++k) map_event(ev[k], R_pf, w_c, static_cast<double>(ev[k].t_ns - t_pf) * 1e-9);
+    block.events.insert(block.events.end(), ev, ev + n);
+    block.steps.push_back({MapperBlock::Kind::kEvents, block.events.size(), R_pf, w_c, t_pf,
+                           mapping::GradientMosaic::ReconstructMode::kAuto, 0});
     record(t_pf, R_pf);
-    if (t_now >= next_rec) {
-      rec = reconstruct_for_tracker();
-      to_map(rec, &map);
-      view.data = map.data();
-      next_rec = t_now + opt.reconstruct_period_ns;
+    head += n;
+    processed += static_cast<int64_t>(n);
+    // The tracker switches to a finished reconstruction once its latency has passed.
+    if (recs_in_use < recs_submitted && processed - rec_point >= opt.reconstruct_latency_events) use_reconstruction();
+    if (processed - rec_point >= opt.reconstruct_events || t_now - rec_t >= opt.reconstruct_period_ns) {
+      if (recs_in_use < recs_submitted) use_reconstruction();  // one reconstruction in flight at most
+      block.steps.push_back({MapperBlock::Kind::kReconstruct, block.events.size(), Eigen::Matrix3d::Identity(),
+                             Eigen::Vector3d::Zero(), 0, next_reconstruct_mode(), 1 - front});
+      queue.submit(&block);
+      ++recs_submitted;
+      rec_point = processed;
+      rec_t = t_now;
+      if (opt.reconstruct_latency_events == 0) use_reconstruction();
+    } else if (block.events.size() >= kMapperBlockEvents) {
+      queue.submit(&block);
     }
     if (t_now >= next_snap) {
-      if (on_snapshot) on_snapshot(t_now, rec);
+      if (on_snapshot) on_snapshot(t_now, map_snapshot(mapper.maps[front], opt.mosaic.width, opt.mosaic.height));
       ++result.stats.snapshots;
       next_snap = t_now + opt.snapshot_period_ns;
     }
-    head += n;
-    processed += static_cast<int64_t>(n);
     return true;
+  }
+
+  // Waits for the oldest reconstruction not yet in use and switches the tracker's map to it.
+  void use_reconstruction() {
+    queue.submit(&block);
+    queue.wait_reconstructions(recs_in_use + 1);
+    ++recs_in_use;
+    front = 1 - front;
+    view.data = mapper.maps[front].data();
   }
 
   void process() {
@@ -426,7 +663,7 @@ void MosaicPipeline::add_events(EventSpan events) {
     m.t0 = events.front().t_ns;
     m.t_boot = m.t0 + options_.bootstrap_ns;
     st.t_first_event_ns = m.t0;
-    m.collect_segments = options_.calibrate_contrast;
+    m.mapper.collect_segments = options_.calibrate_contrast;
     m.record(m.t0, m.R);
     m.phase = Impl::Phase::kBootstrap;
   }
@@ -447,7 +684,10 @@ MosaicResult MosaicPipeline::finish() {
   m.pending = {};
   m.head = 0;
   MosaicResult& r = m.result;
-  r.reconstruction = m.mosaic.reconstruct(mapping::GradientMosaic::ReconstructMode::kFull, m.opt.output_weighting);
+  m.queue.submit(&m.block);
+  m.queue.drain();
+  r.stats.events_mapped = m.mapper.events_mapped;
+  r.reconstruction = m.mapper.mosaic.reconstruct(mapping::GradientMosaic::ReconstructMode::kFull, m.opt.output_weighting);
   if (m.pf) r.stats.tracker = m.pf->stats();
   int64_t seen = 0;
   for (Eigen::Index k = 0; k < r.reconstruction.seen.size(); ++k) seen += r.reconstruction.seen.data()[k] ? 1 : 0;

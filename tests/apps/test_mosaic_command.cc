@@ -136,6 +136,25 @@ TEST(MosaicConfig, ErrorsNameFileLineAndKey) {
   EXPECT_EQ(d.tracker.measurement_model, frontend::RotationMeasurementModel::kPreviousMean);
   EXPECT_EQ(d.event_stride, 3);
   EXPECT_FALSE(d.calibrate_contrast);
+  // *_ms keys are milliseconds (they were read as seconds); the resolved config reads back the same.
+  std::ofstream(p) << "mosaic: {reconstruct_ms: 20, reconstruct_events: 1000, reconstruct_latency_events: 500, threads: 2}\n"
+                      "tracker: {max_batch_ms: 0.5}\nbootstrap: {duration_ms: 250}\noutput: {trajectory_ms: 2}\n";
+  std::string resolved_ms;
+  const MosaicConfig e = load_mosaic_config(p, &resolved_ms);
+  EXPECT_EQ(e.reconstruct_period_ns, 20'000'000);
+  EXPECT_EQ(e.reconstruct_events, 1000);
+  EXPECT_EQ(e.reconstruct_latency_events, 500);
+  EXPECT_EQ(e.threads, 2);
+  EXPECT_EQ(e.tracker.max_batch_duration_ns, 500'000);
+  EXPECT_EQ(e.bootstrap_ns, 250'000'000);
+  EXPECT_EQ(e.trajectory_period_ns, 2'000'000);
+  std::ofstream(p) << resolved_ms;
+  const MosaicConfig f = load_mosaic_config(p);
+  EXPECT_EQ(f.reconstruct_period_ns, e.reconstruct_period_ns);
+  EXPECT_EQ(f.bootstrap_ns, e.bootstrap_ns);
+  EXPECT_EQ(f.footprint_period_ns, e.footprint_period_ns);
+  std::ofstream(p) << "mosaic: {threads: 3}\n";
+  EXPECT_THROW(load_mosaic_config(p), InputError);
   std::ofstream(p) << "tracker:\n  measurement_model: kim\n";
   try {
     load_mosaic_config(p);

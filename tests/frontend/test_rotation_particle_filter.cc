@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <numeric>
 #include <random>
 #include <string>
 #include <vector>
@@ -97,6 +98,11 @@ TEST(RotationParticleFilterOptions, DefaultsValidAndDegenerateRejected) {
   rejects([](auto& o) { o.initial_spread_rad = -0.1; }, "spread");
   rejects([](auto& o) { o.velocity_window_ns = 0; }, "velocity window");
   rejects([](auto& o) { o.velocity_smoothing = 0; }, "velocity smoothing");
+  rejects([](auto& o) { o.min_particles = -1; }, "min particles negative");
+  rejects([](auto& o) { o.min_particles = o.num_particles + 1; }, "min particles above num_particles");
+  rejects([](auto& o) { o.kld_bin_rad = 0; }, "kld bin");
+  rejects([](auto& o) { o.kld_epsilon = 0; }, "kld epsilon");
+  rejects([](auto& o) { o.kld_z = -1; }, "kld z");
   RotationParticleFilterOptions bad;
   bad.num_particles = 0;
   EXPECT_THROW(RotationParticleFilter(4, 4, pinhole_bearings(4, 4), bad), std::invalid_argument);
@@ -162,6 +168,38 @@ TEST(RotationParticleFilter, ResamplingNormalisesAndFollowsWeights) {
   EXPECT_NEAR(first, 900, 1);  // systematic resampling: counts within one of N * w
   EXPECT_EQ(zero, 0);
   EXPECT_EQ(pf.stats().resamples, 1);
+}
+
+// KLD-sampling: a cloud in one bin shrinks to min_particles, one spread over many bins keeps
+// num_particles, and k bins give Fox's bound (k - 1) / (2 eps) (1 - 2/(9(k-1)) + sqrt(2/(9(k-1))) z)^3.
+TEST(RotationParticleFilter, AdaptiveParticleCountFollowsTheCloudsSpread) {
+  RotationParticleFilterOptions o;
+  o.num_particles = 200;
+  o.min_particles = 10;
+  o.kld_bin_rad = 0.002;
+  o.kld_epsilon = 0.5;
+  RotationParticleFilter pf(4, 4, pinhole_bearings(4, 4), o);
+  const std::vector<double> w(200, 1.0);
+  auto resampled_count = [&](double spacing_rad, int distinct) {
+    std::vector<Eigen::Quaterniond> p;
+    for (int i = 0; i < 200; ++i)
+      p.push_back(Eigen::Quaterniond(calib::so3_exp(Eigen::Vector3d(spacing_rad * (i % distinct), 0, 0))));
+    pf.set_particles(p, w);
+    pf.resample();
+    const std::vector<double> wn = pf.weights();
+    EXPECT_NEAR(std::accumulate(wn.begin(), wn.end(), 0.0), 1.0, 1e-12);
+    return pf.particles().size();
+  };
+  EXPECT_EQ(resampled_count(0.0, 1), 10u);          // one bin: min_particles
+  EXPECT_EQ(resampled_count(0.01, 200), 200u);      // 200 bins: Fox's bound is far above 200
+  const double km1 = 9, a = 2 / (9 * km1), b = 1 - a + std::sqrt(a) * o.kld_z;
+  EXPECT_EQ(resampled_count(0.01, 10), static_cast<size_t>(std::ceil(km1 / (2 * o.kld_epsilon) * b * b * b)));  // 10 bins: 22
+  // Fixed count (min_particles 0): resampling keeps the set's size.
+  o.min_particles = 0;
+  RotationParticleFilter fixed(4, 4, pinhole_bearings(4, 4), o);
+  fixed.set_particles(std::vector<Eigen::Quaterniond>(50, Eigen::Quaterniond::Identity()), std::vector<double>(50, 1.0));
+  fixed.resample();
+  EXPECT_EQ(fixed.particles().size(), 50u);
 }
 
 TEST(RotationParticleFilter, PredictionsWithoutEventsStayFiniteAndSpread) {

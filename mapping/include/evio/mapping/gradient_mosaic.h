@@ -198,10 +198,18 @@ class GradientMosaic {
   // solve once wider than poisson.max_region_side).
   MosaicReconstruction reconstruct(ReconstructMode mode = ReconstructMode::kAuto,
                                    PoissonWeighting weighting = PoissonWeighting::kNone);
+  // The same solve as reconstruct(mode, kNone), written as a tracker's map: H x W row-major float
+  // log intensity, NaN at unseen texels (frontend::LogIntensityMapView). Only the re-solved region
+  // is written (the rest of *map is left as the earlier calls wrote it; every texel whose value or
+  // seen state changed lies in the region), so a map kept across calls equals the full conversion
+  // of reconstruct(mode)'s images without their full-size copies. A *map of another size is
+  // resized and written whole. Returns the region written (x may exceed the width: columns wrap).
+  PixelRect reconstruct_map(ReconstructMode mode, std::vector<float>* map);
 
  private:
   size_t index(int i, int j) const { return static_cast<size_t>(j) * options_.width + i; }
   void update_edges(int x0, int y0, int w, int h);  // edge gradients owned by those pixels
+  PixelRect solve(ReconstructMode mode, PoissonWeighting weighting, MosaicReconstruction* out);
 
   GradientMosaicOptions options_;
   PoissonSolver solver_;

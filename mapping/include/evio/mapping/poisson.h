@@ -94,8 +94,9 @@ class PoissonSolver {
   // image (kNeumann), wider than W, or size mismatches. Double precision only.
   // The rectangle is grown to sides that are multiples of 16 px (within the image) so that the
   // eigenbases of its 1-D operators can be cached and reused (thread-safe cache shared by copies
-  // of the solver).
-  void solve_region(const ImageD& gx, const ImageD& gy, const PixelRect& rect, ImageD* L,
+  // of the solver). Returns the rectangle actually re-solved (the grown one, x in [0, W); the whole
+  // image after a fallback): every pixel of *L that changed lies in it.
+  PixelRect solve_region(const ImageD& gx, const ImageD& gy, const PixelRect& rect, ImageD* L,
                     const ImageD* weight = nullptr) const;
 
  private:

@@ -4,7 +4,9 @@
 // (mapping::GradientMosaic), the tracker's contrast is calibrated on that mosaic, then a particle
 // filter on SO(3) (frontend::RotationParticleFilter) tracks the camera against the Poisson
 // reconstruction of the mosaic, which it keeps building from the tracked rotation.
-// Plain data in (events, IMU samples) and out (MosaicResult); no files, flags or threads.
+// Plain data in (events, IMU samples) and out (MosaicResult); no files or flags. With threads = 2
+// the mapper (gradient EKF and the tracker's Poisson solves) runs on a second thread, with the
+// same results.
 #pragma once
 
 #include <cstdint>
@@ -32,9 +34,27 @@ struct MosaicPipelineOptions {
   // Drive the bootstrap and the particles' prediction with the gyro (add_imu); false: events only.
   bool use_gyro = false;
 
-  // Poisson reconstruction of the tracker's map: after the first particle-filter batch that ends at
-  // least this long after the previous reconstruction, ns (> 0).
-  int64_t reconstruct_period_ns = 20'000'000;
+  // Poisson reconstruction of the tracker's map, scheduled by events: after the first
+  // particle-filter batch that ends at least reconstruct_events events (count, >= 1) after the
+  // previous reconstruction's point, or reconstruct_period_ns (ns, > 0) after it, whichever comes
+  // first. Events rather than a clock: the event rate grows with the rotation speed, so a fixed
+  // count re-solves after about the same rotation at every speed and the solves' cost per event
+  // stays bounded (a region solve of the field of view costs about as much at any speed); the
+  // period bounds the map's age on slow, sparse streams. Defaults 200000 events and 100 ms: on
+  // poster_rotation 2 s (3.2 M events/s, 63 ms) with the gyro 50000 / 150000 / 300000 events gave
+  // 0.167 / 0.124 / 0.093 deg RMS (a fixed 20 ms: 0.169; seed-to-seed spread about +-20 %) and
+  // 1.17 / 1.24 / 1.30 M events/s of CPU time.
+  int64_t reconstruct_events = 200'000;
+  int64_t reconstruct_period_ns = 100'000'000;
+  // The tracker switches to a reconstruction reconstruct_latency_events events (count, >= 0) after
+  // its point (at the first batch ending there or later; 0 = the next batch). The results do not
+  // depend on `threads`; with threads = 2 the mapper solves during those events instead of the
+  // tracker waiting for it. A new reconstruction is never started before the previous one is in use.
+  int64_t reconstruct_latency_events = 0;
+  // Mapper thread: 1 = everything on the caller's thread; 2 = the tracker's events are mapped
+  // into the gradient mosaic and the tracker's maps reconstructed on a second thread (from the
+  // tracking start on). The output is bit-identical for 1 and 2 (count, 1 or 2).
+  int threads = 1;
   // Every this many reconstructions (counting the bootstrap's) one is a full solve, the others
   // are GradientMosaic's kAuto (incremental region solve where it suffices), count (>= 1).
   int full_reconstruct_every = 50;
@@ -45,9 +65,12 @@ struct MosaicPipelineOptions {
   // Default kInformation: on 3 s with the gyro it raised the mosaic's PSNR / SSIM against the true
   // panorama from 28.61 dB / 0.903 to 29.38 dB / 0.912 (poster_rotation) and from 19.04 / 0.753 to
   // 19.73 / 0.774 (shapes_rotation), for one solve of about 0.4 s (README, `evio mosaic`). With it,
-  // the camera's field of view is marked on the mosaic every reconstruct_period_ns
+  // the camera's field of view is marked on the mosaic every footprint_period_ns
   // (GradientMosaic::mark_viewed) for the weights of event-free texels.
   mapping::PoissonWeighting output_weighting = mapping::PoissonWeighting::kInformation;
+  // With kInformation: the field of view is marked at the first trajectory pose at least this long
+  // after the previous marking, ns (> 0).
+  int64_t footprint_period_ns = 20'000'000;
 
   // Bootstrap: the events of the first bootstrap_ns (ns, >= 0) after the first event are mapped
   // with rotations integrated from gyro or contrast-maximisation rates, not tracked.
@@ -141,7 +164,8 @@ struct MosaicResult {
 
 class MosaicPipeline {
  public:
-  // Called at each snapshot time (camera clock) with the tracker's current reconstruction.
+  // Called at each snapshot time (camera clock) with the tracker's current reconstruction (log
+  // intensity, 0 where unseen, and the seen mask), on the caller's thread.
   using SnapshotCallback = std::function<void(int64_t t_ns, const mapping::MosaicReconstruction&)>;
 
   // camera: intrinsics (undistortion), T_c_b (only its rotation: the gyro's frame and the written
