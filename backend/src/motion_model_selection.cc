@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
@@ -296,6 +297,50 @@ TwoViewGric two_view_gric(const std::vector<Vector3d>& b0, const std::vector<Vec
   }
   if (out.gric_general < best) out.best = TwoViewModel::kGeneral;
   return out;
+}
+
+namespace {
+
+// P(a, x), the regularised lower incomplete gamma function: series for x < a + 1, else the
+// continued fraction of Q (Numerical Recipes' gser/gcf forms).
+double regularised_gamma_p(double a, double x) {
+  if (x <= 0) return 0.0;
+  const double log_prefactor = -x + a * std::log(x) - std::lgamma(a);
+  if (x < a + 1) {
+    double term = 1.0 / a, sum = term;
+    for (int n = 1; n < 1000 && std::abs(term) > std::abs(sum) * 1e-15; ++n) {
+      term *= x / (a + n);
+      sum += term;
+    }
+    return sum * std::exp(log_prefactor);
+  }
+  double b = x + 1 - a, c = 1e300, d = 1 / b, h = d;
+  for (int i = 1; i < 1000; ++i) {
+    const double an = -i * (i - a);
+    b += 2;
+    d = an * d + b;
+    if (std::abs(d) < 1e-300) d = 1e-300;
+    c = b + an / c;
+    if (std::abs(c) < 1e-300) c = 1e-300;
+    d = 1 / d;
+    const double del = d * c;
+    h *= del;
+    if (std::abs(del - 1) < 1e-15) break;
+  }
+  return 1.0 - std::exp(log_prefactor) * h;
+}
+
+}  // namespace
+
+double chi2_upper_quantile(int dof, double p) {
+  if (dof < 1 || !(p > 0 && p < 1)) throw std::invalid_argument("chi2_upper_quantile: dof >= 1 and p in (0, 1)");
+  double lo = 0, hi = 1;
+  while (1.0 - regularised_gamma_p(0.5 * dof, 0.5 * hi) > p) hi *= 2;
+  for (int i = 0; i < 200 && hi - lo > 1e-10 * hi; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (1.0 - regularised_gamma_p(0.5 * dof, 0.5 * mid) > p ? lo : hi) = mid;
+  }
+  return 0.5 * (lo + hi);
 }
 
 }  // namespace evio::backend

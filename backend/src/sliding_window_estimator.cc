@@ -64,8 +64,8 @@ bool SlidingWindowOptions::Validate(std::string* why) const {
     return fail("rotation_only_gric_margin must be finite and >= 0 (GRIC units)");
   if (rotation_only_min_keyframes < 1) return fail("rotation_only_min_keyframes must be >= 1 keyframe");
   if (model_selection_min_tracks < 6) return fail("model_selection_min_tracks must be >= 6 tracks");
-  if (!(model_selection_imu_veto_chi2_per_dof >= 0) || !std::isfinite(model_selection_imu_veto_chi2_per_dof))
-    return fail("model_selection_imu_veto_chi2_per_dof must be finite and >= 0");
+  if (!(model_selection_imu_veto_p >= 0 && model_selection_imu_veto_p < 1))
+    return fail("model_selection_imu_veto_p must be in [0, 1)");
   if (!(model_selection_min_interval_s >= 0) || !std::isfinite(model_selection_min_interval_s))
     return fail("model_selection_min_interval_s must be finite and >= 0 s");
   if (!(model_selection_accel_sigma_mps2 >= 0) || !std::isfinite(model_selection_accel_sigma_mps2))
@@ -257,8 +257,8 @@ bool SlidingWindowEstimator::choose_rotation_only(const Keyframe& prev, const Fe
     test.best = g.best;
     // IMU veto: a camera centre whose velocity change (or displacement) the IMU rejects cannot
     // be rotating in place, whatever the image test says.
-    if (test.best == TwoViewModel::kRotation && g.imu_dof > 0 && options_.model_selection_imu_veto_chi2_per_dof > 0 &&
-        g.imu_chi2 > options_.model_selection_imu_veto_chi2_per_dof * g.imu_dof) {
+    if (test.best == TwoViewModel::kRotation && g.imu_dof > 0 && options_.model_selection_imu_veto_p > 0 &&
+        g.imu_chi2 > chi2_upper_quantile(g.imu_dof, options_.model_selection_imu_veto_p)) {
       test.best = TwoViewModel::kGeneral;
       test.imu_veto = true;
     }

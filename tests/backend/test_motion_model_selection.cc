@@ -42,6 +42,18 @@ Eigen::Matrix3d rot(double deg, const Eigen::Vector3d& axis) {
   return Eigen::AngleAxisd(deg * M_PI / 180, axis.normalized()).toRotationMatrix();
 }
 
+// Against tabulated chi-square upper quantiles.
+TEST(Chi2UpperQuantile, MatchesTables) {
+  EXPECT_NEAR(chi2_upper_quantile(1, 0.05), 3.8415, 1e-4);
+  EXPECT_NEAR(chi2_upper_quantile(2, 0.01), 9.2103, 1e-4);
+  EXPECT_NEAR(chi2_upper_quantile(3, 0.001), 16.2662, 1e-4);
+  EXPECT_NEAR(chi2_upper_quantile(6, 0.001), 22.4577, 1e-4);
+  EXPECT_NEAR(chi2_upper_quantile(30, 0.5), 29.3360, 1e-4);
+  EXPECT_NEAR(chi2_upper_quantile(100, 1e-6), 182.1268, 1e-4);  // scipy.stats.chi2.isf(1e-6, 100)
+  EXPECT_THROW(chi2_upper_quantile(0, 0.1), std::invalid_argument);
+  EXPECT_THROW(chi2_upper_quantile(3, 1.0), std::invalid_argument);
+}
+
 TEST(TwoViewGric, ChoosesStaticRotationAndGeneral) {
   for (uint64_t seed = 1; seed <= 5; ++seed) {
     // No motion.

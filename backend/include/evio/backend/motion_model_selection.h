@@ -54,4 +54,9 @@ TwoViewGric two_view_gric(const std::vector<Eigen::Vector3d>& b0, const std::vec
                           const Eigen::Matrix3d& R_prior, const Eigen::Vector3d& t_prior, double focal_px, double sigma_px,
                           int imu_dof = 0, double imu_chi2 = 0);
 
+// Upper quantile of the chi-square distribution: x with P(chi2_dof > x) = p, for dof >= 1 and p in
+// (0, 1) (bisection on the regularised lower incomplete gamma function, relative accuracy 1e-10).
+// Throws std::invalid_argument otherwise.
+double chi2_upper_quantile(int dof, double p);
+
 }  // namespace evio::backend

@@ -101,11 +101,13 @@ struct SlidingWindowOptions {
   // one): keyframes made by track losses can be 10 ms apart (boxes_6dof), too little baseline for
   // a translation to show (s, >= 0).
   double model_selection_min_interval_s = 0.05;
-  // IMU veto: R cannot win when the IMU datum's chi2 exceeds this times its degrees of freedom
-  // (5.42 x 3 = 16.3: p = 0.001 for the velocity change alone; with the displacement, 6 dof, p ~
-  // 1e-5). On boxes_6dof at 0.1-0.15 m/s the image test chose R with the IMU at chi2 35-48 (3 dof).
-  // 0 disables the veto.
-  double model_selection_imu_veto_chi2_per_dof = 5.42;
+  // IMU veto: R cannot win when the IMU datum rejects a static camera centre at this significance
+  // (its chi2 above the chi-square upper quantile for its degrees of freedom: 16.27 for the
+  // velocity change alone, 3 dof; 22.46 with the displacement, 6 dof). On boxes_6dof at 0.1-0.15
+  // m/s the image test chose R with the IMU at chi2 35-48 (3 dof), and at 32 (6 dof) where the
+  // former threshold of 5.42 per dof (p = 0.001 for 3 dof but 1e-5 for 6) let it through.
+  // 0 disables the veto; else in (0, 1).
+  double model_selection_imu_veto_p = 0.001;
   // IMU datum of the test: 1-sigma of the camera centre's mean acceleration over the interval that
   // the accelerometer noise density does not explain (accelerometer bias and gravity-direction
   // errors of the estimate, lever-arm errors), m/s^2, >= 0; 0: the IMU is not used in the test.
