@@ -38,6 +38,26 @@ double worst_error(const ceres::GradientChecker::ProbeResults& r) {
   return worst;
 }
 
+// A random body pose, a landmark 2-6 m in front of the camera and its bearing with ~2 px noise.
+struct RandomObservation {
+  std::array<double, 7> pose;
+  std::array<double, 3> landmark;
+  Eigen::Vector3d bearing;
+};
+RandomObservation random_observation(std::mt19937& rng, const calib::SE3& T_c_b) {
+  std::normal_distribution<double> n(0.0, 1.0);
+  RandomObservation o;
+  o.pose = random_pose(rng);
+  const calib::SE3 T_w_b(Eigen::Quaterniond(o.pose[3], o.pose[0], o.pose[1], o.pose[2]),
+                         Eigen::Vector3d(o.pose[4], o.pose[5], o.pose[6]));
+  const calib::SE3 T_w_c = T_w_b * T_c_b.inverse();
+  const Eigen::Vector3d p_c(0.5 * n(rng), 0.5 * n(rng), 2.0 + 4.0 * std::abs(n(rng)) / 3.0);
+  const Eigen::Vector3d p_w = T_w_c.rotation * p_c + T_w_c.translation;
+  o.landmark = {p_w.x(), p_w.y(), p_w.z()};
+  o.bearing = (p_c + Eigen::Vector3d(0.01 * n(rng), 0.01 * n(rng), 0)).normalized();
+  return o;
+}
+
 TEST(ReprojectionError, GradientCheckerAtRandomPosesAndPoints) {
   std::mt19937 rng(3);
   std::normal_distribution<double> n(0.0, 1.0);
@@ -47,16 +67,9 @@ TEST(ReprojectionError, GradientCheckerAtRandomPosesAndPoints) {
   const calib::SE3 T_c_b(calib::so3_exp_quat(Eigen::Vector3d(0.1, -0.2, 0.05)), Eigen::Vector3d(0.02, -0.01, 0.03));
   double worst = 0;
   for (int trial = 0; trial < 50; ++trial) {
-    auto pose = random_pose(rng);
-    // A landmark 2-6 m in front of the camera.
-    const calib::SE3 T_w_b(Eigen::Quaterniond(pose[3], pose[0], pose[1], pose[2]), Eigen::Vector3d(pose[4], pose[5], pose[6]));
-    const calib::SE3 T_w_c = T_w_b * T_c_b.inverse();
-    const Eigen::Vector3d p_c(0.5 * n(rng), 0.5 * n(rng), 2.0 + 4.0 * std::abs(n(rng)) / 3.0);
-    const Eigen::Vector3d p_w = T_w_c.rotation * p_c + T_w_c.translation;
-    std::array<double, 3> l = {p_w.x(), p_w.y(), p_w.z()};
-    const Eigen::Vector3d bearing = (p_c + Eigen::Vector3d(0.01 * n(rng), 0.01 * n(rng), 0)).normalized();
-    const ReprojectionError err(bearing, T_c_b, 200.0, 0.5);
-    const double* params[2] = {pose.data(), l.data()};
+    const RandomObservation o = random_observation(rng, T_c_b);
+    const ReprojectionError err(o.bearing, T_c_b, 200.0, 0.5);
+    const double* params[2] = {o.pose.data(), o.landmark.data()};
     ceres::NumericDiffOptions nd;
     const ceres::GradientChecker checker(&err, &manifolds, nd);
     ceres::GradientChecker::ProbeResults res;
@@ -98,17 +111,12 @@ TEST(TimeOffsetReprojectionError, GradientCheckerAndShiftAlongTheImageVelocity) 
   const calib::SE3 T_c_b(calib::so3_exp_quat(Eigen::Vector3d(0.1, -0.2, 0.05)), Eigen::Vector3d(0.02, -0.01, 0.03));
   double worst = 0;
   for (int trial = 0; trial < 30; ++trial) {
-    auto pose = random_pose(rng);
-    const calib::SE3 T_w_b(Eigen::Quaterniond(pose[3], pose[0], pose[1], pose[2]), Eigen::Vector3d(pose[4], pose[5], pose[6]));
-    const calib::SE3 T_w_c = T_w_b * T_c_b.inverse();
-    const Eigen::Vector3d p_c(0.5 * n(rng), 0.5 * n(rng), 2.0 + 4.0 * std::abs(n(rng)) / 3.0);
-    const Eigen::Vector3d p_w = T_w_c.rotation * p_c + T_w_c.translation;
-    std::array<double, 3> l = {p_w.x(), p_w.y(), p_w.z()};
+    const RandomObservation o = random_observation(rng, T_c_b);
+    const Eigen::Vector3d& bearing = o.bearing;
     std::array<double, 1> td = {0.01 * n(rng)};
-    const Eigen::Vector3d bearing = (p_c + Eigen::Vector3d(0.01 * n(rng), 0.01 * n(rng), 0)).normalized();
     const Eigen::Vector2d v(0.5 * n(rng), 0.5 * n(rng));
     const TimeOffsetReprojectionError err(bearing, v, T_c_b, 200.0, 0.5);
-    const double* params[3] = {pose.data(), l.data(), td.data()};
+    const double* params[3] = {o.pose.data(), o.landmark.data(), td.data()};
     ceres::NumericDiffOptions nd;
     const ceres::GradientChecker checker(&err, &manifolds, nd);
     ceres::GradientChecker::ProbeResults res;
