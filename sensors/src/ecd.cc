@@ -158,27 +158,19 @@ bool EcdEventReader::parse_general(std::string_view line, Event* e, uint32_t* x,
     bad("malformed", line, "time is not a number");
     return false;
   }
-  p = skip_space(p, end);
-  const bool has_x = parse_coord(p, end, x);
-  if (has_x && p < end && *p == '.') {
-    bad("malformed", line, "fractional pixel coordinate (undistorted events are not integer pixels)");
-    return false;
-  }
-  if (!has_x || p == end || !is_space(*p)) {
-    bad("malformed", line, "expected 4 columns, found " + std::to_string(detail::count_tokens(line)) +
-                               (has_x ? "" : " or x is not a non-negative integer"));
-    return false;
-  }
-  p = skip_space(p, end);
-  const bool has_y = parse_coord(p, end, y);
-  if (has_y && p < end && *p == '.') {
-    bad("malformed", line, "fractional pixel coordinate (undistorted events are not integer pixels)");
-    return false;
-  }
-  if (!has_y || p == end || !is_space(*p)) {
-    bad("malformed", line, "expected 4 columns, found " + std::to_string(detail::count_tokens(line)) +
-                               (has_y ? "" : " or y is not a non-negative integer"));
-    return false;
+  // x then y: a non-negative integer followed by a separator.
+  for (const auto& [coord, name] : {std::pair<uint32_t*, const char*>{x, "x"}, {y, "y"}}) {
+    p = skip_space(p, end);
+    const bool has = parse_coord(p, end, coord);
+    if (has && p < end && *p == '.') {
+      bad("malformed", line, "fractional pixel coordinate (undistorted events are not integer pixels)");
+      return false;
+    }
+    if (!has || p == end || !is_space(*p)) {
+      bad("malformed", line, "expected 4 columns, found " + std::to_string(detail::count_tokens(line)) +
+                                 (has ? "" : std::string(" or ") + name + " is not a non-negative integer"));
+      return false;
+    }
   }
   p = skip_space(p, end);
   // Polarity: 0/1 or -1/+1 (also "+1"); the two conventions may not mix within one file.

@@ -71,13 +71,19 @@ TEST(VioConfig, ErrorsNameFileLineAndKey) {
   expect_error("inputs: video\n", "inputs");
   expect_error("aps: {pixel_sigma: 0}\n", "aps.pixel_sigma");
   expect_error("aps_tracker: {klt_window_px: 4}\n", "klt_window_px");
+  expect_error("window: {init_bias_gyro_turn_on_radps: 0}\n", "init_bias_gyro_turn_on_radps");
+  expect_error("window: {init_bias_accel_turn_on_mps2: -1}\n", "init_bias_accel_turn_on_mps2");
+  expect_error("window: {estimate_time_offset: maybe}\n", "estimate_time_offset");
+  expect_error("window: {time_offset_sigma_ms: 0}\n", "time_offset_sigma_ms");
+  expect_error("tracker: {seed: -3}\n", "tracker.seed");
 }
 
 TEST(VioConfig, ResolvedConfigReadsBackToTheSameValues) {
   evio_test::TempDir dir;
   std::string resolved;
   const VioConfig a = load_vio_config(
-      dir.write("c.yaml", "frontend: corners\nwindow: {size: 7, pixel_sigma: 0.8, loss: cauchy}\nframes: {events_per_frame: 9000}\n"
+      dir.write("c.yaml", "frontend: corners\nwindow: {size: 7, pixel_sigma: 0.8, loss: cauchy, init_bias_gyro_turn_on_radps: 0.0002,\n"
+                          "  estimate_time_offset: true, time_offset_sigma_ms: 4}\nframes: {events_per_frame: 9000}\n"
                           "tracker: {ransac: five_point, fast_threshold: 30}\ninit: {method: static, window_ms: 1500}\n"
                           "inputs: events+aps\naps_tracker: {fast_threshold: 7}\naps: {pixel_sigma: 0.4, max_gap_ms: 80}\n"),
       &resolved);
@@ -99,6 +105,9 @@ TEST(VioConfig, ResolvedConfigReadsBackToTheSameValues) {
   EXPECT_EQ(b.tracker.fast_threshold, 30);
   EXPECT_DOUBLE_EQ(b.aps_pixel_sigma_px, 0.4);
   EXPECT_EQ(b.aps_max_gap_ns, 80'000'000);
+  EXPECT_DOUBLE_EQ(b.window.init_bias_gyro_turn_on_radps, 0.0002);
+  EXPECT_TRUE(b.window.estimate_time_offset);
+  EXPECT_DOUBLE_EQ(b.window.time_offset_sigma_s, 0.004);
 }
 
 TEST(VioConfig, EveryExampleConfigInDatasetsParses) {

@@ -235,15 +235,18 @@ ceres::Solver::Options tight() {
   return so;
 }
 
+// An r x c matrix of standard normal entries.
+Eigen::MatrixXd random_matrix(std::mt19937& rng, int r, int c) {
+  std::normal_distribution<double> n(0.0, 1.0);
+  Eigen::MatrixXd m(r, c);
+  for (int i = 0; i < r; ++i)
+    for (int j = 0; j < c; ++j) m(i, j) = n(rng);
+  return m;
+}
+
 TEST(Marginalization, SchurPriorReproducesTheFullSolutionOfKeptVariables) {
   std::mt19937 rng(9);
-  std::normal_distribution<double> n(0.0, 1.0);
-  auto rnd = [&](int r, int c) {
-    Eigen::MatrixXd m(r, c);
-    for (int i = 0; i < r; ++i)
-      for (int j = 0; j < c; ++j) m(i, j) = n(rng);
-    return m;
-  };
+  auto rnd = [&](int r, int c) { return random_matrix(rng, r, c); };
   const LinearResidual f0(rnd(4, 3), rnd(4, 1), 1);   // on x0
   const LinearResidual f01(rnd(5, 6), rnd(5, 1), 2);  // x0, x1
   const LinearResidual f02(rnd(4, 6), rnd(4, 1), 2);  // x0, x2
@@ -290,13 +293,7 @@ TEST(Marginalization, SchurPriorReproducesTheFullSolutionOfKeptVariables) {
 // the removed blocks) gives the Schur complement of one dense elimination of all removed blocks.
 TEST(Marginalization, TwoStageEliminationEqualsTheDenseSchurComplement) {
   std::mt19937 rng(17);
-  std::normal_distribution<double> n(0.0, 1.0);
-  auto rnd = [&](int r, int c) {
-    Eigen::MatrixXd m(r, c);
-    for (int i = 0; i < r; ++i)
-      for (int j = 0; j < c; ++j) m(i, j) = n(rng);
-    return m;
-  };
+  auto rnd = [&](int r, int c) { return random_matrix(rng, r, c); };
   // Removed: a "pose" p and landmarks l1, l2 (each seen from p and a kept pose); kept: k1, k2.
   std::array<double, 3> p{0.1, 0.2, 0.3}, l1{1, 2, 3}, l2{-1, 0, 2}, k1{0.5, 0.5, 0.5}, k2{0, -1, 1};
   std::vector<std::unique_ptr<LinearResidual>> costs;
