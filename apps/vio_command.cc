@@ -522,7 +522,8 @@ int run_vio(const VioArgs& args, std::ostream& out) {
       << ", \"drift_px_per_frame\": " << num(args.oracle_drift_px) << ", \"replaced\": " << oracle->stats().replaced
       << ", \"dropped\": " << oracle->stats().dropped << "}";
   }
-  j << ",\n  \"outliers_removed\": " << st.outliers_removed << ",\n  \"rotation_only_keyframes\": " << st.rotation_only_keyframes;
+  j << ",\n  \"outliers_removed\": " << st.outliers_removed << ",\n  \"landmarks_marginalised\": " << st.landmarks_marginalised
+    << ",\n  \"observations_dropped\": " << st.observations_dropped << ",\n  \"rotation_only_keyframes\": " << st.rotation_only_keyframes;
   if (cfg.window.estimate_time_offset) j << ",\n  \"time_offset_correction_s\": " << num(st.time_offset_s);
   j
     << "\n}\n";
