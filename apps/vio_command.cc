@@ -107,7 +107,8 @@ std::string config_yaml(const VioConfig& c) {
     << ", max_window_ms: " << num(ns_to_ms(fr.max_window_ns))
     << ", min_events: " << fr.min_events << ", motion_compensation: " << (fr.motion_compensation ? "true" : "false")
     << ", use_depth: " << (fr.use_depth ? "true" : "false")
-    << ", clip_percentile: " << num(fr.clip_percentile) << ", clip_count: " << num(fr.clip_count) << "}\n";
+    << ", clip_percentile: " << num(fr.clip_percentile) << ", clip_count: " << num(fr.clip_count)
+    << ", overlap: " << num(fr.overlap) << "}\n";
   y << tracker_yaml("tracker", c.tracker);
   y << tracker_yaml("aps_tracker", c.aps_tracker);
   y << "aps: {pixel_sigma: " << num(c.aps_pixel_sigma_px) << ", event_pixel_sigma: " << num(c.aps_event_pixel_sigma_px)
@@ -167,7 +168,7 @@ VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
       if (top.has("frames")) {
         const Section s = top.child("frames", false, "a map");
         s.allow({"events_per_frame", "min_window_ms", "max_window_ms", "min_events", "motion_compensation", "use_depth", "clip_percentile",
-                 "clip_count"});
+                 "clip_count", "overlap"});
         auto& f = c.frames;
         f.events_per_frame = s.integer("events_per_frame", f.events_per_frame, 1, 100000000);
         f.max_window_ns = ms_to_ns(s.number("max_window_ms", ns_to_ms(f.max_window_ns), Range::kPositive, "ms"));
@@ -177,6 +178,7 @@ VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
         f.use_depth = s.boolean("use_depth", f.use_depth);
         f.clip_percentile = s.number("clip_percentile", f.clip_percentile, Range::kUnit, "");
         f.clip_count = s.number("clip_count", f.clip_count, Range::kNonNegative, "events per pixel");
+        f.overlap = s.number("overlap", f.overlap, Range::kNonNegative, "fraction of a frame's events");
         std::string why;
         if (!f.Validate(&why)) s.fail("invalid frame settings: " + why, "consistent settings");
       }

@@ -54,6 +54,7 @@ bool EventFrameOptions::Validate(std::string* why) const {
   if (max_window_ns <= 0) return fail("max_window_ns must be > 0 ns");
   if (min_window_ns < 0 || min_window_ns > max_window_ns) return fail("min_window_ns must be in 0..max_window_ns");
   if (min_events < 1 || min_events > events_per_frame) return fail("min_events must be in 1..events_per_frame");
+  if (!(overlap >= 0.0 && overlap <= 0.9)) return fail("overlap must be in [0, 0.9]");
   if (use_depth && !motion_compensation) return fail("use_depth needs motion_compensation");
   if (!(clip_percentile > 0.0 && clip_percentile <= 1.0)) return fail("clip_percentile must be in (0, 1]");
   if (!(clip_count >= 0.0) || !std::isfinite(clip_count)) return fail("clip_count must be finite and >= 0");
@@ -314,22 +315,35 @@ EventFrame EventFrameBuilder::build_frame(EventSpan events, int64_t t_ref_ns) {
 }
 
 void EventFrameBuilder::emit_pending(std::vector<EventFrame>* out) {
-  if (pending_.empty()) return;
-  if (static_cast<int>(pending_.size()) < o_.min_events) {
+  if (pending_.size() <= fresh_) return;  // nothing new since the last frame
+  const size_t added = pending_.size() - fresh_;
+  size_t carry = 0;
+  if (static_cast<int>(added) < o_.min_events) {
     ++stats_.frames_dropped_sparse;
-    stats_.events_dropped_sparse += static_cast<int64_t>(pending_.size());
+    stats_.events_dropped_sparse += static_cast<int64_t>(added);
   } else {
     out->push_back(build_frame(EventSpan(pending_.data(), pending_.size()), pending_.back().t_ns));
     ++stats_.frames_emitted;
+    carry = static_cast<size_t>(o_.overlap * static_cast<double>(pending_.size()));
   }
-  pending_.clear();
-  prune_imu(last_event_t_ns_ + time_shift_ns_);
+  // The latest `carry` events start the next frame (carry <= 0.9 of the frame: no overlap of the
+  // copied ranges' start).
+  std::copy(pending_.end() - static_cast<std::ptrdiff_t>(carry), pending_.end(), pending_.begin());
+  pending_.resize(carry);
+  fresh_ = carry;
+  prune_imu((pending_.empty() ? last_event_t_ns_ : pending_.front().t_ns) + time_shift_ns_);
 }
 
 void EventFrameBuilder::add_events(EventSpan events, std::vector<EventFrame>* out) {
   const size_t n = static_cast<size_t>(o_.events_per_frame);
   for (const Event& e : events) {
-    if (!pending_.empty() && e.t_ns - pending_.front().t_ns >= o_.max_window_ns) emit_pending(out);
+    if (pending_.size() > fresh_) {
+      if (e.t_ns - pending_[fresh_].t_ns >= o_.max_window_ns) emit_pending(out);
+    }
+    if (fresh_ > 0 && pending_.size() == fresh_ && e.t_ns - pending_.back().t_ns >= o_.max_window_ns) {
+      pending_.clear();  // carried events this old describe another scene state: start afresh
+      fresh_ = 0;
+    }
     if (e.x >= width_ || e.y >= height_) {  // outside the sensor: ignored
       ++stats_.events_outside_sensor;
       continue;

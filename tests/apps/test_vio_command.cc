@@ -76,6 +76,7 @@ TEST(VioConfig, ErrorsNameFileLineAndKey) {
   expect_error("window: {estimate_time_offset: maybe}\n", "estimate_time_offset");
   expect_error("window: {time_offset_sigma_ms: 0}\n", "time_offset_sigma_ms");
   expect_error("tracker: {seed: -3}\n", "tracker.seed");
+  expect_error("frames: {overlap: 0.95}\n", "overlap");
 }
 
 TEST(VioConfig, ResolvedConfigReadsBackToTheSameValues) {
@@ -83,7 +84,7 @@ TEST(VioConfig, ResolvedConfigReadsBackToTheSameValues) {
   std::string resolved;
   const VioConfig a = load_vio_config(
       dir.write("c.yaml", "frontend: corners\nwindow: {size: 7, pixel_sigma: 0.8, loss: cauchy, init_bias_gyro_turn_on_radps: 0.0002,\n"
-                          "  estimate_time_offset: true, time_offset_sigma_ms: 4}\nframes: {events_per_frame: 9000}\n"
+                          "  estimate_time_offset: true, time_offset_sigma_ms: 4}\nframes: {events_per_frame: 9000, overlap: 0.25}\n"
                           "tracker: {ransac: five_point, fast_threshold: 30}\ninit: {method: static, window_ms: 1500}\n"
                           "inputs: events+aps\naps_tracker: {fast_threshold: 7}\naps: {pixel_sigma: 0.4, max_gap_ms: 80}\n"),
       &resolved);
@@ -95,6 +96,7 @@ TEST(VioConfig, ResolvedConfigReadsBackToTheSameValues) {
   EXPECT_EQ(b.window.loss, backend::RobustLoss::kCauchy);
   EXPECT_DOUBLE_EQ(b.window.pixel_sigma, 0.8);
   EXPECT_EQ(b.frames.events_per_frame, 9000);
+  EXPECT_DOUBLE_EQ(b.frames.overlap, 0.25);
   EXPECT_EQ(b.tracker.ransac, frontend::RansacModel::kFivePoint);
   EXPECT_EQ(b.tracker.fast_threshold, 30);
   EXPECT_EQ(b.init, "static");

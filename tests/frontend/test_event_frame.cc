@@ -339,6 +339,51 @@ TEST(EventFrame, MinimumWindowBoundsTheFrameRate) {
   EXPECT_NE(why.find("min_window_ns"), std::string::npos);
 }
 
+// overlap: each frame starts with the latest fraction of the previous frame's events, so frames
+// come 1 / (1 - overlap) times as often with events_per_frame events each; carried events alone
+// never make a frame, and they are discarded after max_window_ns without new events.
+TEST(EventFrame, OverlappingWindows) {
+  const CameraCalibration cam = undistorted_camera(0, Eigen::Matrix3d::Identity());
+  EventFrameOptions o;
+  o.events_per_frame = 1000;
+  o.min_events = 100;
+  o.max_window_ns = 10'000'000;
+  o.motion_compensation = false;
+  o.overlap = 0.5;
+  const std::vector<Event> dense = uniform_events(3000, 0, 1'000);  // 1 M events/s
+  EventFrameBuilder b(cam, o);
+  std::vector<EventFrame> out;
+  b.add_events(EventSpan(dense.data(), 1234), &out);
+  b.add_events(EventSpan(dense.data() + 1234, dense.size() - 1234), &out);
+  // Frames end at events 999, 1499, 1999, 2499, 2999, each 1000 events.
+  ASSERT_EQ(out.size(), 5u);
+  for (size_t i = 0; i < out.size(); ++i) {
+    EXPECT_EQ(out[i].events, 1000u);
+    EXPECT_EQ(out[i].t_begin_ns, static_cast<int64_t>(500 * i) * 1'000);
+    EXPECT_EQ(out[i].t_ns, static_cast<int64_t>(999 + 500 * i) * 1'000);
+  }
+  // The overlapping half is the same events: the second frame's accumulator holds the first's
+  // second half plus 500 new events.
+  EXPECT_NEAR(cv::sum(out[1].accumulator)[0], 1000.0 - out[1].events_outside, 1e-2);
+  b.flush(&out);  // only carried events pending: no frame
+  EXPECT_EQ(out.size(), 5u);
+  EXPECT_EQ(b.stats().frames_dropped_sparse, 0);
+  // After a gap longer than max_window_ns the carried events are stale: the next frame holds only
+  // new events.
+  std::vector<Event> late = uniform_events(1000, 100'000'000, 1'000);
+  b.add_events(EventSpan(late.data(), late.size()), &out);
+  ASSERT_EQ(out.size(), 6u);
+  EXPECT_EQ(out[5].t_begin_ns, 100'000'000);
+  EXPECT_EQ(out[5].events, 1000u);
+  // With overlap 0 the frames are disjoint, as before.
+  o.overlap = 0.0;
+  EventFrameBuilder b0(cam, o);
+  out.clear();
+  b0.add_events(EventSpan(dense.data(), dense.size()), &out);
+  ASSERT_EQ(out.size(), 3u);
+  EXPECT_EQ(out[1].t_begin_ns, 1'000'000);
+}
+
 TEST(EventFrame, OptionsValidation) {
   EventFrameOptions o;
   std::string why;
@@ -363,6 +408,9 @@ TEST(EventFrame, OptionsValidation) {
   EXPECT_FALSE(bad([](EventFrameOptions& x) { x.clip_percentile = 1.5; }));
   EXPECT_FALSE(bad([](EventFrameOptions& x) { x.clip_percentile = std::nan(""); }));
   EXPECT_FALSE(bad([](EventFrameOptions& x) { x.clip_count = -1.0; }));
+  EXPECT_FALSE(bad([](EventFrameOptions& x) { x.overlap = -0.1; }));
+  EXPECT_FALSE(bad([](EventFrameOptions& x) { x.overlap = 0.95; }));
+  EXPECT_FALSE(bad([](EventFrameOptions& x) { x.overlap = std::nan(""); }));
   EXPECT_FALSE(bad([](EventFrameOptions& x) { x.knot_spacing_ns = 0; }));
   EXPECT_FALSE(bad([](EventFrameOptions& x) { x.max_imu_extrapolation_ns = -1; }));
   EXPECT_FALSE(bad([](EventFrameOptions& x) { x.max_imu_gap_ns = 0; }));

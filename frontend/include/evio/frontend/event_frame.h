@@ -35,6 +35,12 @@ struct EventFrameOptions {
   // a frame then holds more than events_per_frame events (every event until min_window_ns), which
   // bounds the frame rate at 1 / min_window_ns: adaptive to the event rate.
   int64_t min_window_ns = 0;
+  // Overlapping windows: this fraction of each emitted frame's events (its latest ones) starts the
+  // next frame, [0, 0.9] (default 0: disjoint windows). Frames then come 1 / (1 - overlap) times
+  // as often, each still holding events_per_frame events (at least min_window_ns). max_window_ns
+  // and min_events count only the events a frame adds: carried events alone never make a frame,
+  // and they are discarded once max_window_ns older than the next event (a still camera).
+  double overlap = 0.0;
   // Frames with fewer events (closed by max_window_ns or flush) are dropped and counted in
   // EventFrameStats::frames_dropped_sparse; 1 <= min_events <= events_per_frame. Default 1000.
   int min_events = 1000;
@@ -146,6 +152,7 @@ class EventFrameBuilder {
   double depth_m_ = 0;  // 0: no depth set
 
   std::vector<Event> pending_;
+  size_t fresh_ = 0;  // pending_[0, fresh_) were carried from the previous frame (overlap)
   int64_t last_event_t_ns_ = 0;  // camera clock
   bool have_last_event_ = false;
   int64_t t_knot0_ = 0;  // camera clock
