@@ -53,6 +53,7 @@ std::string loss_name(backend::RobustLoss l) {
 std::string tracked_landmark_name(backend::TrackedLandmarkMarginalisation m) {
   return m == backend::TrackedLandmarkMarginalisation::kDoubleCount ? "double_count"
          : m == backend::TrackedLandmarkMarginalisation::kRestart   ? "restart"
+         : m == backend::TrackedLandmarkMarginalisation::kSplit     ? "split"
                                                                      : "drop";
 }
 
@@ -257,9 +258,10 @@ VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
         w.min_triangulation_angle_deg = s.number("min_triangulation_angle_deg", w.min_triangulation_angle_deg, Range::kNonNegative, "deg");
         w.max_reprojection_px = s.number("max_reprojection_px", w.max_reprojection_px, Range::kPositive, "px");
         const std::string tlm = s.string("tracked_landmark_marginalisation", tracked_landmark_name(w.tracked_landmark_marginalisation),
-                                         {"drop", "double_count", "restart"});
+                                         {"drop", "double_count", "restart", "split"});
         w.tracked_landmark_marginalisation = tlm == "double_count" ? backend::TrackedLandmarkMarginalisation::kDoubleCount
                                              : tlm == "restart"    ? backend::TrackedLandmarkMarginalisation::kRestart
+                                             : tlm == "split"      ? backend::TrackedLandmarkMarginalisation::kSplit
                                                                    : backend::TrackedLandmarkMarginalisation::kDrop;
         w.rotation_only_parallax_px = s.number("rotation_only_parallax_px", w.rotation_only_parallax_px, Range::kNonNegative, "px");
         w.rotation_only_translation_px = s.number("rotation_only_translation_px", w.rotation_only_translation_px, Range::kPositive, "px");

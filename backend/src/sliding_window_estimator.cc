@@ -87,8 +87,9 @@ bool SlidingWindowOptions::Validate(std::string* why) const {
   if (!(min_depth_m > 0)) return fail("min_depth_m must be > 0 m");
   if (tracked_landmark_marginalisation != TrackedLandmarkMarginalisation::kDrop &&
       tracked_landmark_marginalisation != TrackedLandmarkMarginalisation::kDoubleCount &&
-      tracked_landmark_marginalisation != TrackedLandmarkMarginalisation::kRestart)
-    return fail("tracked_landmark_marginalisation must be drop, double_count or restart");
+      tracked_landmark_marginalisation != TrackedLandmarkMarginalisation::kRestart &&
+      tracked_landmark_marginalisation != TrackedLandmarkMarginalisation::kSplit)
+    return fail("tracked_landmark_marginalisation must be drop, double_count, restart or split");
   if (!gravity_w.allFinite()) return fail("gravity_w must be finite");
   if (!(init_bias_horizon_s >= 0) || !std::isfinite(init_bias_horizon_s)) return fail("init_bias_horizon_s must be finite and >= 0 s");
   for (double s : {init_sigma_roll_pitch_rad, init_sigma_yaw_rad, init_sigma_position_m, init_sigma_velocity_mps,
@@ -804,11 +805,22 @@ void SlidingWindowEstimator::marginalize_oldest() {
   // Fixed order (k0.obs is a hash map): the prior then does not depend on the hash order.
   std::sort(marginalised_tracks.begin(), marginalised_tracks.end());
   std::sort(tracked_tracks.begin(), tracked_tracks.end());
-  auto add_landmark = [&](int64_t track) {
+  // kSplit: how many of a still-tracked landmark's window observations (oldest first) are
+  // marginalised: the older half (rounded up), all of them when that would be a single one.
+  auto split_count = [&](int64_t track) {
+    int m = 0;
+    for (auto& k : window_) m += k->obs.count(track) ? 1 : 0;
+    const int older = (m + 1) / 2;
+    return older < 2 ? m : older;
+  };
+  // Adds the landmark and its first `count` window observations (oldest first; all by default).
+  auto add_landmark = [&](int64_t track, int count = 1 << 30) {
     Landmark& lm = landmarks_.at(track);
     problem.AddParameterBlock(lm.p.data(), 3);
     removed.push_back(lm.p.data());
     for (auto& k : window_) {
+      if (!k->obs.count(track)) continue;
+      if (count-- <= 0) break;
       if (options_.estimate_time_offset) {
         const auto it = k->reproj_td.find(track);
         if (it == k->reproj_td.end()) continue;
@@ -826,7 +838,11 @@ void SlidingWindowEstimator::marginalize_oldest() {
   for (int64_t track : marginalised_tracks) add_landmark(track);
   // A still-tracked landmark is eliminated from the marginalisation problem only: the parameter
   // block stays in landmarks_ (its position is where it continues from, kDoubleCount).
-  for (int64_t track : tracked_tracks) add_landmark(track);
+  std::unordered_map<int64_t, int> split;  // kSplit: track -> observations marginalised
+  for (int64_t track : tracked_tracks) {
+    if (mode == TrackedLandmarkMarginalisation::kSplit) split[track] = split_count(track);
+    add_landmark(track, mode == TrackedLandmarkMarginalisation::kSplit ? split.at(track) : 1 << 30);
+  }
   std::unordered_set<const double*> poses;
   for (auto& k : window_) poses.insert(k->pose.data());
   prior_ = marginalize(&problem, ids, removed, [&poses](const double* p) { return poses.count(p) > 0; });
@@ -847,6 +863,16 @@ void SlidingWindowEstimator::marginalize_oldest() {
   for (int64_t track : tracked_tracks) {
     if (mode == TrackedLandmarkMarginalisation::kRestart) {
       forget(track);  // the track stays open: later observations start a new landmark
+    } else if (mode == TrackedLandmarkMarginalisation::kSplit) {
+      // The landmark continues from its position with its newer observations only.
+      int count = split.at(track);
+      for (auto& k : window_) {
+        if (!k->obs.count(track)) continue;
+        if (count-- <= 0) break;
+        k->obs.erase(track);
+        k->reproj.erase(track);
+        k->reproj_td.erase(track);
+      }
     } else {
       k0.obs.erase(track);  // kDoubleCount: the landmark continues with its other observations
     }

@@ -249,10 +249,17 @@ TEST(SlidingWindowMarginalisation, TrackedLandmarksAddInformationToThePrior) {
   const Result drop = first_prior(TrackedLandmarkMarginalisation::kDrop);
   const Result twice = first_prior(TrackedLandmarkMarginalisation::kDoubleCount);
   const Result restart = first_prior(TrackedLandmarkMarginalisation::kRestart);
+  const Result split = first_prior(TrackedLandmarkMarginalisation::kSplit);
   ASSERT_EQ(drop.H.rows(), 5 * 15);
   ASSERT_EQ(twice.H.rows(), drop.H.rows());
   // The same marginalisation problem in both modes that marginalise the tracked landmarks.
   EXPECT_LT((twice.H - restart.H).norm(), 1e-9 * twice.H.norm());
+  // Smallest eigenvalue of a - b relative to its largest (>= 0 up to rounding when a >= b).
+  auto min_eig = [](const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) {
+    const Eigen::MatrixXd d = a - b;
+    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> e(0.5 * (d + d.transpose()));
+    return e.eigenvalues().minCoeff() / e.eigenvalues().cwiseAbs().maxCoeff();
+  };
   const Eigen::MatrixXd dH = twice.H - drop.H;
   const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (dH + dH.transpose()));
   // Information on the poses after the oldest remaining one (the anchor prior's tight yaw and
@@ -278,6 +285,14 @@ TEST(SlidingWindowMarginalisation, TrackedLandmarksAddInformationToThePrior) {
   EXPECT_EQ(drop.stats.observations_dropped - twice.stats.observations_dropped, twice.stats.tracked_landmarks_marginalised);
   EXPECT_GT(es.eigenvalues().minCoeff(), -1e-9 * es.eigenvalues().maxCoeff());
   EXPECT_GT(pose_twice, 2.0 * pose_drop);
+  // kSplit marginalises the older half of those landmarks' observations: between the two.
+  const double pose_split = later_poses(split.H);
+  std::printf("split: information on the later poses %.4g\n", pose_split);
+  EXPECT_EQ(split.stats.tracked_landmarks_marginalised, twice.stats.tracked_landmarks_marginalised);
+  EXPECT_GT(min_eig(split.H, drop.H), -1e-9);
+  EXPECT_GT(min_eig(twice.H, split.H), -1e-9);
+  EXPECT_GT(pose_split, 1.3 * pose_drop);
+  EXPECT_LT(pose_split, pose_twice);
   SlidingWindowOptions bad;
   bad.tracked_landmark_marginalisation = static_cast<TrackedLandmarkMarginalisation>(7);
   std::string why;
