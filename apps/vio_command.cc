@@ -50,6 +50,13 @@ std::string loss_name(backend::RobustLoss l) {
   return l == backend::RobustLoss::kHuber ? "huber" : l == backend::RobustLoss::kCauchy ? "cauchy" : "none";
 }
 
+std::string tracked_landmark_name(backend::TrackedLandmarkMarginalisation m) {
+  return m == backend::TrackedLandmarkMarginalisation::kDoubleCount ? "double_count"
+         : m == backend::TrackedLandmarkMarginalisation::kRestart   ? "restart"
+         : m == backend::TrackedLandmarkMarginalisation::kSplit     ? "split"
+                                                                     : "drop";
+}
+
 // One feature-tracker section (tracker, aps_tracker) of the resolved config.
 std::string tracker_yaml(const char* key, const frontend::FeatureTrackerOptions& tk) {
   std::ostringstream y;
@@ -129,6 +136,7 @@ std::string config_yaml(const VioConfig& c) {
     << "\n  keyframe_max_interval_ms: " << num(w.keyframe_max_interval_s * 1e3)
     << "\n  min_triangulation_angle_deg: " << num(w.min_triangulation_angle_deg)
     << "\n  max_reprojection_px: " << num(w.max_reprojection_px)
+    << "\n  tracked_landmark_marginalisation: " << tracked_landmark_name(w.tracked_landmark_marginalisation)
     << "\n  rotation_only_parallax_px: " << num(w.rotation_only_parallax_px)
     << "\n  rotation_only_translation_px: " << num(w.rotation_only_translation_px)
     << "\n  init_bias_gyro_turn_on_radps: " << num(w.init_bias_gyro_turn_on_radps)
@@ -236,7 +244,8 @@ VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
                  "keyframe_min_parallax_px", "keyframe_min_tracked_ratio", "keyframe_max_interval_ms",
                  "min_triangulation_angle_deg", "max_reprojection_px", "rotation_only_parallax_px",
                  "rotation_only_translation_px", "init_bias_gyro_turn_on_radps", "init_bias_accel_turn_on_mps2",
-                 "init_bias_horizon_s", "estimate_time_offset", "time_offset_sigma_ms"});
+                 "init_bias_horizon_s", "estimate_time_offset", "time_offset_sigma_ms",
+                 "tracked_landmark_marginalisation"});
         auto& w = c.window;
         w.window_size = s.integer("size", w.window_size, 2, 200);
         w.max_iterations = s.integer("max_iterations", w.max_iterations, 1, 1000);
@@ -250,6 +259,12 @@ VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
         w.keyframe_max_interval_s = 1e-3 * s.number("keyframe_max_interval_ms", w.keyframe_max_interval_s * 1e3, Range::kPositive, "ms");
         w.min_triangulation_angle_deg = s.number("min_triangulation_angle_deg", w.min_triangulation_angle_deg, Range::kNonNegative, "deg");
         w.max_reprojection_px = s.number("max_reprojection_px", w.max_reprojection_px, Range::kPositive, "px");
+        const std::string tlm = s.string("tracked_landmark_marginalisation", tracked_landmark_name(w.tracked_landmark_marginalisation),
+                                         {"drop", "double_count", "restart", "split"});
+        w.tracked_landmark_marginalisation = tlm == "double_count" ? backend::TrackedLandmarkMarginalisation::kDoubleCount
+                                             : tlm == "restart"    ? backend::TrackedLandmarkMarginalisation::kRestart
+                                             : tlm == "split"      ? backend::TrackedLandmarkMarginalisation::kSplit
+                                                                   : backend::TrackedLandmarkMarginalisation::kDrop;
         w.rotation_only_parallax_px = s.number("rotation_only_parallax_px", w.rotation_only_parallax_px, Range::kNonNegative, "px");
         w.rotation_only_translation_px = s.number("rotation_only_translation_px", w.rotation_only_translation_px, Range::kPositive, "px");
         w.init_bias_gyro_turn_on_radps = s.number("init_bias_gyro_turn_on_radps", w.init_bias_gyro_turn_on_radps, Range::kPositive, "rad/s");
@@ -525,7 +540,8 @@ int run_vio(const VioArgs& args, std::ostream& out) {
       << ", \"dropped\": " << oracle->stats().dropped << "}";
   }
   j << ",\n  \"outliers_removed\": " << st.outliers_removed << ",\n  \"landmarks_marginalised\": " << st.landmarks_marginalised
-    << ",\n  \"observations_dropped\": " << st.observations_dropped << ",\n  \"rotation_only_keyframes\": " << st.rotation_only_keyframes;
+    << ",\n  \"observations_dropped\": " << st.observations_dropped
+    << ",\n  \"tracked_landmarks_marginalised\": " << st.tracked_landmarks_marginalised << ",\n  \"rotation_only_keyframes\": " << st.rotation_only_keyframes;
   if (cfg.window.estimate_time_offset) j << ",\n  \"time_offset_correction_s\": " << num(st.time_offset_s);
   j
     << "\n}\n";

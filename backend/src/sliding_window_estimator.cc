@@ -85,6 +85,11 @@ bool SlidingWindowOptions::Validate(std::string* why) const {
   if (!(max_reprojection_px > 0)) return fail("max_reprojection_px must be > 0 px");
   if (!(time_offset_sigma_s > 0) || !std::isfinite(time_offset_sigma_s)) return fail("time_offset_sigma_s must be finite and > 0 s");
   if (!(min_depth_m > 0)) return fail("min_depth_m must be > 0 m");
+  if (tracked_landmark_marginalisation != TrackedLandmarkMarginalisation::kDrop &&
+      tracked_landmark_marginalisation != TrackedLandmarkMarginalisation::kDoubleCount &&
+      tracked_landmark_marginalisation != TrackedLandmarkMarginalisation::kRestart &&
+      tracked_landmark_marginalisation != TrackedLandmarkMarginalisation::kSplit)
+    return fail("tracked_landmark_marginalisation must be drop, double_count, restart or split");
   if (!gravity_w.allFinite()) return fail("gravity_w must be finite");
   if (!(init_bias_horizon_s >= 0) || !std::isfinite(init_bias_horizon_s)) return fail("init_bias_horizon_s must be finite and >= 0 s");
   for (double s : {init_sigma_roll_pitch_rad, init_sigma_yaw_rad, init_sigma_position_m, init_sigma_velocity_mps,
@@ -154,6 +159,38 @@ std::unordered_map<int64_t, Eigen::Vector3d> SlidingWindowEstimator::landmarks()
     if (lm.triangulated) out[id] = Eigen::Vector3d(lm.p[0], lm.p[1], lm.p[2]);
   }
   return out;
+}
+
+Eigen::MatrixXd SlidingWindowEstimator::prior_information() const {
+  if (window_.empty()) return {};
+  // Column of each window block in the output.
+  std::unordered_map<const double*, int> col;
+  int n = 0;
+  for (const auto& k : window_) {
+    col[k->pose.data()] = n;
+    col[k->sb.data()] = n + 6;
+    n += 15;
+  }
+  if (options_.estimate_time_offset) col[time_offset_.data()] = n++;
+  Eigen::MatrixXd H = Eigen::MatrixXd::Zero(n, n);
+  if (!prior_) return H;
+  const Eigen::MatrixXd& J = prior_->jacobian();
+  std::vector<std::pair<int, int>> cols;  // (column in J, column in H) per block, with its tangent size
+  std::vector<int> sizes;
+  int c = 0;
+  for (const PriorBlock& b : prior_->blocks()) {
+    const auto it = col.find(b.parameters);
+    if (it != col.end()) {
+      cols.emplace_back(c, it->second);
+      sizes.push_back(b.tangent_size());
+    }
+    c += b.tangent_size();
+  }
+  for (size_t i = 0; i < cols.size(); ++i)
+    for (size_t j = 0; j < cols.size(); ++j)
+      H.block(cols[i].second, cols[j].second, sizes[i], sizes[j]) =
+          J.middleCols(cols[i].first, sizes[i]).transpose() * J.middleCols(cols[j].first, sizes[j]);
+  return H;
 }
 
 double SlidingWindowEstimator::parallax_px(const FeatureObservations& frame, const VioState& predicted, size_t* common) const {
@@ -751,17 +788,39 @@ void SlidingWindowEstimator::marginalize_oldest() {
     if (lit != landmarks_.end() && lit->second.triangulated) continue;
     ids.push_back(problem.AddResidualBlock(cost.get(), loss.get(), k0.pose.data(), k1.pose.data()));
   }
-  std::vector<int64_t> marginalised_tracks;
+  // Landmarks observed in k0 to marginalise with all their window observations: the finished
+  // tracks, and by tracked_landmark_marginalisation the still-tracked ones.
+  const TrackedLandmarkMarginalisation mode = options_.tracked_landmark_marginalisation;
+  std::vector<int64_t> marginalised_tracks, tracked_tracks;
   for (const auto& [track, b] : k0.obs) {
     (void)b;
     auto lit = landmarks_.find(track);
     if (lit == landmarks_.end() || !lit->second.triangulated) continue;
-    if (newest.obs.count(track)) continue;  // still tracked: k0's observation is dropped below
-    // A finished track: marginalise the landmark with all its observations.
-    Landmark& lm = lit->second;
+    if (!newest.obs.count(track)) {
+      marginalised_tracks.push_back(track);
+    } else if (mode != TrackedLandmarkMarginalisation::kDrop) {
+      tracked_tracks.push_back(track);
+    }
+  }
+  // Fixed order (k0.obs is a hash map): the prior then does not depend on the hash order.
+  std::sort(marginalised_tracks.begin(), marginalised_tracks.end());
+  std::sort(tracked_tracks.begin(), tracked_tracks.end());
+  // kSplit: how many of a still-tracked landmark's window observations (oldest first) are
+  // marginalised: the older half (rounded up), all of them when that would be a single one.
+  auto split_count = [&](int64_t track) {
+    int m = 0;
+    for (auto& k : window_) m += k->obs.count(track) ? 1 : 0;
+    const int older = (m + 1) / 2;
+    return older < 2 ? m : older;
+  };
+  // Adds the landmark and its first `count` window observations (oldest first; all by default).
+  auto add_landmark = [&](int64_t track, int count = 1 << 30) {
+    Landmark& lm = landmarks_.at(track);
     problem.AddParameterBlock(lm.p.data(), 3);
     removed.push_back(lm.p.data());
     for (auto& k : window_) {
+      if (!k->obs.count(track)) continue;
+      if (count-- <= 0) break;
       if (options_.estimate_time_offset) {
         const auto it = k->reproj_td.find(track);
         if (it == k->reproj_td.end()) continue;
@@ -775,27 +834,53 @@ void SlidingWindowEstimator::marginalize_oldest() {
       add_kf_blocks(*k);
       ids.push_back(problem.AddResidualBlock(it->second.get(), loss.get(), k->pose.data(), lm.p.data()));
     }
-    marginalised_tracks.push_back(track);
+  };
+  for (int64_t track : marginalised_tracks) add_landmark(track);
+  // A still-tracked landmark is eliminated from the marginalisation problem only: the parameter
+  // block stays in landmarks_ (its position is where it continues from, kDoubleCount).
+  std::unordered_map<int64_t, int> split;  // kSplit: track -> observations marginalised
+  for (int64_t track : tracked_tracks) {
+    if (mode == TrackedLandmarkMarginalisation::kSplit) split[track] = split_count(track);
+    add_landmark(track, mode == TrackedLandmarkMarginalisation::kSplit ? split.at(track) : 1 << 30);
   }
   std::unordered_set<const double*> poses;
   for (auto& k : window_) poses.insert(k->pose.data());
   prior_ = marginalize(&problem, ids, removed, [&poses](const double* p) { return poses.count(p) > 0; });
   // Forget the marginalised landmarks and close their tracks.
-  for (int64_t track : marginalised_tracks) {
+  auto forget = [&](int64_t track) {
     for (auto& k : window_) {
       k->obs.erase(track);
       k->reproj.erase(track);
       k->reproj_td.erase(track);
     }
     landmarks_.erase(track);
+  };
+  for (int64_t track : marginalised_tracks) {
+    forget(track);
     closed_tracks_.insert(track);
     ++stats_.landmarks_marginalised;
   }
-  // Still-tracked landmarks lose k0's observation; forgotten when fewer than two remain.
-  for (const auto& [track, b] : k0.obs) {
-    (void)b;
-    ++stats_.observations_dropped;
+  for (int64_t track : tracked_tracks) {
+    if (mode == TrackedLandmarkMarginalisation::kRestart) {
+      forget(track);  // the track stays open: later observations start a new landmark
+    } else if (mode == TrackedLandmarkMarginalisation::kSplit) {
+      // The landmark continues from its position with its newer observations only.
+      int count = split.at(track);
+      for (auto& k : window_) {
+        if (!k->obs.count(track)) continue;
+        if (count-- <= 0) break;
+        k->obs.erase(track);
+        k->reproj.erase(track);
+        k->reproj_td.erase(track);
+      }
+    } else {
+      k0.obs.erase(track);  // kDoubleCount: the landmark continues with its other observations
+    }
+    ++stats_.tracked_landmarks_marginalised;
   }
+  // What remains of k0's observations (open tracks) is dropped; a landmark is forgotten when fewer
+  // than two observations remain.
+  stats_.observations_dropped += static_cast<int64_t>(k0.obs.size());
   k1.rot.clear();  // they linked k1 to k0, which is gone
   window_.pop_front();
   for (auto it = landmarks_.begin(); it != landmarks_.end();) {

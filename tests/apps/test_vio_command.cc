@@ -82,6 +82,7 @@ TEST(VioConfig, ErrorsNameFileLineAndKey) {
   expect_error("window: {time_offset_sigma_ms: 0}\n", "time_offset_sigma_ms");
   expect_error("tracker: {seed: -3}\n", "tracker.seed");
   expect_error("frames: {overlap: 0.95}\n", "overlap");
+  expect_error("window: {tracked_landmark_marginalisation: keep}\n", "window.tracked_landmark_marginalisation");
 }
 
 TEST(VioConfig, ResolvedConfigReadsBackToTheSameValues) {
@@ -89,7 +90,7 @@ TEST(VioConfig, ResolvedConfigReadsBackToTheSameValues) {
   std::string resolved;
   const VioConfig a = load_vio_config(
       dir.write("c.yaml", "frontend: corners\nwindow: {size: 7, pixel_sigma: 0.8, loss: cauchy, init_bias_gyro_turn_on_radps: 0.0002,\n"
-                          "  estimate_time_offset: true, time_offset_sigma_ms: 4}\nframes: {events_per_frame: 9000, overlap: 0.25}\n"
+                          "  estimate_time_offset: true, time_offset_sigma_ms: 4, tracked_landmark_marginalisation: restart}\nframes: {events_per_frame: 9000, overlap: 0.25}\n"
                           "tracker: {ransac: five_point, fast_threshold: 30}\ninit: {method: static, window_ms: 1500}\n"
                           "inputs: events+aps\naps_tracker: {fast_threshold: 7}\naps: {pixel_sigma: 0.4, max_gap_ms: 80}\n"),
       &resolved);
@@ -115,6 +116,7 @@ TEST(VioConfig, ResolvedConfigReadsBackToTheSameValues) {
   EXPECT_DOUBLE_EQ(b.window.init_bias_gyro_turn_on_radps, 0.0002);
   EXPECT_TRUE(b.window.estimate_time_offset);
   EXPECT_DOUBLE_EQ(b.window.time_offset_sigma_s, 0.004);
+  EXPECT_EQ(b.window.tracked_landmark_marginalisation, backend::TrackedLandmarkMarginalisation::kRestart);
 }
 
 TEST(VioConfig, EveryExampleConfigInDatasetsParses) {

@@ -217,6 +217,89 @@ TEST(SlidingWindowSimulated, NoisierObservationsAndMoreOutliers) {
   EXPECT_LT(r.eval.mean_position_error_percent, 0.3);
 }
 
+// Marginalisation of still-tracked landmarks (tracked_landmark_marginalisation): up to the first
+// marginalisation the three modes run the same solves, so their first priors are linearised at
+// the same states. Marginalising the still-tracked landmarks with all their observations adds the
+// Schur complement of those landmarks to the prior: its information over the window states must
+// grow by a positive semi-definite amount, and most on the keyframe next to the removed one. Drop
+// mode counts their oldest-keyframe observations as dropped instead.
+TEST(SlidingWindowMarginalisation, TrackedLandmarksAddInformationToThePrior) {
+  test::VioSimOptions so;
+  so.scene_yaml = std::string(EVIO_SOURCE_DIR) + "/datasets/poster_6dof.yaml";
+  so.duration_s = 3.0;
+  const test::VioSimulation sim = test::make_vio_simulation(so);
+  struct Result {
+    Eigen::MatrixXd H;
+    SlidingWindowStats stats;
+  };
+  auto first_prior = [&](TrackedLandmarkMarginalisation mode) {
+    SlidingWindowOptions o;
+    o.window_size = 5;
+    o.tracked_landmark_marginalisation = mode;
+    SlidingWindowEstimator est(o, sim.camera, sim.imu_noise);
+    est.initialize(sim.true_state(sim.frames.front().t_ns));
+    for (const ImuSample& m : sim.imu) est.add_imu(m);
+    for (const FeatureObservations& f : sim.frames) {
+      est.add_frame(f);
+      if (est.stats().keyframes == o.window_size + 1) break;  // the first marginalisation
+    }
+    EXPECT_EQ(est.stats().keyframes, o.window_size + 1);
+    return Result{est.prior_information(), est.stats()};
+  };
+  const Result drop = first_prior(TrackedLandmarkMarginalisation::kDrop);
+  const Result twice = first_prior(TrackedLandmarkMarginalisation::kDoubleCount);
+  const Result restart = first_prior(TrackedLandmarkMarginalisation::kRestart);
+  const Result split = first_prior(TrackedLandmarkMarginalisation::kSplit);
+  ASSERT_EQ(drop.H.rows(), 5 * 15);
+  ASSERT_EQ(twice.H.rows(), drop.H.rows());
+  // The same marginalisation problem in both modes that marginalise the tracked landmarks.
+  EXPECT_LT((twice.H - restart.H).norm(), 1e-9 * twice.H.norm());
+  // Smallest eigenvalue of a - b relative to its largest (>= 0 up to rounding when a >= b).
+  auto min_eig = [](const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) {
+    const Eigen::MatrixXd d = a - b;
+    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> e(0.5 * (d + d.transpose()));
+    return e.eigenvalues().minCoeff() / e.eigenvalues().cwiseAbs().maxCoeff();
+  };
+  const Eigen::MatrixXd dH = twice.H - drop.H;
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (dH + dH.transpose()));
+  // Information on the poses after the oldest remaining one (the anchor prior's tight yaw and
+  // position dominate that one's).
+  auto later_poses = [](const Eigen::MatrixXd& H) {
+    double t = 0;
+    for (int i = 1; i < H.rows() / 15; ++i) t += H.block(15 * i, 15 * i, 6, 6).trace();
+    return t;
+  };
+  const double pose_drop = later_poses(drop.H), pose_twice = later_poses(twice.H);
+  std::printf("first prior: %lld still-tracked landmarks marginalised (%lld observations dropped in drop mode, %lld "
+              "otherwise); information trace %.4g -> %.4g, on the later poses %.4g -> %.4g; eigenvalues of the "
+              "difference %.3g .. %.3g\n",
+              static_cast<long long>(twice.stats.tracked_landmarks_marginalised),
+              static_cast<long long>(drop.stats.observations_dropped),
+              static_cast<long long>(twice.stats.observations_dropped), drop.H.trace(), twice.H.trace(), pose_drop, pose_twice,
+              es.eigenvalues().minCoeff(), es.eigenvalues().maxCoeff());
+  EXPECT_EQ(drop.stats.tracked_landmarks_marginalised, 0);
+  EXPECT_GT(twice.stats.tracked_landmarks_marginalised, 20);
+  EXPECT_EQ(restart.stats.tracked_landmarks_marginalised, twice.stats.tracked_landmarks_marginalised);
+  EXPECT_EQ(drop.stats.landmarks_marginalised, twice.stats.landmarks_marginalised);
+  // Every still-tracked landmark's oldest observation is marginalised instead of dropped.
+  EXPECT_EQ(drop.stats.observations_dropped - twice.stats.observations_dropped, twice.stats.tracked_landmarks_marginalised);
+  EXPECT_GT(es.eigenvalues().minCoeff(), -1e-9 * es.eigenvalues().maxCoeff());
+  EXPECT_GT(pose_twice, 2.0 * pose_drop);
+  // kSplit marginalises the older half of those landmarks' observations: between the two.
+  const double pose_split = later_poses(split.H);
+  std::printf("split: information on the later poses %.4g\n", pose_split);
+  EXPECT_EQ(split.stats.tracked_landmarks_marginalised, twice.stats.tracked_landmarks_marginalised);
+  EXPECT_GT(min_eig(split.H, drop.H), -1e-9);
+  EXPECT_GT(min_eig(twice.H, split.H), -1e-9);
+  EXPECT_GT(pose_split, 1.3 * pose_drop);
+  EXPECT_LT(pose_split, pose_twice);
+  SlidingWindowOptions bad;
+  bad.tracked_landmark_marginalisation = static_cast<TrackedLandmarkMarginalisation>(7);
+  std::string why;
+  EXPECT_FALSE(bad.Validate(&why));
+  EXPECT_NE(why.find("tracked_landmark_marginalisation"), std::string::npos);
+}
+
 // Model selection (GRIC with hysteresis) on 6-DoF motion: the rotation-only model must never switch
 // on, neither with a moving start (random splines: boxes_6dof, poster_6dof, room_6dof with a
 // non-identity T_c_b and radtan distortion) nor with a static start (quadrotor_flight: 1 s hover,

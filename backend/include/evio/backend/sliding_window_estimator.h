@@ -7,11 +7,23 @@
 // Marginalisation (when the window exceeds K): the oldest keyframe's pose and speed/bias are
 // eliminated together with the landmarks it observes that are no longer tracked (not seen in the
 // newest keyframe), by the Schur complement of every residual touching them (the IMU error to the
-// next keyframe, the previous prior, all reprojection errors of those landmarks). The oldest
-// keyframe's observations of landmarks that are still tracked are dropped instead, so the prior
-// spans keyframe states only (its size stays bounded by the window); a still-tracked landmark
-// keeps its other observations, and is forgotten (re-triangulated later) when fewer than two
-// remain. Tracks of marginalised landmarks are closed: later observations of them are ignored.
+// next keyframe, the previous prior, all reprojection errors of those landmarks). The prior
+// spans keyframe states only (its size stays bounded by the window, and no residual couples two
+// landmarks, which Ceres' Schur elimination needs). Tracks of marginalised landmarks are closed:
+// later observations of them are ignored. The oldest keyframe's observations of triangulated
+// landmarks that are still tracked go by tracked_landmark_marginalisation:
+//   kDrop: dropped; the landmark keeps its other observations, and is forgotten (re-triangulated
+//     later) when fewer than two remain. The prior loses what they said about the poses.
+//   kDoubleCount (VINS-Mono): the landmark is marginalised with all its window observations like a
+//     finished one, then continues from its position with its observations in the other window
+//     keyframes, which the prior and the window then both count.
+//   kRestart: the landmark is marginalised with all its window observations and its track
+//     restarts: a new landmark from the observations of later keyframes only (nothing counted
+//     twice; the landmark's position is not carried over, only what it said about the poses).
+//   kSplit: the landmark is marginalised with the older half of its window observations (rounded
+//     up; all of them when that is one) and continues from its position with the newer half, so
+//     nothing is counted twice and the newest keyframes stay out of the prior's linearisation.
+// Untriangulated tracks lose the oldest keyframe's observation in every mode.
 //
 // Gauge: the first keyframe gets an anchor prior from the initial state (yaw and position tight,
 // roll/pitch, velocity and biases from their sigmas); later the marginalisation prior carries it.
@@ -69,6 +81,10 @@ class ReprojectionError;
 
 enum class RobustLoss { kNone, kHuber, kCauchy };
 
+// What marginalising the oldest keyframe does with its observations of landmarks still tracked
+// in the newest keyframe (see the header comment).
+enum class TrackedLandmarkMarginalisation { kDrop, kDoubleCount, kRestart, kSplit };
+
 struct SlidingWindowOptions {
   int window_size = 10;                    // keyframes K in the window, >= 2
   int max_iterations = 10;                 // Ceres iterations per keyframe, >= 1
@@ -86,6 +102,16 @@ struct SlidingWindowOptions {
   // worse with events+aps (mean over six scenes and three seeds 0.223% against 0.193%).
   double max_reprojection_px = 2.0;
   double min_depth_m = 0.05;               // landmarks closer to any observing camera are rejected, m
+  // The oldest keyframe's observations of still-tracked (triangulated) landmarks at
+  // marginalisation (header comment): dropped (kDrop), or marginalised with the landmark and all
+  // its window observations, the landmark then continuing with them (kDoubleCount, VINS-Mono) or
+  // restarting from later keyframes (kRestart), or with the older half only (kSplit). Mean position
+  // error over the six simulated scenes x 3 RANSAC seeds (datasets/vio/simulator.yaml), events /
+  // events+aps: drop 0.548 / 0.191%, double_count 0.508 / 0.214%, restart 0.444 / 0.176%, split
+  // 0.529 / 0.140%. No mode improves both without a scene clearly worse (restart: room 0.163 ->
+  // 0.304%, quadrotor 0.221 -> 0.282%, mocap 0.048 -> 0.087% with events+aps; split: mocap 0.635
+  // -> 0.816% with events and 0.048 -> 0.072% with events+aps), so drop stays the default.
+  TrackedLandmarkMarginalisation tracked_landmark_marginalisation = TrackedLandmarkMarginalisation::kDrop;
   // Rotation-only model, chosen per keyframe by GRIC with hysteresis (see the header comment).
   bool rotation_only_model = true;         // false: every keyframe uses the 6-DoF model
   // GRIC_R must be below GRIC_S and GRIC_G by at least this much (GRIC units: -2 log likelihood,
@@ -159,8 +185,9 @@ struct SlidingWindowStats {
   int64_t keyframes = 0;
   int64_t landmarks_triangulated = 0;
   int64_t outliers_removed = 0;
-  int64_t landmarks_marginalised = 0;
-  int64_t observations_dropped = 0;
+  int64_t landmarks_marginalised = 0;       // landmarks of finished tracks marginalised
+  int64_t observations_dropped = 0;       // oldest keyframe's observations not marginalised (tracks still open)
+  int64_t tracked_landmarks_marginalised = 0;  // still-tracked landmarks marginalised (kDoubleCount, kRestart)
   int64_t rotation_only_keyframes = 0;  // keyframes that used the rotation-only model
   std::vector<std::pair<int64_t, bool>> motion_model;  // per keyframe: (t_ns, rotation-only)
   // Per keyframe after the first: the model-selection test and the decision.
@@ -221,6 +248,10 @@ class SlidingWindowEstimator {
   // Estimated time-offset correction td (s; 0 unless options().estimate_time_offset): observations
   // stamped t show the scene at t + td.
   double time_offset_s() const { return time_offset_[0]; }
+  // Information matrix (J^T J) of the current prior over the window's keyframe states, in window
+  // order per keyframe [pose tangent (6: dtheta body, dp world), v_w, b_g, b_a (9)], then td (1)
+  // when estimate_time_offset; zero where the prior does not reach. Empty before the first keyframe.
+  Eigen::MatrixXd prior_information() const;
 
  private:
   struct Keyframe;
