@@ -325,6 +325,8 @@ int main(int argc, char** argv) {
   mosaic_cmd->add_option("--gt", mosaic.gt,
                          "Ground truth (TUM or csv): rotation error after aligning the initial orientation into eval.json "
                          "(and PSNR/SSIM against the true panorama of a simulated dataset)");
+  mosaic_cmd->add_flag("--gt-bootstrap", mosaic.gt_bootstrap,
+                       "Diagnostic: the bootstrap maps with the --gt rotations (no bootstrap error; needs --gt)");
   add_dataset_options(mosaic_cmd, &mosaic.dataset_options, &mosaic_format, &mosaic_unit, &mosaic_bad);
 
   try {

@@ -47,6 +47,7 @@ struct MosaicArgs {
   std::string gt;          // optional ground truth (TUM or csv) -> eval.json
   std::string out;
   bool use_imu = false;    // drive the particles (and bootstrap) with the gyro
+  bool gt_bootstrap = false;  // diagnostic: the bootstrap maps with the --gt rotations
   int particles = 0;       // > 0 overrides tracker.particles
   int batch = 0;           // > 0 overrides tracker.batch_size
   int stride = 0;          // > 0 overrides tracker.event_stride

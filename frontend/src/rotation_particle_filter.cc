@@ -75,6 +75,7 @@ const char* rotation_motion_model_name(RotationMotionModel m) {
   switch (m) {
     case RotationMotionModel::kRandomWalk: return "random_walk";
     case RotationMotionModel::kConstantVelocity: return "constant_velocity";
+    case RotationMotionModel::kParticleVelocity: return "particle_velocity";
   }
   return "unknown";
 }
@@ -95,8 +96,21 @@ bool RotationParticleFilterOptions::Validate(std::string* why) const {
   if (event_stride < 1) return fail(why, "event_stride " + std::to_string(event_stride) + " (expected >= 1)");
   if (max_batch_duration_ns <= 0)
     return fail(why, "max_batch_duration_ns " + std::to_string(max_batch_duration_ns) + " (expected > 0 ns)");
-  if (motion_model != RotationMotionModel::kRandomWalk && motion_model != RotationMotionModel::kConstantVelocity)
-    return fail(why, "motion_model (expected random_walk or constant_velocity)");
+  if (motion_model != RotationMotionModel::kRandomWalk && motion_model != RotationMotionModel::kConstantVelocity &&
+      motion_model != RotationMotionModel::kParticleVelocity)
+    return fail(why, "motion_model (expected random_walk, constant_velocity or particle_velocity)");
+  if (!(velocity_noise_rad_s_per_sqrt_s > 0) || !std::isfinite(velocity_noise_rad_s_per_sqrt_s))
+    return fail(why, "velocity_noise_rad_s_per_sqrt_s " + num(velocity_noise_rad_s_per_sqrt_s) +
+                         " (expected > 0 rad/s/sqrt(s))");
+  if (!(velocity_rotation_noise_rad_per_sqrt_s > 0) || !std::isfinite(velocity_rotation_noise_rad_per_sqrt_s))
+    return fail(why, "velocity_rotation_noise_rad_per_sqrt_s " + num(velocity_rotation_noise_rad_per_sqrt_s) +
+                         " (expected > 0 rad/sqrt(s))");
+  if (!(initial_velocity_spread_rad_s >= 0) || !std::isfinite(initial_velocity_spread_rad_s))
+    return fail(why, "initial_velocity_spread_rad_s " + num(initial_velocity_spread_rad_s) + " (expected >= 0 rad/s)");
+  if (relative_max_interval_ns <= 0)
+    return fail(why, "relative_max_interval_ns " + std::to_string(relative_max_interval_ns) + " (expected > 0 ns)");
+  if (!(relative_max_path_rad > 0) || !std::isfinite(relative_max_path_rad))
+    return fail(why, "relative_max_path_rad " + num(relative_max_path_rad) + " (expected > 0 rad)");
   if (measurement_model != RotationMeasurementModel::kPreviousMean &&
       measurement_model != RotationMeasurementModel::kRelativeMotion && measurement_model != RotationMeasurementModel::kAuto)
     return fail(why, "measurement_model (expected previous_mean, relative_motion or auto)");
@@ -239,6 +253,8 @@ void RotationParticleFilter::reset(const Eigen::Quaterniond& R_w_c, int64_t t_ns
   }
   log_w_.assign(static_cast<size_t>(n), -std::log(static_cast<double>(n)));
   w_.assign(static_cast<size_t>(n), 1.0 / n);
+  vel_.assign(static_cast<size_t>(n), Eigen::Vector3d::Zero());
+  vel_mean_.setZero();
   t_ns_ = t_ns;
   std::fill(prev_u_.begin(), prev_u_.end(), kNaN);
   std::fill(prev_v_.begin(), prev_v_.end(), kNaN);
@@ -258,6 +274,17 @@ void RotationParticleFilter::reset(const Eigen::Quaterniond& R_w_c, int64_t t_ns
   ref_ = mean_;
   vel_ref_q_ = mean_;
   stats_ = RotationParticleFilterStats();
+}
+
+void RotationParticleFilter::set_velocity(const Eigen::Vector3d& omega_c_rad_s) {
+  const double s = options_.initial_velocity_spread_rad_s;
+  for (size_t i = 0; i < vel_.size(); ++i)
+    vel_[i] = omega_c_rad_s + (i == 0 ? Eigen::Vector3d::Zero() : Eigen::Vector3d(s * normal(), s * normal(), s * normal()));
+  compute_mean();
+}
+
+bool RotationParticleFilter::particle_velocity_active() const {
+  return options_.motion_model == RotationMotionModel::kParticleVelocity && !have_gyro_;
 }
 
 Eigen::Vector3d RotationParticleFilter::camera_rate_from_imu(const ImuSample& imu, const Eigen::Quaterniond& R_c_b,
@@ -305,12 +332,28 @@ void RotationParticleFilter::predict(int64_t t_ns) {
     ref_ = (ref_ * dR).normalized();
     sigma = options_.gyro_noise_rad_per_sqrt_s;
     ++stats_.gyro_predictions;
+    // Particle velocities follow the gyro, so they are sensible if the gyro drops out.
+    if (options_.motion_model == RotationMotionModel::kParticleVelocity)
+      std::fill(vel_.begin(), vel_.end(), omega_gyro_c_);
   } else {
     have_gyro_ = false;
     if (options_.motion_model == RotationMotionModel::kConstantVelocity && have_velocity_)
       dR = exp_quat(omega_hat_c_ * dt);
   }
   const double s = sigma * std::sqrt(dt);
+  if (particle_velocity_active()) {
+    // Each particle turns by its own velocity, then the velocity takes its random-walk step.
+    const double sw = options_.velocity_noise_rad_s_per_sqrt_s * std::sqrt(dt);
+    const double sr = options_.velocity_rotation_noise_rad_per_sqrt_s * std::sqrt(dt);
+    for (size_t i = 0; i < particles_.size(); ++i) {
+      const Eigen::Vector3d n(sr * normal(), sr * normal(), sr * normal());
+      particles_[i] = (particles_[i] * exp_quat(vel_[i] * dt + n)).normalized();
+      vel_[i] += Eigen::Vector3d(sw * normal(), sw * normal(), sw * normal());
+    }
+    t_ns_ = t_ns;
+    compute_mean();
+    return;
+  }
   const bool drift = dR.vec().squaredNorm() > 0;
   for (Eigen::Quaterniond& q : particles_) {
     const Eigen::Vector3d n(s * normal(), s * normal(), s * normal());
@@ -366,10 +409,15 @@ void RotationParticleFilter::process_batch(const LogIntensityMapView& map) {
   sb2x_.clear();
   sb2y_.clear();
   sb2z_.clear();
+  stau1_.clear();
+  stau2_.clear();
   const float C = static_cast<float>(options_.contrast_threshold);
   const int W = map.width, H = map.height;
+  const bool pv_model = particle_velocity_active();
   const bool relative = options_.measurement_model == RotationMeasurementModel::kRelativeMotion ||
-                        (options_.measurement_model == RotationMeasurementModel::kAuto && have_gyro_);
+                        (options_.measurement_model == RotationMeasurementModel::kAuto && (have_gyro_ || pv_model));
+  const bool pv = relative && pv_model;  // the pixel's previous direction from each particle's velocity
+  const double speed = pv ? vel_mean_.norm() : 0.0;  // rad/s
   const Eigen::Quaternionf ref_now_inv = ref_.conjugate().cast<float>();
   for (const PendingEvent& e : pending_) {
     if (stamp_[e.pixel] == batch_id_) {
@@ -386,7 +434,16 @@ void RotationParticleFilter::process_batch(const LogIntensityMapView& map) {
       continue;
     }
     const Eigen::Vector3f b(bx_[e.pixel], by_[e.pixel], bz_[e.pixel]);
-    if (relative) {
+    if (pv) {
+      if (t_ns_ - prev_t_[e.pixel] > options_.relative_max_interval_ns ||
+          1e-9 * static_cast<double>(t_ns_ - prev_t_[e.pixel]) * speed > options_.relative_max_path_rad) {
+        ++stats_.skipped_long_interval;
+        continue;
+      }
+      stau1_.push_back(1e-9f * static_cast<float>(t_ns_ - e.t_ns));
+      stau2_.push_back(1e-9f * static_cast<float>(t_ns_ - prev_t_[e.pixel]));
+      starget_.push_back(static_cast<float>(e.polarity) * C);
+    } else if (relative) {
       // dR b = R_ref(t)^T R_ref(t_prev) b: the pixel's bearing at its previous event, in the
       // camera frame of now.
       const Eigen::Vector4f& c = prev_ref_[e.pixel];
@@ -437,7 +494,9 @@ void RotationParticleFilter::process_batch(const LogIntensityMapView& map) {
     // ll_[i * m + j]: log-likelihood of event j under particle i (max-mixture), NaN where the
     // particle looks at an unknown texel.
     ll_.resize(np * m);
-    if (linearize_batch(m, relative, W, H)) {
+    if (pv) {
+      weigh_particle_velocity(m, map);
+    } else if (linearize_batch(m, relative, W, H)) {
       ++stats_.linearized_batches;
       // Linearised: u_i = u0 + M delta_i per event and sample point (see linearize_batch).
       const float* lin = lin_.data();
@@ -530,6 +589,135 @@ void RotationParticleFilter::process_batch(const LogIntensityMapView& map) {
   update_velocity();
 }
 
+// kRelativeMotion with particle velocities: fills ll_[i * m + j] for every particle i and used event
+// j (max-mixture log-likelihood; NaN where a sample is unknown). The bearing moved back by a
+// particle's velocity over tau is b'(tau, w) = Exp(-w tau) b = b + c - tau/2 w x c + O(tau^3),
+// c = tau b x w. While the cloud is tight (every particle within linearize_max_spread_rad of the
+// mean and |w_i - w_m| tau within the same angle) the texel positions are linearised about the mean
+// rotation R_m and mean velocity w_m (per event: the events with a longer tau, or near a pole, are
+// projected exactly per particle): with R_i = R_m Exp(delta_i), w_i = w_m + e_i,
+// R_i b'(tau, w_i) = R_m (b'_m + delta_i x b'_m + tau b x e_i) + second order, so a sample point is
+// at (u0, v0) + M delta_i + N e_i, M = -J_pi R_m [b'_m]x, N = tau J_pi R_m [b]x (14 floats per
+// point, two points per event). Otherwise every particle projects both points exactly.
+void RotationParticleFilter::weigh_particle_velocity(size_t m, const LogIntensityMapView& map) {
+  const size_t np = particles_.size();
+  const int W = map.width, H = map.height;
+  const float* data = map.data;
+  const float ku = static_cast<float>(W) * (0.5f / kPiF), kv = static_cast<float>(H) * (1.0f / kPiF);
+  const float u_off = 0.5f * static_cast<float>(W) - 0.5f;
+  const float nhiv = static_cast<float>(neg_half_inv_var_);
+  const float floor_ll = static_cast<float>(floor_loglik_);
+  auto moved = [](const Eigen::Vector3f& b, const Eigen::Vector3f& w, float tau) {
+    const Eigen::Vector3f c = tau * b.cross(w);
+    return Eigen::Vector3f(b + c - 0.5f * tau * w.cross(c));
+  };
+  auto skew = [](const Eigen::Vector3f& v) {
+    Eigen::Matrix3f k;
+    k << 0.0f, -v.z(), v.y(), v.z(), 0.0f, -v.x(), -v.y(), v.x(), 0.0f;
+    return k;
+  };
+  // Rotation offsets and velocity offsets from the mean; the largest velocity offset decides per
+  // event whether its points may be linearised (|e| tau within the spread).
+  bool lin = options_.linearize_max_spread_rad > 0;
+  double max_e = 0;
+  if (lin) {
+    const double max_spread2 = options_.linearize_max_spread_rad * options_.linearize_max_spread_rad;
+    delta_.resize(6 * np);
+    const Eigen::Quaterniond mc = mean_.conjugate();
+    for (size_t i = 0; i < np && lin; ++i) {
+      Eigen::Quaterniond q = mc * particles_[i];
+      if (q.w() < 0) q.coeffs() = -q.coeffs();
+      const double vn = q.vec().norm();
+      const Eigen::Vector3d d = vn > 1e-12 ? Eigen::Vector3d(q.vec() * (2.0 * std::atan2(vn, q.w()) / vn))
+                                           : Eigen::Vector3d(2.0 * q.vec());
+      const Eigen::Vector3d e = vel_[i] - vel_mean_;
+      if (d.squaredNorm() > max_spread2) lin = false;
+      max_e = std::max(max_e, e.norm());
+      for (int a = 0; a < 3; ++a) {
+        delta_[6 * i + a] = static_cast<float>(d[a]);
+        delta_[6 * i + 3 + a] = static_cast<float>(e[a]);
+      }
+    }
+  }
+  lin_idx_.clear();
+  exact_idx_.clear();
+  if (lin) {
+    const Eigen::Matrix3f Rm = mean_.toRotationMatrix().cast<float>();
+    const Eigen::Vector3f wm = vel_mean_.cast<float>();
+    const float max_tau = static_cast<float>(options_.linearize_max_spread_rad / std::max(max_e, 1e-9));
+    lin_.resize(28 * m);
+    for (size_t j = 0; j < m; ++j) {
+      bool ok = stau2_[j] <= max_tau && stau1_[j] <= max_tau;
+      const Eigen::Vector3f b(sbx_[j], sby_[j], sbz_[j]);
+      const Eigen::Matrix3f Rbx = Rm * skew(b);
+      for (int k = 0; k < 2 && ok; ++k) {
+        const float tau = k == 0 ? stau1_[j] : stau2_[j];
+        const Eigen::Vector3f bp = moved(b, wm, tau);
+        const Eigen::Vector3f d = Rm * bp;
+        const float rxy2 = d.x() * d.x() + d.y() * d.y();
+        const float n2 = rxy2 + d.z() * d.z();
+        if (!(rxy2 > 0.1f * n2)) {  // within ~18 deg of a pole (or not finite)
+          ok = false;
+          break;
+        }
+        const float rxy = std::sqrt(rxy2);
+        Eigen::Matrix<float, 2, 3> J;
+        J << -d.y() * ku / rxy2, d.x() * ku / rxy2, 0.0f,  //
+            d.x() * d.z() * kv / (rxy * n2), d.y() * d.z() * kv / (rxy * n2), -rxy * kv / n2;
+        const Eigen::Matrix<float, 2, 3> M = -J * (Rm * skew(bp));
+        const Eigen::Matrix<float, 2, 3> N = tau * (J * Rbx);
+        float* a = &lin_[28 * j + 14 * k];
+        a[0] = fast_atan2(d.y(), d.x()) * ku + u_off;
+        a[1] = fast_atan2(rxy, d.z()) * kv - 0.5f;
+        for (int c = 0; c < 3; ++c) {
+          a[2 + c] = M(0, c);
+          a[5 + c] = N(0, c);
+          a[8 + c] = M(1, c);
+          a[11 + c] = N(1, c);
+        }
+      }
+      (ok ? lin_idx_ : exact_idx_).push_back(static_cast<uint32_t>(j));
+    }
+  } else {
+    for (size_t j = 0; j < m; ++j) exact_idx_.push_back(static_cast<uint32_t>(j));
+  }
+  if (!lin_idx_.empty()) ++stats_.linearized_batches;
+  const float* L0 = lin_.data();
+  for (size_t i = 0; i < np; ++i) {
+    float* ll_i = &ll_[i * m];
+    if (!lin_idx_.empty()) {
+      const float* dl = &delta_[6 * i];
+      const float d0 = dl[0], d1 = dl[1], d2 = dl[2], e0 = dl[3], e1 = dl[4], e2 = dl[5];
+      for (uint32_t j : lin_idx_) {
+        const float* a = L0 + 28 * j;
+        const float* c = a + 14;
+        const float La = sample_index(data, W, H, a[0] + a[2] * d0 + a[3] * d1 + a[4] * d2 + a[5] * e0 + a[6] * e1 + a[7] * e2,
+                                      a[1] + a[8] * d0 + a[9] * d1 + a[10] * d2 + a[11] * e0 + a[12] * e1 + a[13] * e2);
+        const float Lb = sample_index(data, W, H, c[0] + c[2] * d0 + c[3] * d1 + c[4] * d2 + c[5] * e0 + c[6] * e1 + c[7] * e2,
+                                      c[1] + c[8] * d0 + c[9] * d1 + c[10] * d2 + c[11] * e0 + c[12] * e1 + c[13] * e2);
+        const float r = La - Lb - starget_[j];
+        const float ll = nhiv * r * r;
+        ll_i[j] = ll < floor_ll ? floor_ll : ll;  // NaN (unknown texel) stays NaN
+      }
+    }
+    if (exact_idx_.empty()) continue;
+    const Eigen::Matrix3f R = particles_[i].toRotationMatrix().cast<float>();
+    const Eigen::Vector3f w = vel_[i].cast<float>();
+    for (uint32_t j : exact_idx_) {
+      const Eigen::Vector3f b(sbx_[j], sby_[j], sbz_[j]);
+      float L[2];
+      for (int k = 0; k < 2; ++k) {
+        const Eigen::Vector3f d = R * moved(b, w, k == 0 ? stau1_[j] : stau2_[j]);
+        L[k] = sample_index(data, W, H, fast_atan2(d.y(), d.x()) * ku + u_off,
+                            fast_atan2(std::sqrt(d.x() * d.x() + d.y() * d.y()), d.z()) * kv - 0.5f);
+      }
+      const float r = L[0] - L[1] - starget_[j];
+      const float ll = nhiv * r * r;
+      ll_i[j] = ll < floor_ll ? floor_ll : ll;
+    }
+  }
+}
+
 // Every particle's projection linearised about the mean: with R_i = R_m Exp(delta_i), the
 // direction R_i b = R_m (b + delta_i x b) + O(|delta|^2), so a sample point's texel position is
 // (u0, v0) + M delta_i with M = -J_pi(R_m b) R_m [b]x. Per event: one exact projection and a
@@ -607,6 +795,10 @@ void RotationParticleFilter::compute_mean() {
   }
   const double norm = sum.norm();
   mean_ = norm > 1e-12 ? Eigen::Quaterniond(sum / norm) : particles_[best];
+  if (options_.motion_model == RotationMotionModel::kParticleVelocity && vel_.size() == particles_.size()) {
+    vel_mean_.setZero();
+    for (size_t i = 0; i < vel_.size(); ++i) vel_mean_ += w_[i] * vel_[i];
+  }
 }
 
 void RotationParticleFilter::update_velocity() {
@@ -621,6 +813,7 @@ void RotationParticleFilter::update_velocity() {
 
 Eigen::Vector3d RotationParticleFilter::angular_velocity_c() const {
   if (have_gyro_) return omega_gyro_c_;
+  if (options_.motion_model == RotationMotionModel::kParticleVelocity) return vel_mean_;
   return have_velocity_ ? omega_hat_c_ : Eigen::Vector3d::Zero();
 }
 
@@ -645,6 +838,7 @@ void RotationParticleFilter::set_particles(const std::vector<Eigen::Quaterniond>
   if (!(sum > 0)) throw std::invalid_argument("set_particles: weights sum to zero");
   particles_.resize(particles.size());
   for (size_t i = 0; i < particles.size(); ++i) particles_[i] = particles[i].normalized();
+  if (vel_.size() != particles.size()) vel_.assign(particles.size(), vel_mean_);
   w_.resize(weights.size());
   log_w_.resize(weights.size());
   for (size_t i = 0; i < weights.size(); ++i) {
@@ -668,19 +862,27 @@ void RotationParticleFilter::resample() {
   // would under-count its spread.
   const size_t n_new = adaptive ? adaptive_count() : n_out;
   std::vector<Eigen::Quaterniond> out(n_out);
+  std::vector<Eigen::Vector3d> out_v(n_out);
   double cum = w_[0];
   size_t k = 0;
   for (size_t i = 0; i < n_out; ++i) {
     while (u > cum && k + 1 < n) cum += w_[++k];
     out[i] = particles_[k];
+    out_v[i] = vel_[k];
     u += step;
   }
   if (n_new < n_out) {  // a systematic subsample: every (n_out / n_new)-th of the ordered resampled set
     std::vector<Eigen::Quaterniond> sub(n_new);
-    for (size_t i = 0; i < n_new; ++i) sub[i] = out[(2 * i + 1) * n_out / (2 * n_new)];
+    std::vector<Eigen::Vector3d> sub_v(n_new);
+    for (size_t i = 0; i < n_new; ++i) {
+      sub[i] = out[(2 * i + 1) * n_out / (2 * n_new)];
+      sub_v[i] = out_v[(2 * i + 1) * n_out / (2 * n_new)];
+    }
     out.swap(sub);
+    out_v.swap(sub_v);
   }
   particles_.swap(out);
+  vel_.swap(out_v);
   const double w = 1.0 / static_cast<double>(particles_.size());
   w_.assign(particles_.size(), w);
   log_w_.assign(particles_.size(), std::log(w));

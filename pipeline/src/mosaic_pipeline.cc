@@ -375,6 +375,16 @@ struct MosaicPipeline::Impl {
   Eigen::Matrix3d R = mosaic_initial_camera_rotation();
   Eigen::Vector3d omega_c = Eigen::Vector3d::Zero();
   int64_t t0 = 0, t_boot = 0;
+  MosaicPipeline::RotationReference boot_ref;  // diagnostic: bootstrap rotations R_w_b(t)
+  // R_w_c in the mosaic frame from boot_ref (std::nullopt where it has no answer).
+  std::optional<Eigen::Matrix3d> boot_ref_at(int64_t t) const {
+    if (!boot_ref) return std::nullopt;
+    const auto q0 = boot_ref(t0), q = boot_ref(t);
+    if (!q0 || !q) return std::nullopt;
+    const Eigen::Matrix3d R_b_c = q_c_b.conjugate().toRotationMatrix();
+    return Eigen::Matrix3d(mosaic_initial_camera_rotation() * (q0->toRotationMatrix() * R_b_c).transpose() *
+                           (q->toRotationMatrix() * R_b_c));
+  }
 
   // Tracking.
   std::unique_ptr<frontend::RotationParticleFilter> pf;
@@ -467,7 +477,12 @@ struct MosaicPipeline::Impl {
     if (j == n && !finishing) return false;  // the window may hold more events
     if (j < n && ev[j].t_ns < tw1) tw1 = ev[j].t_ns;  // closed by the event count
     if (!imu_ready(tw1)) return false;
-    if (!opt.use_gyro) {
+    const std::optional<Eigen::Matrix3d> R_ref0 = boot_ref_at(tw0), R_ref1 = boot_ref_at(tw1);
+    const bool use_ref = R_ref0 && R_ref1;
+    if (use_ref) {
+      omega_c = tw1 > tw0 ? Eigen::Vector3d(calib::so3_log(R_ref0->transpose() * *R_ref1) / (1e-9 * static_cast<double>(tw1 - tw0)))
+                          : omega_c;
+    } else if (!opt.use_gyro) {
       std::vector<Eigen::Vector3f> b;
       std::vector<int64_t> t;
       for (size_t k = 0; k < j; ++k) {
@@ -481,11 +496,14 @@ struct MosaicPipeline::Impl {
     for (size_t k = 0; k < j; ++k) {
       const Event& e = ev[k];
       const Eigen::Vector3d w_c = opt.use_gyro ? gyro_c_at(e.t_ns) : omega_c;
-      const Eigen::Matrix3d R_e = R * calib::so3_exp(w_c * (static_cast<double>(e.t_ns - tw0) * 1e-9));
+      std::optional<Eigen::Matrix3d> R_g = use_ref ? boot_ref_at(e.t_ns) : std::nullopt;
+      const Eigen::Matrix3d R_e = R_g ? *R_g : Eigen::Matrix3d(R * calib::so3_exp(w_c * (static_cast<double>(e.t_ns - tw0) * 1e-9)));
       mapper.map_event(e, R_e.cast<float>(), Eigen::Vector3f::Zero(), 0.0f);
     }
     // Advance R to the window's end (gyro: integrate the samples inside).
-    if (opt.use_gyro) {
+    if (use_ref) {
+      R = *R_ref1;
+    } else if (opt.use_gyro) {
       for (int64_t t = tw0; t < tw1;) {
         const int64_t dt = std::min<int64_t>(opt.gyro_integration_step_ns, tw1 - t);
         R = R * calib::so3_exp(gyro_c_at(t + dt / 2) * (static_cast<double>(dt) * 1e-9));
@@ -545,6 +563,7 @@ struct MosaicPipeline::Impl {
     tracker_options.contrast_threshold = contrast_used;
     pf = std::make_unique<frontend::RotationParticleFilter>(undistorter, tracker_options);
     pf->reset(Eigen::Quaterniond(R), t_track0);
+    if (!opt.use_gyro) pf->set_velocity(omega_c);  // the last contrast-maximisation rate (kParticleVelocity)
     view.width = opt.mosaic.width;
     view.height = opt.mosaic.height;
     view.data = mapper.maps[front].data();
@@ -653,6 +672,8 @@ void MosaicPipeline::add_imu(const ImuSample& sample) {
   m.imu.push_back(sample);
   m.process();
 }
+
+void MosaicPipeline::set_bootstrap_reference(RotationReference R_w_b_at) { impl_->boot_ref = std::move(R_w_b_at); }
 
 void MosaicPipeline::add_events(EventSpan events) {
   Impl& m = *impl_;

@@ -153,6 +153,28 @@ TEST(MosaicConfig, ErrorsNameFileLineAndKey) {
   EXPECT_EQ(f.reconstruct_period_ns, e.reconstruct_period_ns);
   EXPECT_EQ(f.bootstrap_ns, e.bootstrap_ns);
   EXPECT_EQ(f.footprint_period_ns, e.footprint_period_ns);
+  // Particle-velocity keys: read, written to the resolved config, read back the same; bad values rejected.
+  std::ofstream(p) << "tracker: {motion_model: particle_velocity, velocity_noise_rad_s_per_sqrt_s: 3, "
+                      "velocity_rotation_noise_rad_per_sqrt_s: 0.05, initial_velocity_spread_rad_s: 0.25, "
+                      "relative_max_interval_ms: 40, relative_max_path_rad: 0.2}\n";
+  std::string resolved_pv;
+  const MosaicConfig g = load_mosaic_config(p, &resolved_pv);
+  EXPECT_EQ(g.tracker.motion_model, frontend::RotationMotionModel::kParticleVelocity);
+  EXPECT_DOUBLE_EQ(g.tracker.velocity_noise_rad_s_per_sqrt_s, 3.0);
+  EXPECT_DOUBLE_EQ(g.tracker.velocity_rotation_noise_rad_per_sqrt_s, 0.05);
+  EXPECT_DOUBLE_EQ(g.tracker.initial_velocity_spread_rad_s, 0.25);
+  EXPECT_EQ(g.tracker.relative_max_interval_ns, 40'000'000);
+  EXPECT_DOUBLE_EQ(g.tracker.relative_max_path_rad, 0.2);
+  std::ofstream(p) << resolved_pv;
+  const MosaicConfig h = load_mosaic_config(p);
+  EXPECT_EQ(h.tracker.motion_model, g.tracker.motion_model);
+  EXPECT_DOUBLE_EQ(h.tracker.velocity_noise_rad_s_per_sqrt_s, 3.0);
+  EXPECT_EQ(h.tracker.relative_max_interval_ns, 40'000'000);
+  EXPECT_DOUBLE_EQ(h.tracker.relative_max_path_rad, 0.2);
+  std::ofstream(p) << "tracker: {relative_max_path_rad: 0}\n";
+  EXPECT_THROW(load_mosaic_config(p), InputError);
+  std::ofstream(p) << "tracker: {velocity_noise_rad_s_per_sqrt_s: -1}\n";
+  EXPECT_THROW(load_mosaic_config(p), InputError);
   std::ofstream(p) << "mosaic: {threads: 3}\n";
   EXPECT_THROW(load_mosaic_config(p), InputError);
   std::ofstream(p) << "tracker:\n  measurement_model: kim\n";

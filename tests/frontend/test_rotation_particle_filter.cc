@@ -103,6 +103,12 @@ TEST(RotationParticleFilterOptions, DefaultsValidAndDegenerateRejected) {
   rejects([](auto& o) { o.kld_bin_rad = 0; }, "kld bin");
   rejects([](auto& o) { o.kld_epsilon = 0; }, "kld epsilon");
   rejects([](auto& o) { o.kld_z = -1; }, "kld z");
+  rejects([](auto& o) { o.motion_model = static_cast<RotationMotionModel>(7); }, "motion model");
+  rejects([](auto& o) { o.velocity_noise_rad_s_per_sqrt_s = 0; }, "velocity noise");
+  rejects([](auto& o) { o.velocity_rotation_noise_rad_per_sqrt_s = std::nan(""); }, "velocity rotation noise");
+  rejects([](auto& o) { o.initial_velocity_spread_rad_s = -1; }, "initial velocity spread");
+  rejects([](auto& o) { o.relative_max_interval_ns = 0; }, "relative max interval");
+  rejects([](auto& o) { o.relative_max_path_rad = 0; }, "relative max path");
   RotationParticleFilterOptions bad;
   bad.num_particles = 0;
   EXPECT_THROW(RotationParticleFilter(4, 4, pinhole_bearings(4, 4), bad), std::invalid_argument);
@@ -224,6 +230,45 @@ TEST(RotationParticleFilter, PredictionsWithoutEventsStayFiniteAndSpread) {
   EXPECT_NEAR(pf.effective_sample_size(), 500.0, 1e-6);  // predictions do not change weights
   pf.predict(5);                                         // backwards: ignored
   EXPECT_EQ(pf.time_ns(), 1000 + 10'000'000'000LL);
+}
+
+// kParticleVelocity: each particle turns by its own velocity; the velocities follow set_velocity()
+// and random-walk, the mean rotation follows the mean velocity, and resampling keeps each
+// particle's velocity with its rotation.
+TEST(RotationParticleFilter, ParticleVelocityPredictionTurnsEachParticleByItsVelocity) {
+  RotationParticleFilterOptions o;
+  o.num_particles = 200;
+  o.motion_model = RotationMotionModel::kParticleVelocity;
+  o.velocity_noise_rad_s_per_sqrt_s = 1e-9;
+  o.velocity_rotation_noise_rad_per_sqrt_s = 1e-9;
+  o.initial_velocity_spread_rad_s = 0.2;
+  RotationParticleFilter pf(4, 4, pinhole_bearings(4, 4), o);
+  const Eigen::Quaterniond R0(calib::so3_exp(Eigen::Vector3d(0.1, -0.2, 0.3)));
+  pf.reset(R0, 0);
+  for (const auto& v : pf.particle_velocities()) EXPECT_EQ(v, Eigen::Vector3d::Zero());
+  const Eigen::Vector3d w(1.0, -2.0, 0.5);
+  pf.set_velocity(w);
+  const std::vector<Eigen::Vector3d> v0 = pf.particle_velocities();
+  Eigen::Vector3d mean_v = Eigen::Vector3d::Zero();
+  for (const auto& v : v0) mean_v += v / static_cast<double>(v0.size());
+  EXPECT_LT((mean_v - w).norm(), 0.1);
+  EXPECT_GT((v0[1] - w).norm(), 1e-3);                  // spread around w
+  EXPECT_LT((pf.angular_velocity_c() - mean_v).norm(), 1e-9);  // the weighted mean velocity
+  for (int k = 1; k <= 100; ++k) pf.predict(k * 1'000'000LL);  // 0.1 s
+  for (size_t i = 0; i < pf.particles().size(); ++i) {
+    const Eigen::Quaterniond expect = R0 * Eigen::Quaterniond(calib::so3_exp(v0[i] * 0.1));
+    EXPECT_LT(angle_between(pf.particles()[i], expect), 1e-6) << i;
+    EXPECT_LT((pf.particle_velocities()[i] - v0[i]).norm(), 1e-6) << i;
+  }
+  // Resampling onto one particle carries its velocity.
+  std::vector<double> wts(pf.particles().size(), 0.0);
+  wts[3] = 1.0;
+  const Eigen::Vector3d v3 = pf.particle_velocities()[3];
+  pf.set_particles(pf.particles(), wts);
+  EXPECT_LT((pf.angular_velocity_c() - v3).norm(), 1e-12);
+  pf.resample();
+  ASSERT_EQ(pf.particle_velocities().size(), pf.particles().size());
+  for (const auto& v : pf.particle_velocities()) EXPECT_EQ(v, v3);
 }
 
 TEST(RotationParticleFilter, GyroPredictionIntegratesPiecewiseConstantRates) {

@@ -9,7 +9,9 @@
 // camera frame: R <- R * Exp(delta).
 //  - Motion: R <- R * dR * Exp(n), n ~ N(0, sigma^2 dt I_3), dt the time step in s. Without gyro,
 //    dR = I (random walk, sigma = motion_noise_rad_per_sqrt_s) or, with kConstantVelocity,
-//    dR = Exp(w_hat_c dt) with the filter's own smoothed angular-velocity estimate. With gyro
+//    dR = Exp(w_hat_c dt) with the filter's own smoothed angular-velocity estimate, or, with
+//    kParticleVelocity, each particle carries its own camera-frame angular velocity w_i:
+//    R_i <- R_i Exp(w_i dt + n), w_i <- w_i + m, m ~ N(0, sigma_w^2 dt I_3). With gyro
 //    samples (add_gyro, camera-frame rates), dR is the piecewise-constant integral of the rates and
 //    sigma = gyro_noise_rad_per_sqrt_s.
 //  - Measurement (Kim et al.): an event at pixel x (unit bearing b(x) in the camera frame) with
@@ -69,8 +71,13 @@ struct LogIntensityMapView {
 enum class RotationMotionModel {
   kRandomWalk,        // dR = I between measurements (Kim et al.)
   kConstantVelocity,  // dR = Exp(w_hat_c dt), w_hat_c the filter's smoothed angular velocity
+  // Each particle carries an angular velocity w_i (camera frame, rad/s) with a random-walk
+  // (constant-velocity) model: R_i <- R_i Exp(w_i dt + n), w_i <- w_i + m. With kRelativeMotion
+  // (or kAuto) and no gyro, the measurement moves the pixel's previous direction back with the
+  // particle's own velocity (see kRelativeMotion), so velocity hypotheses are weighed by the map.
+  kParticleVelocity,
 };
-const char* rotation_motion_model_name(RotationMotionModel m);  // "random_walk", "constant_velocity"
+const char* rotation_motion_model_name(RotationMotionModel m);  // "random_walk", "constant_velocity", "particle_velocity"
 
 // Where the measurement takes the log intensity "at the pixel's previous event" from.
 enum class RotationMeasurementModel {
@@ -85,10 +92,16 @@ enum class RotationMeasurementModel {
   // R_ref(t)^T R_ref(t_prev). Both samples move with the particle, so the particle is placed
   // against the mosaic itself and the displacement comes from the reference: no drift through
   // contrast mismatch. Twice the map samples of kPreviousMean.
+  // With kParticleVelocity and no gyro, the reference is each particle's own velocity under a
+  // constant-velocity assumption over the pixel's inter-event interval: with t the batch time
+  // (the particles' time), t_e the event's and t_p the pixel's previous event's,
+  //   z_i = L(pi(R_i Exp(-w_i (t - t_e)) b)) - L(pi(R_i Exp(-w_i (t - t_p)) b)),
+  // (Exp(phi) b to second order in phi); events with t - t_p > relative_max_interval_ns are not used.
   kRelativeMotion,
-  // kRelativeMotion while the gyro drives the prediction, kPreviousMean otherwise (without a gyro
-  // the reference is the mean itself, and the relative measurement leaves the rotation's scale
-  // free: measured 18 deg RMS against 3.5 deg for kPreviousMean on poster_rotation, 1 s).
+  // kRelativeMotion while the gyro drives the prediction or the particles carry velocities
+  // (kParticleVelocity), kPreviousMean otherwise (with the mean as the reference the relative
+  // measurement leaves the rotation's scale free: measured 18 deg RMS against 3.5 deg for
+  // kPreviousMean on poster_rotation, 1 s).
   kAuto,
 };
 const char* rotation_measurement_model_name(RotationMeasurementModel m);  // "previous_mean", "relative_motion", "auto"
@@ -167,6 +180,26 @@ struct RotationParticleFilterOptions {
   // velocity_smoothing (in (0, 1], default 0.5) on each new window.
   int64_t velocity_window_ns = 2'000'000;
   double velocity_smoothing = 0.5;
+  // kParticleVelocity: white angular-acceleration noise density on each particle's velocity,
+  // rad/s/sqrt(s), > 0 (default 2), the rotation's own noise density on top of the velocity
+  // (replaces motion_noise_rad_per_sqrt_s), rad/sqrt(s), > 0 (default 0.03), and the standard
+  // deviation of the velocities set by set_velocity() around the given one, rad/s, >= 0 (default
+  // 0.5). Known map, events only, 1 s at 60 / 150 / 500 deg/s (bench/rotation_pf_table): velocity
+  // noise 1 / 2 / 4 gave 8.8 / 14.9 / 20.3, 6.5 / 6.2 / 6.3, lost / 9.7 / 11.4 mrad RMS (with a
+  // 0.05 rad path cap); rotation noise 0.01 lost the 500 deg/s run, 0.1 and 0.3 lost more runs.
+  double velocity_noise_rad_s_per_sqrt_s = 2.0;
+  double velocity_rotation_noise_rad_per_sqrt_s = 0.03;
+  double initial_velocity_spread_rad_s = 0.5;
+  // kRelativeMotion with particle velocities: an event whose pixel's previous event is more than
+  // relative_max_interval_ns before the batch time (ns, > 0, default 100 ms), or whose path under
+  // the mean velocity since then is longer than relative_max_path_rad (rad, > 0, default 0.1:
+  // about 16 texels at 1024 per turn), is not used (a constant velocity over a long path is a poor
+  // model). Known map, 1 s at 60 / 150 / 500 deg/s: a 30 ms cap without a path cap lost the
+  // 60 deg/s run (too few events), 100 ms gave 7.6 / 5.5 / 7.8 mrad RMS; path caps 0.05 / 0.1 / 0.2
+  // rad with 100 ms: 14.9 / 7.9 / 7.6, 6.2 / 5.2 / 5.2, 9.7 / 6.2 / 6.0 mrad (previous_mean: 12.5 /
+  // 7.6 / 6.6 mrad).
+  int64_t relative_max_interval_ns = 100'000'000;
+  double relative_max_path_rad = 0.1;
   uint64_t seed = 1;  // seed of every random choice (process noise, resampling)
 
   bool Validate(std::string* why) const;
@@ -178,6 +211,7 @@ struct RotationParticleFilterStats {
   int64_t skipped_no_previous = 0;     // the pixel had no earlier event since reset()
   int64_t skipped_unknown_map = 0;     // the mosaic is unknown at the previous position, or for every particle
   int64_t skipped_repeat_in_batch = 0; // the pixel already fired earlier in the same batch
+  int64_t skipped_long_interval = 0;   // particle velocities: the pixel's previous event is older than relative_max_interval_ns
   int64_t skipped_stride = 0;          // left out by event_stride
   int64_t skipped_invalid = 0;         // outside the sensor, or a pixel without a bearing
   int64_t batches = 0;
@@ -212,6 +246,10 @@ class RotationParticleFilter {
   static Eigen::Vector3d camera_rate_from_imu(const ImuSample& imu, const Eigen::Quaterniond& R_c_b,
                                               const Eigen::Vector3d& gyro_bias_b = Eigen::Vector3d::Zero());
 
+  // kParticleVelocity: every particle's angular velocity (camera frame, rad/s) to omega_c plus
+  // N(0, initial_velocity_spread_rad_s^2 I) (e.g. the bootstrap's last rate after reset()).
+  void set_velocity(const Eigen::Vector3d& omega_c_rad_s);
+
   // Moves the particles to t_ns with the motion model (gyro when fresh samples exist). Times
   // before the filter's time are ignored (no backward prediction).
   void predict(int64_t t_ns);
@@ -231,7 +269,8 @@ class RotationParticleFilter {
   Eigen::Quaterniond mean() const { return mean_; }
   int64_t time_ns() const { return t_ns_; }
   // Angular velocity, rad/s: with a fresh gyro sample the latest camera-frame rate given to
-  // add_gyro; otherwise the smoothed difference of mean rotations (velocity_window_ns). The world
+  // add_gyro; with kParticleVelocity the particles' weighted mean velocity; otherwise the smoothed
+  // difference of mean rotations (velocity_window_ns). The world
   // version is mean() * angular_velocity_c() (a mapper's mosaic pixel velocity of an event with
   // world bearing d is d(pi)/d(d) * (omega_w x d)).
   Eigen::Vector3d angular_velocity_c() const;
@@ -242,9 +281,13 @@ class RotationParticleFilter {
 
   // Particle access (tests, diagnostics). Weights are normalised (sum 1).
   const std::vector<Eigen::Quaterniond>& particles() const { return particles_; }
+  // kParticleVelocity: per particle angular velocity (camera frame, rad/s); zeros otherwise.
+  const std::vector<Eigen::Vector3d>& particle_velocities() const { return vel_; }
   std::vector<double> weights() const;
   // Replaces the particle set (weights >= 0 with a positive sum, normalised here; sizes must
-  // match, any count >= 1) and recomputes the mean; throws std::invalid_argument otherwise.
+  // match, any count >= 1) and recomputes the mean; throws std::invalid_argument otherwise. The
+  // particle velocities (kParticleVelocity) are kept when the count is unchanged, else all set to
+  // the previous mean velocity.
   void set_particles(const std::vector<Eigen::Quaterniond>& particles, const std::vector<double>& weights);
   // Systematic resampling now, regardless of the ESS.
   void resample();
@@ -257,6 +300,8 @@ class RotationParticleFilter {
   };
   void process_batch(const LogIntensityMapView& map);
   bool linearize_batch(size_t m, bool relative, int W, int H);
+  void weigh_particle_velocity(size_t m, const LogIntensityMapView& map);
+  bool particle_velocity_active() const;
   void normalize_weights();
   size_t adaptive_count() const;
   void compute_mean();
@@ -273,6 +318,8 @@ class RotationParticleFilter {
   double floor_loglik_ = 0;          // outlier log-likelihood relative to the Gaussian peak (< 0)
 
   std::vector<Eigen::Quaterniond> particles_;
+  std::vector<Eigen::Vector3d> vel_;  // kParticleVelocity: angular velocity per particle (camera, rad/s)
+  Eigen::Vector3d vel_mean_ = Eigen::Vector3d::Zero();
   std::vector<double> log_w_;  // normalised log-weights
   std::vector<double> w_;      // normalised weights
   Eigen::Quaterniond mean_ = Eigen::Quaterniond::Identity();
@@ -296,10 +343,12 @@ class RotationParticleFilter {
   // Scratch of the batch being processed (SoA of the events that weight the particles).
   std::vector<float> sbx_, sby_, sbz_, starget_;
   std::vector<float> sb2x_, sb2y_, sb2z_;  // kRelativeMotion: the bearing moved back, dR b
+  std::vector<float> stau1_, stau2_;       // particle velocities: t - t_e and t - t_p, s
   std::vector<float> rot_;  // per-particle float rotation matrices, 9 floats each
   std::vector<float> ll_;   // per particle and used event log-likelihood of the batch
   std::vector<float> lin_;    // linearised projections of the batch (linearize_batch)
-  std::vector<float> delta_;  // per particle Log(mean^T R_i)
+  std::vector<uint32_t> lin_idx_, exact_idx_;  // particle velocities: events weighed linearised / exactly
+  std::vector<float> delta_;  // per particle Log(mean^T R_i) (particle velocities: and w_i - w_mean, 6 floats)
 
   std::deque<std::pair<int64_t, Eigen::Vector3d>> gyro_;
   Eigen::Vector3d omega_gyro_c_ = Eigen::Vector3d::Zero();

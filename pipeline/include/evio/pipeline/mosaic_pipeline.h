@@ -12,6 +12,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -177,6 +178,14 @@ class MosaicPipeline {
   MosaicPipeline& operator=(const MosaicPipeline&) = delete;
 
   void set_snapshot_callback(SnapshotCallback callback);
+
+  // Diagnostic (splitting the error into bootstrap and tracking): the bootstrap maps its events with
+  // these body rotations R_w_b(t) (camera clock; e.g. the ground truth), expressed in the mosaic
+  // frame relative to the first event's, instead of gyro or contrast-maximisation rates; the
+  // tracker's initial velocity is their difference over the last window. A time the function
+  // cannot answer (std::nullopt) falls back to the rates. Call before the first add_events.
+  using RotationReference = std::function<std::optional<Eigen::Quaterniond>(int64_t t_ns)>;
+  void set_bootstrap_reference(RotationReference R_w_b_at);
 
   // IMU samples in time order (IMU clock), used with use_gyro (ignored otherwise). They may all
   // come first or be interleaved with add_events.
