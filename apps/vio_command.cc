@@ -10,6 +10,7 @@
 #include <ostream>
 #include <sstream>
 
+#include <opencv2/core/utility.hpp>
 #include <yaml-cpp/yaml.h>
 
 #include "eval_command.h"
@@ -330,6 +331,9 @@ std::string init_description(pipeline::VioInitMethod m) {
 }  // namespace
 
 int run_vio(const VioArgs& args, std::ostream& out) {
+  // One core: OpenCV's parallel loops (the KLT's per-point loop) run inline instead of handing
+  // work to TBB worker threads, whose hand-offs and spinning cost CPU time for no gain here.
+  cv::setNumThreads(1);
   // The oracle's scene first: its errors come before reading a dataset.
   std::shared_ptr<const sim::PlanarScene> oracle_planes;
   if (!args.oracle_scene.empty()) {
