@@ -76,6 +76,8 @@ TEST(VioConfig, ErrorsNameFileLineAndKey) {
   expect_error("window: {estimate_time_offset: maybe}\n", "estimate_time_offset");
   expect_error("window: {time_offset_sigma_ms: 0}\n", "time_offset_sigma_ms");
   expect_error("tracker: {seed: -3}\n", "tracker.seed");
+  expect_error("window: {function_tolerance: 0}\n", "function_tolerance");
+  expect_error("window: {function_tolerance: 1}\n", "function_tolerance");
 }
 
 TEST(VioConfig, ResolvedConfigReadsBackToTheSameValues) {
@@ -83,7 +85,7 @@ TEST(VioConfig, ResolvedConfigReadsBackToTheSameValues) {
   std::string resolved;
   const VioConfig a = load_vio_config(
       dir.write("c.yaml", "frontend: corners\nwindow: {size: 7, pixel_sigma: 0.8, loss: cauchy, init_bias_gyro_turn_on_radps: 0.0002,\n"
-                          "  estimate_time_offset: true, time_offset_sigma_ms: 4}\nframes: {events_per_frame: 9000}\n"
+                          "  estimate_time_offset: true, time_offset_sigma_ms: 4, function_tolerance: 0.0001}\nframes: {events_per_frame: 9000}\n"
                           "tracker: {ransac: five_point, fast_threshold: 30}\ninit: {method: static, window_ms: 1500}\n"
                           "inputs: events+aps\naps_tracker: {fast_threshold: 7}\naps: {pixel_sigma: 0.4, max_gap_ms: 80}\n"),
       &resolved);
@@ -108,6 +110,7 @@ TEST(VioConfig, ResolvedConfigReadsBackToTheSameValues) {
   EXPECT_DOUBLE_EQ(b.window.init_bias_gyro_turn_on_radps, 0.0002);
   EXPECT_TRUE(b.window.estimate_time_offset);
   EXPECT_DOUBLE_EQ(b.window.time_offset_sigma_s, 0.004);
+  EXPECT_DOUBLE_EQ(b.window.function_tolerance, 1e-4);
 }
 
 TEST(VioConfig, EveryExampleConfigInDatasetsParses) {
