@@ -10,6 +10,7 @@
 #include <ostream>
 #include <sstream>
 
+#include <opencv2/core/utility.hpp>
 #include <yaml-cpp/yaml.h>
 
 #include "eval_command.h"
@@ -129,6 +130,7 @@ std::string config_yaml(const VioConfig& c) {
     << ", min_track_age_ms: " << num(ns_to_ms(c.min_track_age_ns)) << "}\n";
   const auto& w = c.window;
   y << "window:\n  size: " << w.window_size << "\n  max_iterations: " << w.max_iterations
+    << "\n  function_tolerance: " << num(w.function_tolerance)
     << "\n  max_solver_time_ms: " << num(w.max_solver_time_s * 1e3) << "\n  loss: " << loss_name(w.loss)
     << "\n  loss_scale: " << num(w.loss_scale) << "\n  pixel_sigma: " << num(w.pixel_sigma)
     << "\n  keyframe_min_parallax_px: " << num(w.keyframe_min_parallax_px)
@@ -240,7 +242,7 @@ VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
       }
       if (top.has("window")) {
         const Section s = top.child("window", false, "a map");
-        s.allow({"size", "max_iterations", "max_solver_time_ms", "loss", "loss_scale", "pixel_sigma",
+        s.allow({"size", "max_iterations", "function_tolerance", "max_solver_time_ms", "loss", "loss_scale", "pixel_sigma",
                  "keyframe_min_parallax_px", "keyframe_min_tracked_ratio", "keyframe_max_interval_ms",
                  "min_triangulation_angle_deg", "max_reprojection_px", "rotation_only_parallax_px",
                  "rotation_only_translation_px", "init_bias_gyro_turn_on_radps", "init_bias_accel_turn_on_mps2",
@@ -249,6 +251,8 @@ VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
         auto& w = c.window;
         w.window_size = s.integer("size", w.window_size, 2, 200);
         w.max_iterations = s.integer("max_iterations", w.max_iterations, 1, 1000);
+        w.function_tolerance = s.number("function_tolerance", w.function_tolerance, Range::kPositive, "relative cost change");
+        if (!(w.function_tolerance < 1)) s.fail_at("function_tolerance", "must be < 1", "a relative cost change in (0, 1)");
         w.max_solver_time_s = 1e-3 * s.number("max_solver_time_ms", w.max_solver_time_s * 1e3, Range::kNonNegative, "ms");
         const std::string loss = s.string("loss", loss_name(w.loss), {"huber", "cauchy", "none"});
         w.loss = loss == "huber" ? backend::RobustLoss::kHuber : loss == "cauchy" ? backend::RobustLoss::kCauchy : backend::RobustLoss::kNone;
@@ -347,6 +351,9 @@ std::string init_description(pipeline::VioInitMethod m) {
 }  // namespace
 
 int run_vio(const VioArgs& args, std::ostream& out) {
+  // One core: OpenCV's parallel loops (the KLT's per-point loop) run inline instead of handing
+  // work to TBB worker threads, whose hand-offs and spinning cost CPU time for no gain here.
+  cv::setNumThreads(1);
   // The oracle's scene first: its errors come before reading a dataset.
   std::shared_ptr<const sim::PlanarScene> oracle_planes;
   if (!args.oracle_scene.empty()) {

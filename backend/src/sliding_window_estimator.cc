@@ -75,6 +75,7 @@ bool SlidingWindowOptions::Validate(std::string* why) const {
   if (!(rotation_only_parallax_px >= 0) || !(rotation_only_translation_px >= 0))
     return fail("rotation_only_parallax_px and rotation_only_translation_px (deprecated) must be >= 0 px");
   if (max_iterations < 1) return fail("max_iterations must be >= 1");
+  if (!(function_tolerance > 0 && function_tolerance < 1)) return fail("function_tolerance must be in (0, 1)");
   if (!(max_solver_time_s >= 0)) return fail("max_solver_time_s must be >= 0 s");
   if (!(loss_scale > 0)) return fail("loss_scale must be > 0 (pixel sigmas)");
   if (!(pixel_sigma > 0)) return fail("pixel_sigma must be > 0 px");
@@ -698,6 +699,7 @@ void SlidingWindowEstimator::solve() {
   for (double* p : outside) ordering->AddElementToGroup(p, 1);
   so.linear_solver_ordering = ordering;
   so.max_num_iterations = options_.max_iterations;
+  so.function_tolerance = options_.function_tolerance;
   so.num_threads = 1;
   so.logging_type = ceres::SILENT;
   so.minimizer_progress_to_stdout = false;

@@ -211,7 +211,15 @@ EventFrame EventFrameBuilder::build_frame(EventSpan events, int64_t t_ref_ns) {
   // (time-ordered) events pass the knots, which avoids a 64-bit division per event.
   int64_t i = 0, i_t = 0;  // step, and its start i * h
   const float vx = v_over_d.x(), vy = v_over_d.y(), vz = v_over_d.z();
-  for (const Event& e : events) {
+  const Event* ev = events.data();
+  const size_t n_events = events.size();
+  constexpr size_t kAhead = 16;  // events: the bearing table is read at random pixels, fetched ahead
+  for (size_t j = 0; j < n_events; ++j) {
+    const Event& e = ev[j];
+    if (j + kAhead < n_events) {
+      const Event& f = ev[j + kAhead];
+      __builtin_prefetch(&bearings_[static_cast<size_t>(f.y) * width_ + f.x]);
+    }
     const Eigen::Vector3f& b = bearings_[static_cast<size_t>(e.y) * width_ + e.x];
     float px, py, pz;
     if (compensate) {

@@ -282,11 +282,11 @@ FeatureObservations FeatureTracker::track(int64_t t_ns, const cv::Mat& frame,
         q1.push_back(p1[i]);
       }
       std::vector<uchar> sf, sb;
-      std::vector<float> err;
-      cv::calcOpticalFlowPyrLK(*ref_pyr, pyramid, q0, q1, sf, err, win, levels, term,
+      // No error output: OpenCV then skips its per-point residual pass (the status is the same).
+      cv::calcOpticalFlowPyrLK(*ref_pyr, pyramid, q0, q1, sf, cv::noArray(), win, levels, term,
                                cv::OPTFLOW_USE_INITIAL_FLOW);
       qb = q0;
-      cv::calcOpticalFlowPyrLK(pyramid, *ref_pyr, q1, qb, sb, err, win, levels, term,
+      cv::calcOpticalFlowPyrLK(pyramid, *ref_pyr, q1, qb, sb, cv::noArray(), win, levels, term,
                                cv::OPTFLOW_USE_INITIAL_FLOW);
       for (size_t k = 0; k < idx.size(); ++k) {
         p1[idx[k]] = q1[k];

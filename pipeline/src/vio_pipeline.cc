@@ -503,7 +503,17 @@ struct VioPipeline::Impl {
   void process(EventSpan chunk) {
     VioStats& st = result.stats;
     filtered.clear();
-    for (const Event& e : chunk) {
+    constexpr size_t kAhead = 16;  // events: the filters' per-pixel tables are fetched ahead
+    const bool prefetch = use_frames && chunk.size() > kAhead;
+    for (size_t j = 0; j < chunk.size(); ++j) {
+      const Event& e = chunk[j];
+      if (prefetch && j + kAhead < chunk.size()) {
+        const Event& f = chunk[j + kAhead];
+        if (f.x < width && f.y < height) {
+          if (opt.refractory_enabled) refractory.prefetch(f);
+          if (opt.background_activity_enabled) background.prefetch(f);
+        }
+      }
       if (!have_events) {
         st.t_first_event_ns = e.t_ns;
         next_obs = e.t_ns + opt.observation_period_ns;

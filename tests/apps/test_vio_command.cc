@@ -83,6 +83,8 @@ TEST(VioConfig, ErrorsNameFileLineAndKey) {
   expect_error("tracker: {seed: -3}\n", "tracker.seed");
   expect_error("frames: {overlap: 0.95}\n", "overlap");
   expect_error("window: {tracked_landmark_marginalisation: keep}\n", "window.tracked_landmark_marginalisation");
+  expect_error("window: {function_tolerance: 0}\n", "function_tolerance");
+  expect_error("window: {function_tolerance: 1}\n", "function_tolerance");
 }
 
 TEST(VioConfig, ResolvedConfigReadsBackToTheSameValues) {
@@ -90,7 +92,8 @@ TEST(VioConfig, ResolvedConfigReadsBackToTheSameValues) {
   std::string resolved;
   const VioConfig a = load_vio_config(
       dir.write("c.yaml", "frontend: corners\nwindow: {size: 7, pixel_sigma: 0.8, loss: cauchy, init_bias_gyro_turn_on_radps: 0.0002,\n"
-                          "  estimate_time_offset: true, time_offset_sigma_ms: 4, tracked_landmark_marginalisation: restart}\nframes: {events_per_frame: 9000, overlap: 0.25}\n"
+                          "  estimate_time_offset: true, time_offset_sigma_ms: 4, tracked_landmark_marginalisation: restart,\n"
+                          "  function_tolerance: 0.0001}\nframes: {events_per_frame: 9000, overlap: 0.25}\n"
                           "tracker: {ransac: five_point, fast_threshold: 30}\ninit: {method: static, window_ms: 1500}\n"
                           "inputs: events+aps\naps_tracker: {fast_threshold: 7}\naps: {pixel_sigma: 0.4, max_gap_ms: 80}\n"),
       &resolved);
@@ -117,6 +120,7 @@ TEST(VioConfig, ResolvedConfigReadsBackToTheSameValues) {
   EXPECT_TRUE(b.window.estimate_time_offset);
   EXPECT_DOUBLE_EQ(b.window.time_offset_sigma_s, 0.004);
   EXPECT_EQ(b.window.tracked_landmark_marginalisation, backend::TrackedLandmarkMarginalisation::kRestart);
+  EXPECT_DOUBLE_EQ(b.window.function_tolerance, 1e-4);
 }
 
 TEST(VioConfig, EveryExampleConfigInDatasetsParses) {

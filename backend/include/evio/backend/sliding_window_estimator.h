@@ -88,6 +88,7 @@ enum class TrackedLandmarkMarginalisation { kDrop, kDoubleCount, kRestart, kSpli
 struct SlidingWindowOptions {
   int window_size = 10;                    // keyframes K in the window, >= 2
   int max_iterations = 10;                 // Ceres iterations per keyframe, >= 1
+  double function_tolerance = 1e-6;        // Ceres stops when the cost changes by less than this fraction, in (0, 1)
   double max_solver_time_s = 0.0;          // wall time limit per solve, s (0: none)
   RobustLoss loss = RobustLoss::kHuber;    // on reprojection errors
   double loss_scale = 1.345;               // in units of pixel sigma (whitened residual)
