@@ -294,6 +294,14 @@ int main(int argc, char** argv) {
   vio_cmd->add_option("--oracle-drift-px", vio.oracle_drift_px,
                       "With --oracle-tracks: random-walk drift per track, Gaussian step per axis and frame (px)")
       ->check(CLI::NonNegativeNumber);
+  vio_cmd->add_option("--oracle-error", vio.oracle_error,
+                      "With --oracle-tracks: what the estimator keeps of the front-end's own error (observed minus true "
+                      "projection): none, real (all of it), independent (each frame's common mode, the per-axis median, "
+                      "removed) or common_mode (that median alone)")
+      ->check(CLI::IsMember({"none", "real", "independent", "common_mode"}));
+  vio_cmd->add_option("--oracle-max-error-px", vio.oracle_max_error_px,
+                      "With --oracle-error real or independent: drop observations whose own error is larger (px; 0 = keep all)")
+      ->check(CLI::NonNegativeNumber);
   add_dataset_options(vio_cmd, &vio.dataset_options, &vio_format, &vio_unit, &vio_bad);
 
   evio::apps::MosaicArgs mosaic;

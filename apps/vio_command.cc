@@ -67,6 +67,9 @@ std::string tracker_yaml(const char* key, const frontend::FeatureTrackerOptions&
     << ", klt_pyramid_levels: " << tk.klt_pyramid_levels << ", klt_max_iterations: " << tk.klt_max_iterations
     << ", klt_epsilon_px: " << num(tk.klt_epsilon_px) << ", forward_backward_max_px: " << num(tk.forward_backward_max_px)
     << ", template_max_age_frames: " << tk.template_max_age_frames
+    << ", template_fallback: " << (tk.template_fallback ? "true" : "false")
+    << ", template_max_rotation_deg: " << num(tk.template_max_rotation_deg)
+    << ", anchor_frames: " << tk.anchor_frames << ", anchor_ransac_threshold_px: " << num(tk.anchor_ransac_threshold_px)
     << ", ransac: " << frontend::ransac_model_name(tk.ransac)
     << ", ransac_threshold_px: " << num(tk.ransac_threshold_px) << ", min_tracks_before_detection: " << tk.min_tracks_before_detection
     << ", seed: " << tk.seed << "}\n";
@@ -77,7 +80,8 @@ std::string tracker_yaml(const char* key, const frontend::FeatureTrackerOptions&
 void parse_tracker(const Section& s, frontend::FeatureTrackerOptions* t) {
   s.allow({"grid_cols", "grid_rows", "max_features", "max_per_cell", "fast_threshold", "min_distance_px",
            "klt_window_px", "klt_pyramid_levels", "klt_max_iterations", "klt_epsilon_px", "forward_backward_max_px", "ransac",
-           "ransac_threshold_px", "min_tracks_before_detection", "template_max_age_frames", "seed"});
+           "ransac_threshold_px", "min_tracks_before_detection", "template_max_age_frames", "template_fallback", "template_max_rotation_deg", "anchor_frames",
+           "anchor_ransac_threshold_px", "seed"});
   t->grid_cols = s.integer("grid_cols", t->grid_cols, 1, 100);
   t->grid_rows = s.integer("grid_rows", t->grid_rows, 1, 100);
   t->max_features = s.integer("max_features", t->max_features, 1, 100000);
@@ -90,6 +94,10 @@ void parse_tracker(const Section& s, frontend::FeatureTrackerOptions* t) {
   t->klt_epsilon_px = s.number("klt_epsilon_px", t->klt_epsilon_px, Range::kPositive, "px");
   t->forward_backward_max_px = s.number("forward_backward_max_px", t->forward_backward_max_px, Range::kPositive, "px");
   t->template_max_age_frames = s.integer("template_max_age_frames", t->template_max_age_frames, 1, 100000);
+  t->template_fallback = s.boolean("template_fallback", t->template_fallback);
+  t->template_max_rotation_deg = s.number("template_max_rotation_deg", t->template_max_rotation_deg, Range::kNonNegative, "deg");
+  t->anchor_frames = s.integer("anchor_frames", t->anchor_frames, 0, 100000);
+  t->anchor_ransac_threshold_px = s.number("anchor_ransac_threshold_px", t->anchor_ransac_threshold_px, Range::kPositive, "px");
   const std::string r = s.string("ransac", frontend::ransac_model_name(t->ransac), {"two_point", "five_point", "none"});
   t->ransac = r == "two_point" ? frontend::RansacModel::kTwoPoint : r == "five_point" ? frontend::RansacModel::kFivePoint : frontend::RansacModel::kNone;
   t->ransac_threshold_px = s.number("ransac_threshold_px", t->ransac_threshold_px, Range::kPositive, "px");
@@ -141,6 +149,7 @@ std::string config_yaml(const VioConfig& c) {
     << "\n  tracked_landmark_marginalisation: " << tracked_landmark_name(w.tracked_landmark_marginalisation)
     << "\n  rotation_only_parallax_px: " << num(w.rotation_only_parallax_px)
     << "\n  rotation_only_translation_px: " << num(w.rotation_only_translation_px)
+    << "\n  rotation_only_min_duration_ms: " << num(w.rotation_only_min_duration_s * 1e3)
     << "\n  init_bias_gyro_turn_on_radps: " << num(w.init_bias_gyro_turn_on_radps)
     << "\n  init_bias_accel_turn_on_mps2: " << num(w.init_bias_accel_turn_on_mps2)
     << "\n  init_bias_horizon_s: " << num(w.init_bias_horizon_s)
@@ -194,6 +203,7 @@ VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
       }
       if (top.has("tracker")) parse_tracker(top.child("tracker", false, "a map"), &c.tracker);
       if (top.has("aps_tracker")) parse_tracker(top.child("aps_tracker", false, "a map"), &c.aps_tracker);
+
       if (top.has("aps")) {
         const Section s = top.child("aps", false, "a map");
         s.allow({"pixel_sigma", "event_pixel_sigma", "max_gap_ms"});
@@ -245,7 +255,7 @@ VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
         s.allow({"size", "max_iterations", "function_tolerance", "max_solver_time_ms", "loss", "loss_scale", "pixel_sigma",
                  "keyframe_min_parallax_px", "keyframe_min_tracked_ratio", "keyframe_max_interval_ms",
                  "min_triangulation_angle_deg", "max_reprojection_px", "rotation_only_parallax_px",
-                 "rotation_only_translation_px", "init_bias_gyro_turn_on_radps", "init_bias_accel_turn_on_mps2",
+                 "rotation_only_translation_px", "rotation_only_min_duration_ms", "init_bias_gyro_turn_on_radps", "init_bias_accel_turn_on_mps2",
                  "init_bias_horizon_s", "estimate_time_offset", "time_offset_sigma_ms",
                  "tracked_landmark_marginalisation"});
         auto& w = c.window;
@@ -271,6 +281,8 @@ VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
                                                                    : backend::TrackedLandmarkMarginalisation::kDrop;
         w.rotation_only_parallax_px = s.number("rotation_only_parallax_px", w.rotation_only_parallax_px, Range::kNonNegative, "px");
         w.rotation_only_translation_px = s.number("rotation_only_translation_px", w.rotation_only_translation_px, Range::kPositive, "px");
+        w.rotation_only_min_duration_s =
+            1e-3 * s.number("rotation_only_min_duration_ms", w.rotation_only_min_duration_s * 1e3, Range::kNonNegative, "ms");
         w.init_bias_gyro_turn_on_radps = s.number("init_bias_gyro_turn_on_radps", w.init_bias_gyro_turn_on_radps, Range::kPositive, "rad/s");
         w.init_bias_accel_turn_on_mps2 = s.number("init_bias_accel_turn_on_mps2", w.init_bias_accel_turn_on_mps2, Range::kPositive, "m/s^2");
         w.init_bias_horizon_s = s.number("init_bias_horizon_s", w.init_bias_horizon_s, Range::kNonNegative, "s");
@@ -404,6 +416,11 @@ int run_vio(const VioArgs& args, std::ostream& out) {
     evaluation::TrackOracleOptions oo;
     oo.white_noise_px = args.oracle_noise_px;
     oo.drift_px_per_frame = args.oracle_drift_px;
+    oo.max_error_px = args.oracle_max_error_px;
+    oo.keep_error = args.oracle_error == "real"          ? evaluation::OracleError::kReal
+                    : args.oracle_error == "independent" ? evaluation::OracleError::kIndependent
+                    : args.oracle_error == "common_mode" ? evaluation::OracleError::kCommonMode
+                                                         : evaluation::OracleError::kNone;
     oracle = std::make_unique<evaluation::TrackOracle>(
         load_trajectory(args.gt), *cal,
         [p = oracle_planes](const Eigen::Vector3d& o, const Eigen::Vector3d& d) { return p->intersect(o, d); }, oo);
@@ -530,7 +547,8 @@ int run_vio(const VioArgs& args, std::ostream& out) {
     j << "\"event_frames\": " << fs_.frames_emitted << ", \"frames_uncompensated\": " << fs_.frames_uncompensated
       << ", \"frames_dropped_sparse\": " << fs_.frames_dropped_sparse << ", \"tracks_detected\": " << ts.detected
       << ", \"tracked\": " << ts.tracked << ", \"lost_klt\": " << ts.lost_klt << ", \"lost_forward_backward\": " << ts.lost_fb
-      << ", \"rejected_ransac\": " << ts.rejected_ransac;
+      << ", \"rejected_ransac\": " << ts.rejected_ransac << ", \"template_fallbacks\": " << ts.template_fallbacks
+      << ", \"rejected_anchor\": " << ts.rejected_anchor << ", \"template_rotation_refreshes\": " << ts.template_rotation_refreshes;
   } else {
     j << "\"corner_events\": " << vs.corner_events << ", \"corner_tracks_started\": " << vs.corner_tracker.tracks_started;
   }
@@ -544,7 +562,9 @@ int run_vio(const VioArgs& args, std::ostream& out) {
   if (oracle) {
     j << ",\n  \"oracle\": {\"scene\": \"" << json_escape(args.oracle_scene) << "\", \"white_noise_px\": " << num(args.oracle_noise_px)
       << ", \"drift_px_per_frame\": " << num(args.oracle_drift_px) << ", \"replaced\": " << oracle->stats().replaced
-      << ", \"dropped\": " << oracle->stats().dropped << "}";
+      << ", \"dropped\": " << oracle->stats().dropped << ", \"keep_error\": \"" << args.oracle_error
+      << "\", \"common_mode_rms_px\": " << num(oracle->stats().common_mode_rms_px)
+      << ", \"max_error_px\": " << num(args.oracle_max_error_px) << ", \"dropped_gross\": " << oracle->stats().dropped_gross << "}";
   }
   j << ",\n  \"outliers_removed\": " << st.outliers_removed << ",\n  \"landmarks_marginalised\": " << st.landmarks_marginalised
     << ",\n  \"observations_dropped\": " << st.observations_dropped

@@ -52,6 +52,8 @@ struct VioArgs {
   std::string oracle_scene;
   double oracle_noise_px = 0;
   double oracle_drift_px = 0;
+  double oracle_max_error_px = 0;
+  std::string oracle_error = "none";  // none | real | independent | common_mode (evaluation::OracleError)
 };
 
 int run_vio(const VioArgs& args, std::ostream& out);

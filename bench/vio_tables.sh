@@ -10,8 +10,8 @@
 #     real-time factor of the whole process (CPU time user+sys / sequence duration: one core;
 #     wall time alongside);
 #  2. speed-accuracy on the replay (or, without the real data, on poster_6dof), events only:
-#     frames.events_per_frame x window.size x tracker (frames front-end with chained KLT,
-#     frames with reference templates refreshed every 5 frames, corners front-end), with error
+#     frames.events_per_frame x window.size x tracker (frames front-end with templates, the
+#     default; frames with chained frame-to-frame KLT; corners front-end), with error
 #     and real-time factor.
 # Prints markdown tables and writes OUT/per_sequence.md, OUT/speed_accuracy.md and every run's
 # outputs under OUT/runs. Run on an otherwise idle machine for the wall times.
@@ -105,13 +105,13 @@ echo
   echo "### speed-accuracy on $sweep_seq (events): frames.events_per_frame x window.size x tracker"
   echo
   echo "$header"
-  for tracker in chained template5 corners; do
+  for tracker in templates chained corners; do
     for epf in 5000 15000 30000; do
       for k in 5 10 15; do
         [ "$tracker" = corners ] && [ "$epf" != 15000 ] && continue  # corners: no event frames
         cfg="$out/runs/cfg_${tracker}_${epf}_$k.yaml"
         extra=(-e "s/events_per_frame: [0-9]*/events_per_frame: $epf/" -e "s/window: {size: [0-9]*/window: {size: $k/")
-        [ "$tracker" = template5 ] && extra+=(-e "s/template_max_age_frames: [0-9]*/template_max_age_frames: 5/")
+        [ "$tracker" = chained ] && extra+=(-e "s/template_max_age_frames: [0-9]*/template_max_age_frames: 1/")
         [ "$tracker" = corners ] && extra+=(-e "s/^frontend: .*/frontend: corners/")
         config "$cfg" events "${extra[@]}"
         run "sweep_${tracker}_${epf}_$k" "$sweep_seq" "$cfg"

@@ -63,6 +63,8 @@ bool SlidingWindowOptions::Validate(std::string* why) const {
   if (!(rotation_only_gric_margin >= 0) || !std::isfinite(rotation_only_gric_margin))
     return fail("rotation_only_gric_margin must be finite and >= 0 (GRIC units)");
   if (rotation_only_min_keyframes < 1) return fail("rotation_only_min_keyframes must be >= 1 keyframe");
+  if (!(rotation_only_min_duration_s >= 0) || !std::isfinite(rotation_only_min_duration_s))
+    return fail("rotation_only_min_duration_s must be finite and >= 0 s");
   if (model_selection_min_tracks < 6) return fail("model_selection_min_tracks must be >= 6 tracks");
   if (!(model_selection_imu_veto_p >= 0 && model_selection_imu_veto_p < 1))
     return fail("model_selection_imu_veto_p must be in [0, 1)");
@@ -314,7 +316,10 @@ bool SlidingWindowEstimator::choose_rotation_only(const Keyframe& prev, const Fe
     const bool r_wins = test.best == TwoViewModel::kRotation &&
                         test.gric_rotation + options_.rotation_only_gric_margin <= std::min(test.gric_static, test.gric_general);
     rotation_only_run_ = r_wins ? rotation_only_run_ + 1 : 0;
-    rotation_only_active_ = rotation_only_run_ >= options_.rotation_only_min_keyframes;
+    if (rotation_only_run_ == 1) rotation_only_run_start_ns_ = frame.t_ns;
+    rotation_only_active_ = rotation_only_run_ >= options_.rotation_only_min_keyframes &&
+                            static_cast<double>(frame.t_ns - rotation_only_run_start_ns_) * 1e-9 >=
+                                options_.rotation_only_min_duration_s;
   }
   // Necessary condition kept from the former pixel test: the median rotation-compensated
   // displacement below rotation_only_parallax_px and, once landmarks are triangulated, the

@@ -1,8 +1,10 @@
 #include "evio/evaluation/track_oracle.h"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <utility>
+#include <vector>
 
 namespace evio::evaluation {
 
@@ -12,6 +14,7 @@ bool TrackOracleOptions::Validate(std::string* why) const {
     return false;
   };
   if (!(white_noise_px >= 0) || !std::isfinite(white_noise_px)) return fail("white_noise_px must be finite and >= 0");
+  if (!(max_error_px >= 0) || !std::isfinite(max_error_px)) return fail("max_error_px must be finite and >= 0");
   if (!(drift_px_per_frame >= 0) || !std::isfinite(drift_px_per_frame))
     return fail("drift_px_per_frame must be finite and >= 0");
   return true;
@@ -38,6 +41,7 @@ void TrackOracle::apply(FeatureObservations* frame) {
   std::normal_distribution<double> white(0.0, options_.white_noise_px), step(0.0, options_.drift_px_per_frame);
   std::vector<FeatureObservation> kept;
   kept.reserve(frame->observations.size());
+  std::vector<Eigen::Vector2d> real_error;  // per kept observation (px), for keep_error
   for (FeatureObservation o : frame->observations) {
     auto it = landmarks_.find(o.track_id);
     if (it == landmarks_.end()) {
@@ -59,12 +63,60 @@ void TrackOracle::apply(FeatureObservations* frame) {
     }
     Eigen::Vector2d e = l.drift_px;
     if (options_.white_noise_px > 0) e += Eigen::Vector2d(white(rng_), white(rng_));
+    if (options_.keep_error != OracleError::kNone) {
+      const Eigen::Vector3d b = o.bearing_c;
+      real_error.push_back(b.z() > 1e-9 ? Eigen::Vector2d(K.fx * (b.x() / b.z() - p_c.x() / p_c.z()),
+                                                          K.fy * (b.y() / b.z() - p_c.y() / p_c.z()))
+                                        : Eigen::Vector2d::Zero());
+    }
     const double x = p_c.x() / p_c.z() + e.x() / K.fx, y = p_c.y() / p_c.z() + e.y() / K.fy;
     o.bearing_c = Eigen::Vector3d(x, y, 1.0).normalized();
     kept.push_back(o);
     ++stats_.replaced;
   }
+  if (options_.keep_error != OracleError::kNone && !kept.empty()) {
+    // The frame's common mode: per-axis median of the errors within 10 px (gross ones excluded).
+    Eigen::Vector2d c = Eigen::Vector2d::Zero();
+    for (int axis = 0; axis < 2; ++axis) {
+      std::vector<double> v;
+      for (const Eigen::Vector2d& e : real_error)
+        if (e.norm() < 10.0) v.push_back(e[axis]);
+      if (v.empty()) continue;
+      std::nth_element(v.begin(), v.begin() + static_cast<long>(v.size() / 2), v.end());
+      c[axis] = v[v.size() / 2];
+    }
+    common_mode_sq_sum_ += c.squaredNorm();
+    ++stats_.frames;
+    stats_.common_mode_rms_px = std::sqrt(common_mode_sq_sum_ / static_cast<double>(stats_.frames));
+    std::vector<FeatureObservation> gross_free;
+    gross_free.reserve(kept.size());
+    for (size_t i = 0; i < kept.size(); ++i) {
+      if (options_.max_error_px > 0 && options_.keep_error != OracleError::kCommonMode &&
+          real_error[i].norm() > options_.max_error_px) {
+        ++stats_.dropped_gross;
+        continue;
+      }
+      const Eigen::Vector2d add = options_.keep_error == OracleError::kReal          ? real_error[i]
+                                  : options_.keep_error == OracleError::kIndependent ? Eigen::Vector2d(real_error[i] - c)
+                                                                                      : c;
+      const Eigen::Vector3d& b = kept[i].bearing_c;  // oracle bearing (z > 0)
+      kept[i].bearing_c =
+          Eigen::Vector3d(b.x() / b.z() + add.x() / K.fx, b.y() / b.z() + add.y() / K.fy, 1.0).normalized();
+      gross_free.push_back(kept[i]);
+    }
+    kept = std::move(gross_free);
+  }
   frame->observations = std::move(kept);
+}
+
+const char* to_string(OracleError e) {
+  switch (e) {
+    case OracleError::kReal: return "real";
+    case OracleError::kIndependent: return "independent";
+    case OracleError::kCommonMode: return "common_mode";
+    case OracleError::kNone: break;
+  }
+  return "none";
 }
 
 }  // namespace evio::evaluation

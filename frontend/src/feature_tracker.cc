@@ -8,6 +8,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include <Eigen/Geometry>
 #include <opencv2/features2d.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/video/tracking.hpp>
@@ -145,6 +146,11 @@ bool FeatureTrackerOptions::Validate(std::string* why) const {
     return fail("min_tracks_before_detection must be in 0..max_features");
   if (border_px < 0) return fail("border_px must be >= 0");
   if (template_max_age_frames < 1) return fail("template_max_age_frames must be >= 1");
+  if (!(template_max_rotation_deg >= 0) || !std::isfinite(template_max_rotation_deg))
+    return fail("template_max_rotation_deg must be finite and >= 0");
+  if (anchor_frames < 0) return fail("anchor_frames must be >= 0");
+  if (!(anchor_ransac_threshold_px > 0) || !std::isfinite(anchor_ransac_threshold_px))
+    return fail("anchor_ransac_threshold_px must be positive and finite");
   return true;
 }
 
@@ -212,12 +218,49 @@ void FeatureTracker::detect(const cv::Mat& frame) {
     if (per_cell[static_cast<size_t>(cell)] >= options_.max_per_cell) continue;
     const cv::Point ip(cvRound(kp.pt.x), cvRound(kp.pt.y));
     if (occupied.at<uint8_t>(ip) != 0) continue;
-    tracks_.push_back({next_id_++, kp.pt, frame_id_, kp.pt});
+    tracks_.push_back({next_id_++, kp.pt, frame_id_, kp.pt, false, kp.pt});
     ++per_cell[static_cast<size_t>(cell)];
     if (r > 0) cv::circle(occupied, ip, r, 255, -1);
     ++added;
   }
   stats_.detected += added;
+}
+
+void FeatureTracker::verify_against_anchor(std::vector<Track>* tracks, const Eigen::Matrix3d* R_cur_prev) {
+  if (anchor_frame_ < 0) return;
+  if (!R_cur_prev) {  // the rotation since the anchor is unknown: restart it at this frame
+    anchor_frame_ = -1;
+    for (Track& t : *tracks) t.anchored = false;
+    return;
+  }
+  R_cur_anchor_ = *R_cur_prev * R_cur_anchor_;
+  std::vector<size_t> idx;
+  std::vector<Eigen::Vector3d> b0, b1;
+  for (size_t i = 0; i < tracks->size(); ++i) {
+    const Track& t = (*tracks)[i];
+    if (!t.anchored) continue;
+    idx.push_back(i);
+    b0.push_back(bearing(t.anchor_px));
+    b1.push_back(bearing(t.px));
+  }
+  if (idx.size() < static_cast<size_t>(ransac_min_correspondences(RansacModel::kTwoPoint))) return;
+  const double f = std::sqrt(K_.fx * K_.fy);
+  const std::vector<bool> inlier =
+      ransac_inliers(b0, b1, RansacModel::kTwoPoint, &R_cur_anchor_, std::atan(options_.anchor_ransac_threshold_px / f),
+                     options_.ransac_max_iterations,
+                     splitmix64(~options_.seed ^ splitmix64(static_cast<uint64_t>(frame_id_))));
+  std::vector<bool> drop(tracks->size(), false);
+  for (size_t k = 0; k < idx.size(); ++k) drop[idx[k]] = !inlier[k];
+  std::vector<Track> kept;
+  kept.reserve(tracks->size());
+  for (size_t i = 0; i < tracks->size(); ++i) {
+    if (drop[i]) {
+      ++stats_.rejected_anchor;
+    } else {
+      kept.push_back((*tracks)[i]);
+    }
+  }
+  *tracks = std::move(kept);
 }
 
 FeatureObservations FeatureTracker::track(int64_t t_ns, const cv::Mat& frame,
@@ -254,22 +297,53 @@ FeatureObservations FeatureTracker::track(int64_t t_ns, const cv::Mat& frame,
         }
       }
     }
+    const std::vector<cv::Point2f> guess = p1;  // KLT's initial positions (rotation prior)
     std::vector<uchar> st_f(n, 0), st_b(n, 0);
     std::vector<cv::Point2f> ref_px(n);
     // One KLT call per reference frame (with template_max_age_frames = 1 that is the previous
     // frame for every track).
     const bool chained = options_.template_max_age_frames == 1;
+    // Templates turned by more than template_max_rotation_deg since their frame (or by an unknown
+    // rotation) are not used: such tracks go from the previous frame and their template restarts.
+    for (RefFrame& rf : ref_frames_) {
+      if (R_cur_prev) {
+        rf.R_cur_ref = *R_cur_prev * rf.R_cur_ref;
+      } else {
+        rf.rotation_known = false;
+      }
+    }
+    auto too_rotated = [&](int64_t ref) {
+      if (options_.template_max_rotation_deg <= 0) return false;
+      for (const RefFrame& rf : ref_frames_) {
+        if (rf.frame != ref) continue;
+        if (!rf.rotation_known) return true;
+        return Eigen::AngleAxisd(rf.R_cur_ref).angle() > options_.template_max_rotation_deg * M_PI / 180.0;
+      }
+      return true;
+    };
     std::vector<int64_t> refs;
-    for (const Track& t : tracks_) refs.push_back(chained ? frame_id_ - 1 : t.ref_frame);
+    std::vector<uchar> refresh(n, 0);
+    for (size_t i = 0; i < n; ++i) {
+      const Track& t = tracks_[i];
+      if (chained || t.ref_frame == frame_id_ - 1) {
+        refs.push_back(frame_id_ - 1);
+      } else if (too_rotated(t.ref_frame)) {
+        refs.push_back(frame_id_ - 1);
+        refresh[i] = 1;
+        ++stats_.template_rotation_refreshes;
+      } else {
+        refs.push_back(t.ref_frame);
+      }
+    }
     std::vector<int64_t> groups = refs;
     std::sort(groups.begin(), groups.end());
     groups.erase(std::unique(groups.begin(), groups.end()), groups.end());
     for (int64_t g : groups) {
       const std::vector<cv::Mat>* ref_pyr = &prev_pyramid_;
-      if (!chained) {
+      if (g != frame_id_ - 1) {
         ref_pyr = nullptr;
-        for (const auto& rp : ref_pyramids_)
-          if (rp.first == g) ref_pyr = &rp.second;
+        for (const RefFrame& rf : ref_frames_)
+          if (rf.frame == g) ref_pyr = &rf.pyramid;
         if (!ref_pyr) continue;  // cannot happen: every referenced pyramid is kept
       }
       std::vector<size_t> idx;
@@ -277,7 +351,7 @@ FeatureObservations FeatureTracker::track(int64_t t_ns, const cv::Mat& frame,
       for (size_t i = 0; i < n; ++i) {
         if (refs[i] != g) continue;
         idx.push_back(i);
-        ref_px[i] = chained ? p0[i] : tracks_[i].ref_px;
+        ref_px[i] = g == frame_id_ - 1 ? p0[i] : tracks_[i].ref_px;
         q0.push_back(ref_px[i]);
         q1.push_back(p1[i]);
       }
@@ -295,9 +369,44 @@ FeatureObservations FeatureTracker::track(int64_t t_ns, const cv::Mat& frame,
         st_b[idx[k]] = sb[k];
       }
     }
+    const double fb2 = options_.forward_backward_max_px * options_.forward_backward_max_px;
+    auto passed = [&](size_t i) {
+      const double dx = back[i].x - ref_px[i].x, dy = back[i].y - ref_px[i].y;
+      return st_f[i] && inside(p1[i]) && st_b[i] && dx * dx + dy * dy <= fb2;
+    };
+    // Template fallback: a track that fails against an older reference is tracked from the
+    // previous frame instead (chained) and its reference restarts at this frame.
+    std::vector<uchar> fell_back(n, 0);
+    if (!chained && options_.template_fallback) {
+      std::vector<size_t> idx;
+      std::vector<cv::Point2f> q0, q1, qb;
+      for (size_t i = 0; i < n; ++i) {
+        if (refs[i] == frame_id_ - 1 || passed(i)) continue;
+        idx.push_back(i);
+        q0.push_back(p0[i]);
+        q1.push_back(guess[i]);
+      }
+      if (!idx.empty()) {
+        std::vector<uchar> sf, sb;
+        cv::calcOpticalFlowPyrLK(prev_pyramid_, pyramid, q0, q1, sf, cv::noArray(), win, levels, term,
+                                 cv::OPTFLOW_USE_INITIAL_FLOW);
+        qb = q0;
+        cv::calcOpticalFlowPyrLK(pyramid, prev_pyramid_, q1, qb, sb, cv::noArray(), win, levels, term,
+                                 cv::OPTFLOW_USE_INITIAL_FLOW);
+        for (size_t k = 0; k < idx.size(); ++k) {
+          const size_t i = idx[k];
+          p1[i] = q1[k];
+          back[i] = qb[k];
+          ref_px[i] = p0[i];
+          st_f[i] = sf[k];
+          st_b[i] = sb[k];
+          fell_back[i] = 1;
+        }
+        stats_.template_fallbacks += static_cast<int64_t>(idx.size());
+      }
+    }
     std::vector<size_t> kept;
     kept.reserve(n);
-    const double fb2 = options_.forward_backward_max_px * options_.forward_backward_max_px;
     for (size_t i = 0; i < n; ++i) {
       if (!st_f[i] || !inside(p1[i])) {
         ++stats_.lost_klt;
@@ -335,13 +444,14 @@ FeatureObservations FeatureTracker::track(int64_t t_ns, const cv::Mat& frame,
       }
       Track t = tracks_[kept[k]];
       t.px = p1[kept[k]];
-      // The template is refreshed once it is template_max_age_frames old.
-      if (frame_id_ - t.ref_frame >= options_.template_max_age_frames) {
+      // The template is refreshed once it is template_max_age_frames old (or after a fallback).
+      if (fell_back[kept[k]] || refresh[kept[k]] || frame_id_ - t.ref_frame >= options_.template_max_age_frames) {
         t.ref_frame = frame_id_;
         t.ref_px = t.px;
       }
       survivors.push_back(t);
     }
+    if (options_.anchor_frames > 0) verify_against_anchor(&survivors, R_cur_prev);
     stats_.tracked += static_cast<int64_t>(survivors.size());
     tracks_ = std::move(survivors);
   } else {
@@ -354,16 +464,25 @@ FeatureObservations FeatureTracker::track(int64_t t_ns, const cv::Mat& frame,
   }
   if (options_.template_max_age_frames > 1) {
     // Keep the pyramids still referenced (this frame's is referenced by new and refreshed tracks).
-    std::vector<std::pair<int64_t, std::vector<cv::Mat>>> keep;
-    for (auto& rp : ref_pyramids_) {
+    std::vector<RefFrame> keep;
+    for (RefFrame& rf : ref_frames_) {
       const bool used = std::any_of(tracks_.begin(), tracks_.end(),
-                                    [&](const Track& t) { return t.ref_frame == rp.first; });
-      if (used) keep.push_back(std::move(rp));
+                                    [&](const Track& t) { return t.ref_frame == rf.frame; });
+      if (used) keep.push_back(std::move(rf));
     }
-    keep.emplace_back(frame_id_, pyramid);
-    ref_pyramids_ = std::move(keep);
+    keep.push_back({frame_id_, pyramid, Eigen::Matrix3d::Identity(), true});
+    ref_frames_ = std::move(keep);
   }
   prev_pyramid_ = std::move(pyramid);
+  if (options_.anchor_frames > 0 &&
+      (anchor_frame_ < 0 || frame_id_ - anchor_frame_ >= options_.anchor_frames)) {
+    anchor_frame_ = frame_id_;
+    R_cur_anchor_.setIdentity();
+    for (Track& t : tracks_) {
+      t.anchored = true;
+      t.anchor_px = t.px;
+    }
+  }
 
   FeatureObservations out;
   out.t_ns = t_ns;

@@ -168,6 +168,10 @@ TEST(SlidingWindowSimulated, OnlineTimeOffsetRecoversAShiftedCameraClock) {
   bad.time_offset_sigma_s = 0;
   std::string why;
   EXPECT_FALSE(bad.Validate(&why));
+  SlidingWindowOptions bad_duration;
+  bad_duration.rotation_only_min_duration_s = -0.1;
+  EXPECT_FALSE(bad_duration.Validate(&why));
+  EXPECT_NE(why.find("rotation_only_min_duration_s"), std::string::npos);
 }
 
 // The same run at t0 = 1.7e18 ns gives the same estimates (times enter only as int64 differences).

@@ -6,7 +6,10 @@
 #include "evio/evaluation/track_oracle.h"
 
 #include <cmath>
+#include <algorithm>
 #include <random>
+#include <set>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -200,6 +203,84 @@ TEST(TrackOracle, RandomWalkDriftGrowsLikeTheSquareRootOfAge) {
   }
 }
 
+// keep_error splits the front-end's own error per frame: every observation after a track's first
+// is moved by a frame-wide shift c_k plus its own noise; `real` keeps the observations as they
+// are, `common_mode` gives every track the frame's median error (c_k up to the noise), and
+// `independent` the rest (median 0).
+TEST(TrackOracle, KeepsTheRealErrorItsCommonModeOrTheRest) {
+  const Scenario s;
+  std::vector<FeatureObservations> frames = s.frames(30, 0.0, 1000);
+  std::mt19937 rng(9);
+  std::normal_distribution<double> noise(0.0, 0.2);
+  std::vector<Eigen::Vector2d> shift;
+  std::set<int64_t> seen;
+  for (size_t k = 0; k < frames.size(); ++k) {
+    shift.emplace_back(0.8 * std::sin(0.7 * static_cast<double>(k)), 0.5 * std::cos(0.4 * static_cast<double>(k)));
+    for (FeatureObservation& o : frames[k].observations) {
+      if (seen.insert(o.track_id).second) continue;  // first observation: exact (the anchor)
+      Eigen::Vector2d px;
+      ASSERT_TRUE(s.camera.camera.project(o.bearing_c, &px));
+      px += shift.back() + Eigen::Vector2d(noise(rng), noise(rng));
+      ASSERT_TRUE(s.camera.camera.unproject(px, &o.bearing_c));
+    }
+  }
+  TrackOracleStats st_none, st;
+  const auto exact = through_oracle(s, frames, {}, s.cast, &st_none);
+  // Pixel error of each observation of `out` against the exact projections, per frame.
+  auto errors = [&](const std::vector<FeatureObservations>& out) {
+    std::vector<std::vector<Eigen::Vector2d>> e(out.size());
+    for (size_t k = 0; k < out.size(); ++k) {
+      EXPECT_EQ(out[k].observations.size(), exact[k].observations.size());
+      for (size_t i = 0; i < out[k].observations.size(); ++i) {
+        Eigen::Vector2d a, b;
+        EXPECT_TRUE(s.camera.camera.project(out[k].observations[i].bearing_c, &a));
+        EXPECT_TRUE(s.camera.camera.project(exact[k].observations[i].bearing_c, &b));
+        e[k].push_back(a - b);
+      }
+    }
+    return e;
+  };
+  auto median_x = [](std::vector<Eigen::Vector2d> v) {
+    std::vector<double> x;
+    for (const auto& p : v) x.push_back(p.x());
+    std::nth_element(x.begin(), x.begin() + static_cast<long>(x.size() / 2), x.end());
+    return x[x.size() / 2];
+  };
+  TrackOracleOptions o;
+  o.keep_error = OracleError::kReal;
+  const auto real = errors(through_oracle(s, frames, o, s.cast, &st));
+  double ms = 0;
+  for (size_t k = 1; k < frames.size(); ++k) ms += shift[k].squaredNorm();
+  EXPECT_NEAR(st.common_mode_rms_px, std::sqrt(ms / static_cast<double>(frames.size())), 0.05);
+  o.keep_error = OracleError::kCommonMode;
+  const auto common = errors(through_oracle(s, frames, o, s.cast, &st));
+  o.keep_error = OracleError::kIndependent;
+  const auto rest = errors(through_oracle(s, frames, o, s.cast, &st));
+  for (size_t k = 1; k < frames.size(); ++k) {
+    ASSERT_GT(real[k].size(), 50u);
+    for (size_t i = 0; i < real[k].size(); ++i) {
+      EXPECT_NEAR(common[k][i].x(), common[k][0].x(), 1e-6);  // one shift for the whole frame
+      EXPECT_NEAR(common[k][i].x() + rest[k][i].x(), real[k][i].x(), 1e-6);
+      EXPECT_NEAR(common[k][i].y() + rest[k][i].y(), real[k][i].y(), 1e-6);
+    }
+    EXPECT_NEAR(common[k][0].x(), shift[k].x(), 0.06) << k;
+    EXPECT_NEAR(common[k][0].y(), shift[k].y(), 0.06) << k;
+    EXPECT_NEAR(median_x(rest[k]), 0.0, 1e-6) << k;
+  }
+  EXPECT_STREQ(to_string(OracleError::kCommonMode), "common_mode");
+  // max_error_px drops the observations whose own error is larger.
+  o.keep_error = OracleError::kReal;
+  o.max_error_px = 0.9;
+  const auto kept = through_oracle(s, frames, o, s.cast, &st);
+  size_t n_in = 0, n_out = 0;
+  for (size_t k = 0; k < frames.size(); ++k) {
+    n_in += frames[k].observations.size();
+    n_out += kept[k].observations.size();
+  }
+  EXPECT_GT(st.dropped_gross, 0);
+  EXPECT_EQ(n_out + static_cast<size_t>(st.dropped_gross), n_in);
+}
+
 TEST(TrackOracle, TracksWithoutALandmarkAreDroppedAndOptionsAreChecked) {
   const Scenario s;
   TrackOracleStats st;
@@ -211,6 +292,9 @@ TEST(TrackOracle, TracksWithoutALandmarkAreDroppedAndOptionsAreChecked) {
   TrackOracleOptions bad;
   bad.white_noise_px = -1;
   EXPECT_THROW(TrackOracle(s.gt, s.camera, s.cast, bad), std::invalid_argument);
+  TrackOracleOptions bad_max;
+  bad_max.max_error_px = -1;
+  EXPECT_THROW(TrackOracle(s.gt, s.camera, s.cast, bad_max), std::invalid_argument);
   EXPECT_THROW(TrackOracle(s.gt, s.camera, RayCaster(), {}), std::invalid_argument);
 }
 

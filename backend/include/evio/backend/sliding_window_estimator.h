@@ -123,6 +123,11 @@ struct SlidingWindowOptions {
   // keyframes span 0.2-0.6 s: the onset of a translation (acceleration from rest, banking) looks
   // rotational for a keyframe or two before its parallax shows.
   int rotation_only_min_keyframes = 3;
+  // ... and from the first of those keyframes to the current one at least this long (s, >= 0).
+  // Keyframes made by track losses can come every 10 ms: three of them are no evidence of a
+  // rotation in place (boxes_6dof at 0.1 m/s and 25 deg/s: R won 9 keyframes within 0.17 s with
+  // template-tracked features; a hover-to-flight onset: 4 keyframes in 0.2 s).
+  double rotation_only_min_duration_s = 0.25;
   int model_selection_min_tracks = 10;     // fewer shared tracks: no test, the 6-DoF model (tracks, >= 6)
   // The test's reference view is at least this much older than the new keyframe (the newest
   // window keyframe that is and still shares model_selection_min_tracks tracks; else the previous
@@ -301,6 +306,7 @@ class SlidingWindowEstimator {
   std::optional<Eigen::Matrix<double, 6, 6>> latest_cov_;
   bool rotation_only_active_ = false;  // hysteresis state of the rotation-only model
   int rotation_only_run_ = 0;          // consecutive keyframes R has won by the margin
+  int64_t rotation_only_run_start_ns_ = 0;  // time of the first of them
   SlidingWindowStats stats_;
 };
 

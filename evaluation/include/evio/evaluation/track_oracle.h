@@ -24,7 +24,24 @@
 
 namespace evio::evaluation {
 
+// What an oracle observation keeps of the front-end's own error e (observed minus true projection,
+// px), split per frame into its common mode c (the per-axis median of e over the frame's
+// observations within 10 px: the error every track of the frame shares) and the rest:
+enum class OracleError {
+  kNone,         // the true projection (plus the synthetic noise below)
+  kReal,         // the observation as tracked (e); the synthetic noise is still added
+  kIndependent,  // e - c: the frame's common mode removed
+  kCommonMode    // c: every track of the frame moved by the common mode alone
+};
+// "none", "real", "independent", "common_mode".
+const char* to_string(OracleError e);
+
 struct TrackOracleOptions {
+  OracleError keep_error = OracleError::kNone;
+  // With keep_error real or independent: observations whose own error e is larger than this are
+  // dropped (px, >= 0; 0 = keep all): how much of the error the gross ones (e.g. tracks sliding
+  // along an edge) make. Counted in TrackOracleStats::dropped_gross.
+  double max_error_px = 0;
   // White noise added to every oracle observation: isotropic Gaussian, standard deviation per
   // axis (px on the ideal pinhole, >= 0).
   double white_noise_px = 0;
@@ -41,6 +58,9 @@ struct TrackOracleStats {
   int64_t replaced = 0;  // observations replaced by their true projection
   int64_t dropped = 0;   // observations removed: outside the ground truth, no scene hit for the
                          // track's first ray, or landmark behind the camera
+  double common_mode_rms_px = 0;  // rms over frames of the common mode c (keep_error != kNone)
+  int64_t frames = 0;             // frames with a common mode (keep_error != kNone)
+  int64_t dropped_gross = 0;      // observations dropped by max_error_px
 };
 
 class TrackOracle {
@@ -66,6 +86,7 @@ class TrackOracle {
   TrackOracleStats stats_;
   std::map<int64_t, Landmark> landmarks_;
   std::mt19937_64 rng_;
+  double common_mode_sq_sum_ = 0;
 };
 
 }  // namespace evio::evaluation

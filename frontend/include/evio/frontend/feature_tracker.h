@@ -77,6 +77,25 @@ struct FeatureTrackerOptions {
   // every N frames), with the previous position as the initial guess: errors add once per N frames
   // instead of once per frame. The forward-backward check runs against the reference frame.
   int template_max_age_frames = 1;
+  // With template_max_age_frames > 1: a track that fails against its reference (KLT status, image
+  // border or forward-backward check) is tracked from the previous frame instead (chained), and
+  // its reference restarts at the current frame. Without it such a track is lost: templates of
+  // event frames age quickly (edges change with the motion direction), and tracks live shorter.
+  bool template_fallback = false;
+  // With template_max_age_frames > 1: a template whose frame is turned by more than this against
+  // the current one (deg, from the chained IMU rotation priors; >= 0, 0 = no limit) is not used:
+  // the track goes from the previous frame and its template restarts. Translation-only KLT
+  // against a turned template is biased (10-15 deg in-plane: 1.5-2.5 px, and the forward-backward
+  // check passes). A frame without the IMU rotation restarts every template.
+  double template_max_rotation_deg = 0;
+  // Long-baseline verification (frames, >= 0; 0 = off): besides the RANSAC between consecutive
+  // frames, the tracks that existed at an anchor frame are verified by a second 2-point RANSAC
+  // between their anchor positions and the current ones (rotation from the chained IMU priors);
+  // the anchor moves to the current frame every anchor_frames frames. A track sliding slowly
+  // (along an edge, or drifting) passes every frame-to-frame test but not one over more parallax.
+  // Needs the IMU rotation in every track() call (the anchor restarts where one is missing).
+  int anchor_frames = 0;
+  double anchor_ransac_threshold_px = 1.0;  // inlier threshold of that RANSAC (px, as ransac_threshold_px)
   // Geometric verification. kTwoPoint needs the IMU rotation: when track() gets no R_cur_prev it
   // falls back to kFivePoint.
   RansacModel ransac = RansacModel::kTwoPoint;
@@ -102,6 +121,9 @@ struct FeatureTrackerStats {
   int64_t lost_klt = 0;         // KLT failure or left the image (minus border)
   int64_t lost_fb = 0;          // forward-backward check failed
   int64_t rejected_ransac = 0;  // RANSAC outliers
+  int64_t rejected_anchor = 0;     // long-baseline RANSAC outliers (anchor_frames)
+  int64_t template_fallbacks = 0;
+  int64_t template_rotation_refreshes = 0;  // templates dropped for template_max_rotation_deg  // template failures retried from the previous frame (template_fallback)
 };
 
 class FeatureTracker {
@@ -134,20 +156,33 @@ class FeatureTracker {
     cv::Point2f px;      // position in the last frame
     int64_t ref_frame;   // frame id of the reference template
     cv::Point2f ref_px;  // position in the reference frame
+    bool anchored = false;  // existed at the anchor frame (anchor_frames)
+    cv::Point2f anchor_px;  // position there
   };
   int cell_of(const cv::Point2f& px) const;
   bool inside(const cv::Point2f& px) const;
   void detect(const cv::Mat& frame);
+  // Long-baseline RANSAC of the anchored tracks (anchor_frames); drops its outliers.
+  void verify_against_anchor(std::vector<Track>* tracks, const Eigen::Matrix3d* R_cur_prev);
 
   calib::CameraIntrinsics K_;
   FeatureTrackerOptions options_;
   FeatureTrackerStats stats_;
   std::vector<Track> tracks_;
   std::vector<cv::Mat> prev_pyramid_;
-  // Pyramids of the frames still referenced by a track's template (frame id -> pyramid).
-  std::vector<std::pair<int64_t, std::vector<cv::Mat>>> ref_pyramids_;
+  // The frames still referenced by a track's template: pyramid, and the rotation from there to
+  // the current frame (chained IMU priors; unknown once a frame came without one).
+  struct RefFrame {
+    int64_t frame;
+    std::vector<cv::Mat> pyramid;
+    Eigen::Matrix3d R_cur_ref;
+    bool rotation_known;
+  };
+  std::vector<RefFrame> ref_frames_;
   int64_t next_id_ = 0;
   int64_t frame_id_ = 0;
+  int64_t anchor_frame_ = -1;                                   // -1: no anchor
+  Eigen::Matrix3d R_cur_anchor_ = Eigen::Matrix3d::Identity();  // anchor camera -> current camera
 };
 
 }  // namespace evio::frontend
