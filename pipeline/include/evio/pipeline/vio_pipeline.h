@@ -103,11 +103,11 @@ struct VioPipelineOptions {
   // Templates: each event feature is aligned against its patch of up to 10 frames ago (not the
   // previous frame), a template turned by more than 4 deg is not used, and a track its template
   // loses continues from the previous frame (template_fallback). Tracks drift less (boxes_6dof,
-  // error against the best-fit landmark: median 0.47 -> 0.27 px; anchored drift after 20 frames
+  // error against the best-fit landmark: median 0.47 -> 0.25 px; anchored drift after 20 frames
   // 1.19 -> 0.53 px). Mean position error, six simulated scenes x 6 RANSAC seeds: 0.505% ->
-  // 0.447% (mocap 12 s 0.74 -> 0.37%, quadrotor 0.40 -> 0.28%; boxes 0.36 -> 0.49% and room 0.31
-  // -> 0.37% worse); without the rotation limit 0.487% (room 0.52%); events+aps unchanged (0.146
-  // -> 0.143%, 3 seeds).
+  // 0.445% (mocap 12 s 0.74 -> 0.37%, quadrotor 0.40 -> 0.30%; boxes 0.36 -> 0.46% and room 0.31
+  // -> 0.37% worse); without the rotation limit 0.487% (room 0.52%); events+aps 0.146 -> 0.138%
+  // (3 seeds). Needs window.rotation_only_min_duration_s (see SlidingWindowOptions).
   frontend::FeatureTrackerOptions tracker = [] {
     frontend::FeatureTrackerOptions t;
     t.klt_window_px = 27;
