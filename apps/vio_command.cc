@@ -368,6 +368,8 @@ int run_vio(const VioArgs& args, std::ostream& out) {
   cv::setNumThreads(1);
   // The oracle's scene first: its errors come before reading a dataset.
   std::shared_ptr<const sim::PlanarScene> oracle_planes;
+  if (args.oracle_frame_motion && args.oracle_scene.empty())
+    throw InputError(args.dataset, 0, "--oracle-frame-motion needs the scene", "--oracle-tracks SCENE.yaml and --gt GT.tum");
   if (!args.oracle_scene.empty()) {
     if (args.gt.empty()) throw InputError(args.oracle_scene, 0, "--oracle-tracks needs the true trajectory", "--gt GT.tum");
     const SimulationConfig sc = load_simulation_config(args.oracle_scene);
@@ -425,6 +427,24 @@ int run_vio(const VioArgs& args, std::ostream& out) {
         load_trajectory(args.gt), *cal,
         [p = oracle_planes](const Eigen::Vector3d& o, const Eigen::Vector3d& d) { return p->intersect(o, d); }, oo);
     vio.set_observation_filter([o = oracle.get()](FeatureObservations* f) { o->apply(f); });
+    if (args.oracle_frame_motion) {
+      vio.set_frame_motion_oracle([gt = load_trajectory(args.gt), T_c_b = cal->T_c_b, planes = oracle_planes](
+                                      const FeatureObservations& f, Eigen::Vector3d* v_c, double* depth_m) {
+        const std::optional<VioState> st = groundtruth_state(gt, f.t_ns);
+        if (!st) return false;
+        const calib::SE3 T_w_c = st->T_w_b * T_c_b.inverse();
+        std::vector<double> z;
+        for (const FeatureObservation& o : f.observations) {
+          const Eigen::Vector3d b = o.bearing_c.normalized();
+          if (const auto r = planes->intersect(T_w_c.translation, T_w_c.rotation * b)) z.push_back(*r * b.z());
+        }
+        if (z.empty()) return false;
+        std::nth_element(z.begin(), z.begin() + static_cast<long>(z.size() / 2), z.end());
+        *depth_m = z[z.size() / 2];
+        *v_c = T_c_b.rotation * (st->T_w_b.rotation.conjugate() * st->v_w);
+        return *depth_m > 0 && v_c->allFinite();
+      });
+    }
   }
   std::ofstream obs_file((fs::path(args.out) / "observations.txt").string());
   obs_file << "# t[s] track_id bx by bz  (front-end observations: unit bearings in the camera frame, body clock)\n";

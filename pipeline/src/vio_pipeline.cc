@@ -129,6 +129,7 @@ struct VioPipeline::Impl {
   InitialStateProvider initial_state;
   ObservationCallback on_observations;
   ObservationFilter observation_filter;
+  FrameMotionOracle frame_motion_oracle;
   std::vector<backend::FramePrediction> predictions;  // per trajectory_causal state
   std::map<int64_t, VioState> final_keyframes;         // every keyframe's last optimised state
   bool finished = false;
@@ -371,7 +372,7 @@ struct VioPipeline::Impl {
     const bool have_prior = prev_frame_t >= 0 && rotation_prior(prev_frame_t, ef.t_ns, &R_cur_prev);
     prev_frame_t = ef.t_ns;
     FeatureObservations f = frame_tracker->track(ef.t_ns + shift, ef.image, have_prior ? &R_cur_prev : nullptr);
-    if (est) feed_back_motion();
+    if (est) feed_back_motion(f);
     emit_event_frame(std::move(f));
   }
 
@@ -483,10 +484,18 @@ struct VioPipeline::Impl {
 
   // The estimate back to the frame builder: gyro bias, and for use_depth the camera velocity and
   // the median landmark depth.
-  void feed_back_motion() {
+  void feed_back_motion(const FeatureObservations& f) {
     const VioState st = est->latest_state();
     frame_builder->set_gyro_bias(st.bias_gyro);
     if (!opt.frames.use_depth) return;
+    if (frame_motion_oracle) {
+      Eigen::Vector3d v_c;
+      double depth_m = 0;
+      if (frame_motion_oracle(f, &v_c, &depth_m)) {
+        frame_builder->set_motion(v_c, depth_m);
+        return;
+      }
+    }
     const calib::SE3 T_c_w = cal.T_c_b * st.T_w_b.inverse();
     std::vector<double> depth;
     for (const auto& [id, p] : est->landmarks()) {
@@ -576,6 +585,7 @@ void VioPipeline::set_initial_state_provider(InitialStateProvider provider) { im
 
 void VioPipeline::set_observation_callback(ObservationCallback callback) { impl_->on_observations = std::move(callback); }
 void VioPipeline::set_observation_filter(ObservationFilter filter) { impl_->observation_filter = std::move(filter); }
+void VioPipeline::set_frame_motion_oracle(FrameMotionOracle oracle) { impl_->frame_motion_oracle = std::move(oracle); }
 
 bool VioPipeline::initialized() const { return impl_->est != nullptr; }
 

@@ -173,6 +173,14 @@ TEST(VioCommand, OracleTracksNeedGroundTruthAndAPlanesScene) {
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("planes scene"), std::string::npos) << e.what();
   }
+  va.oracle_scene.clear();
+  va.oracle_frame_motion = true;
+  try {
+    run_vio(va, o);
+    ADD_FAILURE() << "no error for --oracle-frame-motion without a scene";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("--oracle-tracks"), std::string::npos) << e.what();
+  }
 }
 
 TEST(VioCommand, ShortSimulatedSequenceEndToEnd) {
@@ -252,6 +260,24 @@ TEST(VioCommand, ShortSimulatedSequenceEndToEnd) {
   const double ompe = json_value(read(oa.out + "/eval.json"), "mean_position_error_percent");
   std::printf("oracle tracks: mean position error %.3f%%\n", ompe);
   EXPECT_LT(ompe, 0.05);  // measured 0.038% (0.069% with the library's real-sensor bias priors)
+
+  // --oracle-error real passes the front-end's own observations through (re-expressed as the true
+  // projection plus the error: equal up to rounding): the same estimate.
+  VioArgs ra = oa;
+  ra.out = dir.file("oracle_real");
+  ra.oracle_error = "real";
+  std::ostringstream ro;
+  ASSERT_EQ(run_vio(ra, ro), 0) << ro.str();
+  const double rmpe = json_value(read(ra.out + "/eval.json"), "mean_position_error_percent");
+  EXPECT_NEAR(rmpe, mpe, 0.002);
+  // --oracle-frame-motion: the frames' translation compensation from the true velocity and depth.
+  ra.out = dir.file("oracle_frame_motion");
+  ra.oracle_frame_motion = true;
+  ASSERT_EQ(run_vio(ra, ro), 0) << ro.str();
+  const double fmpe = json_value(read(ra.out + "/eval.json"), "mean_position_error_percent");
+  std::printf("true frame motion: mean position error %.3f%%\n", fmpe);
+  EXPECT_GT(std::abs(fmpe - mpe), 0.002);  // the compensation's inputs changed the estimate
+  EXPECT_LT(fmpe, 0.32);  // measured 0.243% against 0.311% with the estimate's velocity and depth
 }
 
 // The poster_6dof motion-capture replay (needs the shared real data): its slow, translating start

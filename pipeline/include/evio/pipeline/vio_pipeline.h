@@ -228,6 +228,10 @@ class VioPipeline {
   using InitialStateProvider = std::function<std::optional<VioState>(int64_t t_ns)>;
   using ObservationCallback = std::function<void(const FeatureObservations&)>;
   using ObservationFilter = std::function<void(FeatureObservations*)>;
+  // Diagnostic: the camera velocity (camera frame, m/s) and the median z-depth (m) of the tracks
+  // of `frame` (its observations, IMU-clock time) for the event frames' translation compensation,
+  // in place of the estimate's; false: use the estimate's.
+  using FrameMotionOracle = std::function<bool(const FeatureObservations& frame, Eigen::Vector3d* v_c, double* depth_m)>;
 
   // Throws std::invalid_argument when the options or the IMU noise are invalid.
   VioPipeline(const VioPipelineOptions& options, const calib::CameraCalibration& camera, const calib::ImuNoise& noise);
@@ -244,6 +248,10 @@ class VioPipeline {
   // (e.g. evaluation::TrackOracle replaces the bearings by true projections for an error budget).
   // The front-end keeps tracking its own observations.
   void set_observation_filter(ObservationFilter filter);
+  // Frames front-end with frames.use_depth, once initialised: each frame's translation
+  // compensation takes its velocity and depth from `oracle` (e.g. the ground truth) when it
+  // answers; an error budget of the compensation's inputs.
+  void set_frame_motion_oracle(FrameMotionOracle oracle);
 
   // IMU samples in time order (IMU clock; t_imu = t_cam + camera.time_shift_ns). They may all come
   // first or be interleaved with add_events: events wait until the IMU covers them (imu_wait_ns).
