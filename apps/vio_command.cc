@@ -428,22 +428,12 @@ int run_vio(const VioArgs& args, std::ostream& out) {
         [p = oracle_planes](const Eigen::Vector3d& o, const Eigen::Vector3d& d) { return p->intersect(o, d); }, oo);
     vio.set_observation_filter([o = oracle.get()](FeatureObservations* f) { o->apply(f); });
     if (args.oracle_frame_motion) {
-      vio.set_frame_motion_oracle([gt = load_trajectory(args.gt), T_c_b = cal->T_c_b, planes = oracle_planes](
-                                      const FeatureObservations& f, Eigen::Vector3d* v_c, double* depth_m) {
-        const std::optional<VioState> st = groundtruth_state(gt, f.t_ns);
-        if (!st) return false;
-        const calib::SE3 T_w_c = st->T_w_b * T_c_b.inverse();
-        std::vector<double> z;
-        for (const FeatureObservation& o : f.observations) {
-          const Eigen::Vector3d b = o.bearing_c.normalized();
-          if (const auto r = planes->intersect(T_w_c.translation, T_w_c.rotation * b)) z.push_back(*r * b.z());
-        }
-        if (z.empty()) return false;
-        std::nth_element(z.begin(), z.begin() + static_cast<long>(z.size() / 2), z.end());
-        *depth_m = z[z.size() / 2];
-        *v_c = T_c_b.rotation * (st->T_w_b.rotation.conjugate() * st->v_w);
-        return *depth_m > 0 && v_c->allFinite();
-      });
+      vio.set_frame_motion_oracle(
+          [gt = load_trajectory(args.gt), T_c_b = cal->T_c_b,
+           cast = evaluation::RayCaster([p = oracle_planes](const Eigen::Vector3d& o, const Eigen::Vector3d& d) { return p->intersect(o, d); })](
+              const FeatureObservations& f, Eigen::Vector3d* v_c, double* depth_m) {
+            return evaluation::true_frame_motion(gt, T_c_b, cast, f, v_c, depth_m);
+          });
     }
   }
   std::ofstream obs_file((fs::path(args.out) / "observations.txt").string());

@@ -109,6 +109,27 @@ void TrackOracle::apply(FeatureObservations* frame) {
   frame->observations = std::move(kept);
 }
 
+bool true_frame_motion(const Trajectory& groundtruth, const calib::SE3& T_c_b, const RayCaster& cast,
+                       const FeatureObservations& frame, Eigen::Vector3d* v_c, double* depth_m) {
+  constexpr int64_t kHalfStepNs = 5'000'000;
+  const auto a = groundtruth.interpolate(frame.t_ns - kHalfStepNs), b = groundtruth.interpolate(frame.t_ns + kHalfStepNs),
+             T_w_b = groundtruth.interpolate(frame.t_ns);
+  if (!a || !b || !T_w_b || !cast) return false;
+  const calib::SE3 T_w_c = *T_w_b * T_c_b.inverse();
+  std::vector<double> z;
+  z.reserve(frame.observations.size());
+  for (const FeatureObservation& o : frame.observations) {
+    const Eigen::Vector3d d = o.bearing_c.normalized();
+    if (const auto s = cast(T_w_c.translation, T_w_c.rotation * d)) z.push_back(*s * d.z());
+  }
+  if (z.empty()) return false;
+  std::nth_element(z.begin(), z.begin() + static_cast<long>(z.size() / 2), z.end());
+  const Eigen::Vector3d v_w = (b->translation - a->translation) / (2e-9 * static_cast<double>(kHalfStepNs));
+  *v_c = T_c_b.rotation * (T_w_b->rotation.conjugate() * v_w);
+  *depth_m = z[z.size() / 2];
+  return *depth_m > 0 && v_c->allFinite();
+}
+
 const char* to_string(OracleError e) {
   switch (e) {
     case OracleError::kReal: return "real";

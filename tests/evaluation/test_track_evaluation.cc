@@ -281,6 +281,24 @@ TEST(TrackOracle, KeepsTheRealErrorItsCommonModeOrTheRest) {
   EXPECT_EQ(n_out + static_cast<size_t>(st.dropped_gross), n_in);
 }
 
+// true_frame_motion: the camera moves 0.5 m/s along world y, looking along world x at the plane
+// x = 2 m: camera-frame velocity (-0.5, 0, 0) m/s (camera x is world -y), every track 2 m deep.
+TEST(TrackOracle, TrueFrameMotionGivesTheCameraVelocityAndTheTracksMedianDepth) {
+  const Scenario s;
+  const auto frames = s.frames(5, 0.0, 1000);
+  ASSERT_GT(frames[2].observations.size(), 10u);
+  Eigen::Vector3d v_c;
+  double depth = 0;
+  ASSERT_TRUE(true_frame_motion(s.gt, s.camera.T_c_b, s.cast, frames[2], &v_c, &depth));
+  EXPECT_NEAR((v_c - Eigen::Vector3d(-0.5, 0, 0)).norm(), 0.0, 1e-9) << v_c.transpose();
+  EXPECT_NEAR(depth, 2.0, 1e-9);
+  const RayCaster nothing = [](const Eigen::Vector3d&, const Eigen::Vector3d&) { return std::optional<double>(); };
+  EXPECT_FALSE(true_frame_motion(s.gt, s.camera.T_c_b, nothing, frames[2], &v_c, &depth));
+  FeatureObservations late = frames[2];
+  late.t_ns = 10'000'000'000;  // after the ground truth
+  EXPECT_FALSE(true_frame_motion(s.gt, s.camera.T_c_b, s.cast, late, &v_c, &depth));
+}
+
 TEST(TrackOracle, TracksWithoutALandmarkAreDroppedAndOptionsAreChecked) {
   const Scenario s;
   TrackOracleStats st;

@@ -63,6 +63,13 @@ struct TrackOracleStats {
   int64_t dropped_gross = 0;      // observations dropped by max_error_px
 };
 
+// The true motion the event frames' translation compensation needs at a front-end frame (IMU
+// clock): the camera velocity in the camera frame (m/s; central difference of the ground truth
+// over 10 ms) and the median z-depth (m) of the frame's tracks (each bearing cast into the scene
+// at the true pose). False when the ground truth does not cover the frame or no ray hits.
+bool true_frame_motion(const Trajectory& groundtruth, const calib::SE3& T_c_b, const RayCaster& cast,
+                       const FeatureObservations& frame, Eigen::Vector3d* v_c, double* depth_m);
+
 class TrackOracle {
  public:
   // Throws std::invalid_argument on invalid options or an empty ray caster.
