@@ -302,6 +302,9 @@ int main(int argc, char** argv) {
   vio_cmd->add_flag("--oracle-frame-motion", vio.oracle_frame_motion,
                     "With --oracle-tracks: the event frames' translation compensation (frames.use_depth) takes the true "
                     "camera velocity and the true median depth of the frame's tracks instead of the estimate's");
+  vio_cmd->add_flag("--oracle-frame-plane", vio.oracle_frame_plane,
+                    "With --oracle-frame-motion: each event's depth from the least-squares plane through the true scene points "
+                    "of the frame's tracks instead of their median depth");
   vio_cmd->add_option("--oracle-max-error-px", vio.oracle_max_error_px,
                       "With --oracle-error real or independent: drop observations whose own error is larger (px; 0 = keep all)")
       ->check(CLI::NonNegativeNumber);

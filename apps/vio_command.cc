@@ -429,10 +429,10 @@ int run_vio(const VioArgs& args, std::ostream& out) {
     vio.set_observation_filter([o = oracle.get()](FeatureObservations* f) { o->apply(f); });
     if (args.oracle_frame_motion) {
       vio.set_frame_motion_oracle(
-          [gt = load_trajectory(args.gt), T_c_b = cal->T_c_b,
+          [gt = load_trajectory(args.gt), T_c_b = cal->T_c_b, plane = args.oracle_frame_plane,
            cast = evaluation::RayCaster([p = oracle_planes](const Eigen::Vector3d& o, const Eigen::Vector3d& d) { return p->intersect(o, d); })](
-              const FeatureObservations& f, Eigen::Vector3d* v_c, double* depth_m) {
-            return evaluation::true_frame_motion(gt, T_c_b, cast, f, v_c, depth_m);
+              const FeatureObservations& f, Eigen::Vector3d* v_c, double* depth_m, Eigen::Vector4d* plane_c) {
+            return evaluation::true_frame_motion(gt, T_c_b, cast, f, v_c, depth_m, plane ? plane_c : nullptr);
           });
     }
   }

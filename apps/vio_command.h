@@ -54,7 +54,8 @@ struct VioArgs {
   double oracle_drift_px = 0;
   double oracle_max_error_px = 0;
   std::string oracle_error = "none";
-  bool oracle_frame_motion = false;  // with oracle_scene: the frames' translation compensation from the ground truth  // none | real | independent | common_mode (evaluation::OracleError)
+  bool oracle_frame_motion = false;
+  bool oracle_frame_plane = false;  // with oracle_frame_motion: per-event depth from the plane through the tracks' true points  // with oracle_scene: the frames' translation compensation from the ground truth  // none | real | independent | common_mode (evaluation::OracleError)
 };
 
 int run_vio(const VioArgs& args, std::ostream& out);

@@ -1,5 +1,7 @@
 #include "evio/evaluation/track_oracle.h"
 
+#include <Eigen/Eigenvalues>
+
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
@@ -110,19 +112,44 @@ void TrackOracle::apply(FeatureObservations* frame) {
 }
 
 bool true_frame_motion(const Trajectory& groundtruth, const calib::SE3& T_c_b, const RayCaster& cast,
-                       const FeatureObservations& frame, Eigen::Vector3d* v_c, double* depth_m) {
+                       const FeatureObservations& frame, Eigen::Vector3d* v_c, double* depth_m,
+                       Eigen::Vector4d* plane_c) {
   constexpr int64_t kHalfStepNs = 5'000'000;
   const auto a = groundtruth.interpolate(frame.t_ns - kHalfStepNs), b = groundtruth.interpolate(frame.t_ns + kHalfStepNs),
              T_w_b = groundtruth.interpolate(frame.t_ns);
   if (!a || !b || !T_w_b || !cast) return false;
   const calib::SE3 T_w_c = *T_w_b * T_c_b.inverse();
   std::vector<double> z;
+  std::vector<Eigen::Vector3d> points_c;
   z.reserve(frame.observations.size());
   for (const FeatureObservation& o : frame.observations) {
     const Eigen::Vector3d d = o.bearing_c.normalized();
-    if (const auto s = cast(T_w_c.translation, T_w_c.rotation * d)) z.push_back(*s * d.z());
+    if (const auto s = cast(T_w_c.translation, T_w_c.rotation * d)) {
+      z.push_back(*s * d.z());
+      points_c.push_back(*s * d);
+    }
   }
   if (z.empty()) return false;
+  if (plane_c) {
+    plane_c->setZero();
+    if (points_c.size() >= 3) {
+      Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+      for (const auto& p : points_c) mean += p;
+      mean /= static_cast<double>(points_c.size());
+      Eigen::Matrix3d C = Eigen::Matrix3d::Zero();
+      for (const auto& p : points_c) C += (p - mean) * (p - mean).transpose();
+      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(C);
+      Eigen::Vector3d n = es.eigenvectors().col(0);  // smallest eigenvalue
+      if (es.eigenvalues()(1) > 1e-12) {
+        double dist = n.dot(mean);
+        if (dist < 0) {
+          n = -n;
+          dist = -dist;
+        }
+        if (dist > 0) *plane_c << n, dist;
+      }
+    }
+  }
   std::nth_element(z.begin(), z.begin() + static_cast<long>(z.size() / 2), z.end());
   const Eigen::Vector3d v_w = (b->translation - a->translation) / (2e-9 * static_cast<double>(kHalfStepNs));
   *v_c = T_c_b.rotation * (T_w_b->rotation.conjugate() * v_w);

@@ -128,6 +128,16 @@ void EventFrameBuilder::set_motion(const Eigen::Vector3d& v_c, double median_dep
     throw std::invalid_argument("EventFrameBuilder::set_motion: need finite v_c and median_depth_m > 0 m");
   v_c_ = v_c;
   depth_m_ = median_depth_m;
+  plane_d_ = 0;
+}
+
+void EventFrameBuilder::set_motion_plane(const Eigen::Vector3d& v_c, const Eigen::Vector3d& n_c, double d_m) {
+  if (!(d_m > 0) || !std::isfinite(d_m) || !v_c.allFinite() || !n_c.allFinite() || std::abs(n_c.norm() - 1) > 1e-6)
+    throw std::invalid_argument("EventFrameBuilder::set_motion_plane: need finite v_c, unit n_c and d_m > 0 m");
+  v_c_ = v_c;
+  plane_n_ = n_c;
+  plane_d_ = d_m;
+  depth_m_ = d_m;
 }
 
 Eigen::Vector3d EventFrameBuilder::gyro_at(int64_t t_imu) const {
@@ -200,7 +210,9 @@ EventFrame EventFrameBuilder::build_frame(EventSpan events, int64_t t_ref_ns) {
   }
   f.motion_compensated = compensate;
   const bool translate = compensate && o_.use_depth && depth_m_ > 0;
-  const Eigen::Vector3f v_over_d = (v_c_ / (translate ? depth_m_ : 1.0)).cast<float>();
+  const bool plane = translate && plane_d_ > 0;
+  const Eigen::Vector3f v_over_d = (v_c_ / (translate ? (plane ? plane_d_ : depth_m_) : 1.0)).cast<float>();
+  const float pnx = static_cast<float>(plane_n_.x()), pny = static_cast<float>(plane_n_.y()), pnz = static_cast<float>(plane_n_.z());
   const int64_t h = o_.knot_spacing_ns;
   const float inv_h = 1.0f / static_cast<float>(h);
   const int64_t last_step = static_cast<int64_t>(knots_.size()) - 2;
@@ -251,7 +263,7 @@ EventFrame EventFrameBuilder::build_frame(EventSpan events, int64_t t_ref_ns) {
         // Point at z-depth D along b, moved by the camera displacement: P_ref = (D / b_z) R b +
         // v (t_k - t_ref); scaled by b_z / D (projection is scale-free).
         const float dt_s = static_cast<float>(static_cast<double>(e.t_ns - t_ref_ns) * 1e-9);
-        const float k = dt_s * bz;
+        const float k = dt_s * (plane ? pnx * bx + (pny * by + pnz * bz) : bz);
         px += vx * k;
         py += vy * k;
         pz += vz * k;

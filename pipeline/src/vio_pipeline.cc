@@ -491,8 +491,13 @@ struct VioPipeline::Impl {
     if (frame_motion_oracle) {
       Eigen::Vector3d v_c;
       double depth_m = 0;
-      if (frame_motion_oracle(f, &v_c, &depth_m)) {
-        frame_builder->set_motion(v_c, depth_m);
+      Eigen::Vector4d plane = Eigen::Vector4d::Zero();
+      if (frame_motion_oracle(f, &v_c, &depth_m, &plane)) {
+        if (plane.w() > 0) {
+          frame_builder->set_motion_plane(v_c, plane.head<3>(), plane.w());
+        } else {
+          frame_builder->set_motion(v_c, depth_m);
+        }
         return;
       }
     }

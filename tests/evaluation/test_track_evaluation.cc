@@ -292,6 +292,10 @@ TEST(TrackOracle, TrueFrameMotionGivesTheCameraVelocityAndTheTracksMedianDepth) 
   ASSERT_TRUE(true_frame_motion(s.gt, s.camera.T_c_b, s.cast, frames[2], &v_c, &depth));
   EXPECT_NEAR((v_c - Eigen::Vector3d(-0.5, 0, 0)).norm(), 0.0, 1e-9) << v_c.transpose();
   EXPECT_NEAR(depth, 2.0, 1e-9);
+  // The plane x = 2 m (world) is z = 2 m in the camera frame.
+  Eigen::Vector4d plane;
+  ASSERT_TRUE(true_frame_motion(s.gt, s.camera.T_c_b, s.cast, frames[2], &v_c, &depth, &plane));
+  EXPECT_NEAR((plane - Eigen::Vector4d(0, 0, 1, 2)).norm(), 0.0, 1e-9) << plane.transpose();
   const RayCaster nothing = [](const Eigen::Vector3d&, const Eigen::Vector3d&) { return std::optional<double>(); };
   EXPECT_FALSE(true_frame_motion(s.gt, s.camera.T_c_b, nothing, frames[2], &v_c, &depth));
   FeatureObservations late = frames[2];

@@ -146,13 +146,20 @@ TEST(EventFrame, RotationWarpMatchesClosedForm) {
   EXPECT_LT((got - Eigen::Vector2d(100, 70)).norm(), 1e-3);
 }
 
-TEST(EventFrame, TranslationWithDepth) {
-  const CameraCalibration cam = undistorted_camera(0, Eigen::Matrix3d::Identity());
+// Translation tests: one event per frame is enough, and the camera does not turn.
+EventFrameOptions depth_options() {
   EventFrameOptions o;
   o.min_events = 1;
   o.use_depth = true;
-  EventFrameBuilder b(cam, o);
-  for (const ImuSample& s : constant_gyro(0, 100'000'000, 1'000'000, Eigen::Vector3d::Zero())) b.add_imu(s);
+  return o;
+}
+void add_still_imu(EventFrameBuilder* b) {
+  for (const ImuSample& s : constant_gyro(0, 100'000'000, 1'000'000, Eigen::Vector3d::Zero())) b->add_imu(s);
+}
+
+TEST(EventFrame, TranslationWithDepth) {
+  EventFrameBuilder b(undistorted_camera(0, Eigen::Matrix3d::Identity()), depth_options());
+  add_still_imu(&b);
   const double vx = 2.0, depth = 1.5;
   b.set_motion(Eigen::Vector3d(vx, 0, 0), depth);
   Event e;
@@ -169,6 +176,44 @@ TEST(EventFrame, TranslationWithDepth) {
   EXPECT_NEAR(got.x(), u, 2e-3);
   EXPECT_NEAR(got.y(), 89.0, 2e-3);
   EXPECT_THROW(b.set_motion(Eigen::Vector3d::Zero(), 0.0), std::invalid_argument);
+}
+
+// Per-event depth from a plane: a fronto-parallel plane z = D gives the frame of set_motion(v, D)
+// bit for bit; a tilted plane puts an off-axis event at the plane's own depth there.
+TEST(EventFrame, TranslationWithAScenePlane) {
+  EventFrameBuilder b(undistorted_camera(0, Eigen::Matrix3d::Identity()), depth_options());
+  add_still_imu(&b);
+  const Eigen::Vector3d v(2.0, 0, 0);
+  std::vector<Event> ev;
+  for (int i = 0; i < 50; ++i) {
+    Event e;
+    e.t_ns = 30'000'000 + i * 100'000;
+    e.x = static_cast<uint16_t>(20 + 4 * i);
+    e.y = static_cast<uint16_t>(10 + 3 * i);
+    ev.push_back(e);
+  }
+  const int64_t t_ref = 45'000'000;
+  b.set_motion(v, 1.5);
+  const cv::Mat a = b.build_frame(EventSpan(ev.data(), ev.size()), t_ref).accumulator.clone();
+  b.set_motion_plane(v, Eigen::Vector3d::UnitZ(), 1.5);
+  const cv::Mat p = b.build_frame(EventSpan(ev.data(), ev.size()), t_ref).accumulator;
+  EXPECT_EQ(cv::norm(a, p, cv::NORM_INF), 0.0);
+  // Tilted plane n = (sin 30, 0, cos 30), d = 1.5: on the pixel column u = 179.5 (x = 0.3) the
+  // plane is at z = d / (n . (x, 0, 1)); the event moves by v dt / z there.
+  const Eigen::Vector3d n(0.5, 0, std::sqrt(0.75));
+  b.set_motion_plane(v, n, 1.5);
+  Event e;
+  e.t_ns = 40'000'000;
+  e.x = 179;
+  e.y = 89;
+  const int64_t dt = 10'000'000;
+  const double x = (179 - 119.5) / 200.0, z = 1.5 / n.dot(Eigen::Vector3d(x, 0, 1));
+  const double u = 200.0 * (x * z - v.x() * dt * 1e-9) / z + 119.5;
+  const Eigen::Vector2d got = centroid(b.build_frame(EventSpan(&e, 1), e.t_ns + dt).accumulator);
+  EXPECT_NEAR(got.x(), u, 2e-3);
+  EXPECT_NEAR(got.y(), 89.0, 2e-3);
+  EXPECT_THROW(b.set_motion_plane(v, Eigen::Vector3d(0, 0, 2), 1.5), std::invalid_argument);
+  EXPECT_THROW(b.set_motion_plane(v, Eigen::Vector3d::UnitZ(), 0.0), std::invalid_argument);
 }
 
 // Time shift direction: t_imu = t_cam + shift. IMU covers [0, 100 ms] on its clock.

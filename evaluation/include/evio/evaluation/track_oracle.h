@@ -67,8 +67,11 @@ struct TrackOracleStats {
 // clock): the camera velocity in the camera frame (m/s; central difference of the ground truth
 // over 10 ms) and the median z-depth (m) of the frame's tracks (each bearing cast into the scene
 // at the true pose). False when the ground truth does not cover the frame or no ray hits.
+// plane_c (optional): the least-squares plane n . P = d (camera frame, n unit, d > 0) through
+// those scene points (d = 0 when fewer than 3 hit or they do not span a plane).
 bool true_frame_motion(const Trajectory& groundtruth, const calib::SE3& T_c_b, const RayCaster& cast,
-                       const FeatureObservations& frame, Eigen::Vector3d* v_c, double* depth_m);
+                       const FeatureObservations& frame, Eigen::Vector3d* v_c, double* depth_m,
+                       Eigen::Vector4d* plane_c = nullptr);
 
 class TrackOracle {
  public:

@@ -114,6 +114,9 @@ class EventFrameBuilder {
   // Camera velocity in the camera frame (m/s, assumed constant over a frame) and the median scene
   // z-depth (m, > 0) for use_depth. Each event's point at that depth is moved by v_c (t_k - t_ref).
   void set_motion(const Eigen::Vector3d& v_c, double median_depth_m);
+  // The same with a scene plane n_c . P = d_m (camera frame, n_c unit, d_m > 0 m) instead of one
+  // depth: each event's point is where its bearing meets the plane (z = d_m b_z / (n_c . b)).
+  void set_motion_plane(const Eigen::Vector3d& v_c, const Eigen::Vector3d& n_c, double d_m);
 
   // Adds time-ordered events (camera clock); appends every completed frame to *out.
   void add_events(EventSpan events, std::vector<EventFrame>* out);
@@ -150,6 +153,8 @@ class EventFrameBuilder {
   Eigen::Vector3d bias_gyro_ = Eigen::Vector3d::Zero();
   Eigen::Vector3d v_c_ = Eigen::Vector3d::Zero();
   double depth_m_ = 0;  // 0: no depth set
+  Eigen::Vector3d plane_n_ = Eigen::Vector3d::UnitZ();
+  double plane_d_ = 0;  // > 0: per-event depth from the plane (set_motion_plane)
 
   std::vector<Event> pending_;
   size_t fresh_ = 0;  // pending_[0, fresh_) were carried from the previous frame (overlap)

@@ -230,8 +230,10 @@ class VioPipeline {
   using ObservationFilter = std::function<void(FeatureObservations*)>;
   // Diagnostic: the camera velocity (camera frame, m/s) and the median z-depth (m) of the tracks
   // of `frame` (its observations, IMU-clock time) for the event frames' translation compensation,
-  // in place of the estimate's; false: use the estimate's.
-  using FrameMotionOracle = std::function<bool(const FeatureObservations& frame, Eigen::Vector3d* v_c, double* depth_m)>;
+  // in place of the estimate's, and optionally a scene plane (n, d: n . P = d in the camera frame,
+  // d > 0; left at d = 0 for none) for per-event depth; false: use the estimate's.
+  using FrameMotionOracle =
+      std::function<bool(const FeatureObservations& frame, Eigen::Vector3d* v_c, double* depth_m, Eigen::Vector4d* plane_c)>;
 
   // Throws std::invalid_argument when the options or the IMU noise are invalid.
   VioPipeline(const VioPipelineOptions& options, const calib::CameraCalibration& camera, const calib::ImuNoise& noise);
