@@ -203,7 +203,6 @@ VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
       }
       if (top.has("tracker")) parse_tracker(top.child("tracker", false, "a map"), &c.tracker);
       if (top.has("aps_tracker")) parse_tracker(top.child("aps_tracker", false, "a map"), &c.aps_tracker);
-
       if (top.has("aps")) {
         const Section s = top.child("aps", false, "a map");
         s.allow({"pixel_sigma", "event_pixel_sigma", "max_gap_ms"});
@@ -368,6 +367,8 @@ int run_vio(const VioArgs& args, std::ostream& out) {
   cv::setNumThreads(1);
   // The oracle's scene first: its errors come before reading a dataset.
   std::shared_ptr<const sim::PlanarScene> oracle_planes;
+  if (args.oracle_frame_plane && !args.oracle_frame_motion)
+    throw InputError(args.dataset, 0, "--oracle-frame-plane needs --oracle-frame-motion", "--oracle-frame-motion --oracle-frame-plane");
   if (args.oracle_frame_motion && args.oracle_scene.empty())
     throw InputError(args.dataset, 0, "--oracle-frame-motion needs the scene", "--oracle-tracks SCENE.yaml and --gt GT.tum");
   if (!args.oracle_scene.empty()) {
@@ -423,14 +424,14 @@ int run_vio(const VioArgs& args, std::ostream& out) {
                     : args.oracle_error == "independent" ? evaluation::OracleError::kIndependent
                     : args.oracle_error == "common_mode" ? evaluation::OracleError::kCommonMode
                                                          : evaluation::OracleError::kNone;
-    oracle = std::make_unique<evaluation::TrackOracle>(
-        load_trajectory(args.gt), *cal,
-        [p = oracle_planes](const Eigen::Vector3d& o, const Eigen::Vector3d& d) { return p->intersect(o, d); }, oo);
+    const evaluation::RayCaster cast = [p = oracle_planes](const Eigen::Vector3d& o, const Eigen::Vector3d& d) {
+      return p->intersect(o, d);
+    };
+    oracle = std::make_unique<evaluation::TrackOracle>(load_trajectory(args.gt), *cal, cast, oo);
     vio.set_observation_filter([o = oracle.get()](FeatureObservations* f) { o->apply(f); });
     if (args.oracle_frame_motion) {
       vio.set_frame_motion_oracle(
-          [gt = load_trajectory(args.gt), T_c_b = cal->T_c_b, plane = args.oracle_frame_plane,
-           cast = evaluation::RayCaster([p = oracle_planes](const Eigen::Vector3d& o, const Eigen::Vector3d& d) { return p->intersect(o, d); })](
+          [gt = load_trajectory(args.gt), T_c_b = cal->T_c_b, plane = args.oracle_frame_plane, cast](
               const FeatureObservations& f, Eigen::Vector3d* v_c, double* depth_m, Eigen::Vector4d* plane_c) {
             return evaluation::true_frame_motion(gt, T_c_b, cast, f, v_c, depth_m, plane ? plane_c : nullptr);
           });

@@ -181,6 +181,14 @@ TEST(VioCommand, OracleTracksNeedGroundTruthAndAPlanesScene) {
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("--oracle-tracks"), std::string::npos) << e.what();
   }
+  va.oracle_frame_motion = false;
+  va.oracle_frame_plane = true;
+  try {
+    run_vio(va, o);
+    ADD_FAILURE() << "no error for --oracle-frame-plane without --oracle-frame-motion";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("--oracle-frame-motion"), std::string::npos) << e.what();
+  }
 }
 
 TEST(VioCommand, ShortSimulatedSequenceEndToEnd) {
