@@ -336,19 +336,6 @@ void write_tum(const std::string& path, const std::vector<VioState>& states) {
   if (!f) throw InputError(path, 0, "write failed (disk full?)", "a writable output folder");
 }
 
-// Init method `groundtruth` (diagnostic): pose at t and velocity by a central difference over
-// 10 ms of the ground truth, zero biases; nullopt where the ground truth does not cover t.
-std::optional<VioState> groundtruth_state(const Trajectory& gt, int64_t t_ns) {
-  constexpr int64_t kHalfStepNs = 5'000'000;
-  const auto a = gt.interpolate(t_ns - kHalfStepNs), b = gt.interpolate(t_ns + kHalfStepNs), c = gt.interpolate(t_ns);
-  if (!a || !b || !c) return std::nullopt;
-  VioState s;
-  s.t_ns = t_ns;
-  s.T_w_b = *c;
-  s.v_w = (b->translation - a->translation) / 0.01;  // over 0.01 s = 2 * kHalfStepNs
-  return s;
-}
-
 std::string init_description(pipeline::VioInitMethod m) {
   switch (m) {
     case pipeline::VioInitMethod::kStatic: return "static";
@@ -412,7 +399,7 @@ int run_vio(const VioArgs& args, std::ostream& out) {
   pipeline::VioPipeline vio(cfg, *cal, noise);
   if (cfg.init == pipeline::VioInitMethod::kGiven) {
     if (args.gt.empty()) throw InputError(args.config, 0, "init.method groundtruth needs --gt", "--gt GT.tum, or another init.method");
-    vio.set_initial_state_provider([gt = load_trajectory(args.gt)](int64_t t_ns) { return groundtruth_state(gt, t_ns); });
+    vio.set_initial_state_provider([gt = load_trajectory(args.gt)](int64_t t_ns) { return evaluation::groundtruth_state(gt, t_ns); });
   }
   std::unique_ptr<evaluation::TrackOracle> oracle;
   if (oracle_planes) {

@@ -111,14 +111,24 @@ void TrackOracle::apply(FeatureObservations* frame) {
   frame->observations = std::move(kept);
 }
 
+std::optional<VioState> groundtruth_state(const Trajectory& groundtruth, int64_t t_ns) {
+  constexpr int64_t kHalfStepNs = 5'000'000;
+  const auto a = groundtruth.interpolate(t_ns - kHalfStepNs), b = groundtruth.interpolate(t_ns + kHalfStepNs),
+             c = groundtruth.interpolate(t_ns);
+  if (!a || !b || !c) return std::nullopt;
+  VioState s;
+  s.t_ns = t_ns;
+  s.T_w_b = *c;
+  s.v_w = (b->translation - a->translation) / (2e-9 * static_cast<double>(kHalfStepNs));
+  return s;
+}
+
 bool true_frame_motion(const Trajectory& groundtruth, const calib::SE3& T_c_b, const RayCaster& cast,
                        const FeatureObservations& frame, Eigen::Vector3d* v_c, double* depth_m,
                        Eigen::Vector4d* plane_c) {
-  constexpr int64_t kHalfStepNs = 5'000'000;
-  const auto a = groundtruth.interpolate(frame.t_ns - kHalfStepNs), b = groundtruth.interpolate(frame.t_ns + kHalfStepNs),
-             T_w_b = groundtruth.interpolate(frame.t_ns);
-  if (!a || !b || !T_w_b || !cast) return false;
-  const calib::SE3 T_w_c = *T_w_b * T_c_b.inverse();
+  const std::optional<VioState> st = groundtruth_state(groundtruth, frame.t_ns);
+  if (!st || !cast) return false;
+  const calib::SE3 T_w_c = st->T_w_b * T_c_b.inverse();
   std::vector<double> z;
   std::vector<Eigen::Vector3d> points_c;
   z.reserve(frame.observations.size());
@@ -151,8 +161,7 @@ bool true_frame_motion(const Trajectory& groundtruth, const calib::SE3& T_c_b, c
     }
   }
   std::nth_element(z.begin(), z.begin() + static_cast<long>(z.size() / 2), z.end());
-  const Eigen::Vector3d v_w = (b->translation - a->translation) / (2e-9 * static_cast<double>(kHalfStepNs));
-  *v_c = T_c_b.rotation * (T_w_b->rotation.conjugate() * v_w);
+  *v_c = T_c_b.rotation * (st->T_w_b.rotation.conjugate() * st->v_w);
   *depth_m = z[z.size() / 2];
   return *depth_m > 0 && v_c->allFinite();
 }

@@ -12,6 +12,7 @@
 
 #include <cstdint>
 #include <map>
+#include <optional>
 #include <random>
 #include <string>
 
@@ -62,6 +63,10 @@ struct TrackOracleStats {
   int64_t frames = 0;             // frames with a common mode (keep_error != kNone)
   int64_t dropped_gross = 0;      // observations dropped by max_error_px
 };
+
+// The ground-truth state at t_ns (pose interpolated; velocity by a central difference over 10 ms;
+// zero biases), or nullopt where the ground truth does not cover t_ns +- 5 ms.
+std::optional<VioState> groundtruth_state(const Trajectory& groundtruth, int64_t t_ns);
 
 // The true motion the event frames' translation compensation needs at a front-end frame (IMU
 // clock): the camera velocity in the camera frame (m/s; central difference of the ground truth
