@@ -161,7 +161,13 @@ bool true_frame_motion(const Trajectory& groundtruth, const calib::SE3& T_c_b, c
     }
   }
   std::nth_element(z.begin(), z.begin() + static_cast<long>(z.size() / 2), z.end());
-  *v_c = T_c_b.rotation * (st->T_w_b.rotation.conjugate() * st->v_w);
+  // The camera centre's velocity (central difference over 10 ms, as groundtruth_state), so a
+  // camera-IMU lever arm is included.
+  constexpr int64_t kHalfStepNs = 5'000'000;
+  const auto a = groundtruth.interpolate(frame.t_ns - kHalfStepNs), b = groundtruth.interpolate(frame.t_ns + kHalfStepNs);
+  const Eigen::Vector3d p_b_c = T_c_b.inverse().translation;
+  const Eigen::Vector3d v_w_c = ((*b * p_b_c) - (*a * p_b_c)) / (2e-9 * static_cast<double>(kHalfStepNs));
+  *v_c = T_w_c.rotation.conjugate() * v_w_c;
   *depth_m = z[z.size() / 2];
   return *depth_m > 0 && v_c->allFinite();
 }

@@ -209,6 +209,16 @@ EventFrame EventFrameBuilder::build_frame(EventSpan events, int64_t t_ref_ns) {
     if (!compensate) ++stats_.frames_uncompensated;
   }
   f.motion_compensated = compensate;
+  if (compensate && o_.use_depth && provider_) {
+    FrameMotion m;
+    if (provider_(t_ref_ns, &m)) {
+      if (m.plane_d_m > 0) {
+        set_motion_plane(m.v_c, m.plane_n_c, m.plane_d_m);
+      } else {
+        set_motion(m.v_c, m.depth_m);
+      }
+    }
+  }
   const bool translate = compensate && o_.use_depth && depth_m_ > 0;
   const bool plane = translate && plane_d_ > 0;
   const Eigen::Vector3f v_over_d = (v_c_ / (translate ? (plane ? plane_d_ : depth_m_) : 1.0)).cast<float>();

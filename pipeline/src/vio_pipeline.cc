@@ -98,6 +98,8 @@ struct VioPipeline::Impl {
         background(width, height, o.background_activity) {
     if (use_frames) {
       frame_builder = std::make_unique<frontend::EventFrameBuilder>(cal, opt.frames);
+      if (opt.frames.use_depth)
+        frame_builder->set_motion_provider([this](int64_t t_ref, frontend::FrameMotion* m) { return frame_motion_at(t_ref + shift, m); });
       // The tracker works on the builder's undistorted pinhole images.
       frame_tracker = std::make_unique<frontend::FeatureTracker>(ideal_pinhole(), opt.tracker);
     } else {
@@ -152,6 +154,9 @@ struct VioPipeline::Impl {
   std::vector<Event> filtered;
   std::vector<frontend::EventFrame> built;
   int64_t prev_frame_t = -1;  // camera clock, last event frame
+  std::optional<FeatureObservations> last_tracked;  // the latest event frame's tracks (for the frame-motion oracle)
+  std::vector<double> depth_scratch;                // landmark depths (median_landmark_depth)
+  std::optional<frontend::FrameMotion> latest_motion;  // use_depth without frame_velocity_at_reference
   int64_t next_obs = 0;       // camera clock, next corner observation frame
   bool have_events = false;
   int64_t frame_id = 0;
@@ -482,35 +487,83 @@ struct VioPipeline::Impl {
     }
   }
 
-  // The estimate back to the frame builder: gyro bias, and for use_depth the camera velocity and
-  // the median landmark depth.
+  // The estimate back to the frame builder after each tracked frame: the gyro bias, and for
+  // use_depth without frame_velocity_at_reference the latest state's camera velocity and median
+  // landmark depth for the frames to come (frame_motion_at answers with them).
   void feed_back_motion(const FeatureObservations& f) {
-    const VioState st = est->latest_state();
-    frame_builder->set_gyro_bias(st.bias_gyro);
+    frame_builder->set_gyro_bias(est->latest_state().bias_gyro);
     if (!opt.frames.use_depth) return;
-    if (frame_motion_oracle) {
-      Eigen::Vector3d v_c;
-      double depth_m = 0;
-      Eigen::Vector4d plane = Eigen::Vector4d::Zero();
-      if (frame_motion_oracle(f, &v_c, &depth_m, &plane)) {
-        if (plane.w() > 0) {
-          frame_builder->set_motion_plane(v_c, plane.head<3>(), plane.w());
-        } else {
-          frame_builder->set_motion(v_c, depth_m);
-        }
-        return;
-      }
-    }
+    if (frame_motion_oracle) last_tracked = f;
+    if (opt.frame_velocity_at_reference) return;
+    const VioState st = est->latest_state();
+    double depth_m = 0;
+    if (!median_landmark_depth(st, &depth_m)) return;
+    frontend::FrameMotion m;
+    m.v_c = cal.T_c_b.rotation * (st.T_w_b.rotation.conjugate() * st.v_w);
+    m.depth_m = depth_m;
+    latest_motion = m;
+  }
+
+  // The median z-depth of the landmarks in front of the camera at state st; false without any.
+  bool median_landmark_depth(const VioState& st, double* depth_m) {
     const calib::SE3 T_c_w = cal.T_c_b * st.T_w_b.inverse();
-    std::vector<double> depth;
+    depth_scratch.clear();
     for (const auto& [id, p] : est->landmarks()) {
       const double z = (T_c_w.rotation * p + T_c_w.translation).z();
-      if (z > 0) depth.push_back(z);
+      if (z > 0) depth_scratch.push_back(z);
     }
-    if (depth.empty()) return;
-    std::nth_element(depth.begin(), depth.begin() + static_cast<long>(depth.size() / 2), depth.end());
-    const Eigen::Vector3d v_c = cal.T_c_b.rotation * (st.T_w_b.rotation.conjugate() * st.v_w);
-    frame_builder->set_motion(v_c, depth[depth.size() / 2]);
+    if (depth_scratch.empty()) return false;
+    const auto mid = depth_scratch.begin() + static_cast<long>(depth_scratch.size() / 2);
+    std::nth_element(depth_scratch.begin(), mid, depth_scratch.end());
+    *depth_m = *mid;
+    return true;
+  }
+
+  // frames.use_depth: the motion of the frame whose reference time is t (IMU clock): the oracle's
+  // answer when one is set; else without frame_velocity_at_reference the one fed back after the
+  // last tracked frame; else the latest state propagated to t with the IMU (the camera centre's
+  // velocity, lever arm included) and the median landmark depth. False before the
+  // initialisation or without landmarks.
+  bool frame_motion_at(int64_t t, frontend::FrameMotion* m) {
+    if (!est) return false;
+    if (frame_motion_oracle && last_tracked) {
+      FeatureObservations g = *last_tracked;
+      g.t_ns = t;
+      Eigen::Vector4d plane = Eigen::Vector4d::Zero();
+      if (frame_motion_oracle(g, &m->v_c, &m->depth_m, &plane)) {
+        if (plane.w() > 0) {
+          m->plane_n_c = plane.head<3>();
+          m->plane_d_m = plane.w();
+        }
+        return true;
+      }
+    }
+    if (!opt.frame_velocity_at_reference) {
+      if (!latest_motion) return false;
+      *m = *latest_motion;
+      return true;
+    }
+    const VioState st = est->latest_state();
+    double depth_m = 0;
+    if (!median_landmark_depth(st, &depth_m)) return false;
+    Eigen::Matrix3d R_w_b = st.T_w_b.rotation.toRotationMatrix();
+    Eigen::Vector3d v_w = st.v_w;
+    if (t > st.t_ns) {
+      try {
+        const auto pre = backend::ImuPreintegration::between(imu, st.t_ns, t, st.bias_gyro, st.bias_accel, noise);
+        v_w += opt.window.gravity_w * pre.dt_s() + R_w_b * pre.delta_v();
+        R_w_b = R_w_b * pre.delta_R();
+      } catch (const std::invalid_argument&) {
+        // no IMU over the interval: the latest state's velocity
+      }
+    }
+    Eigen::Vector3d w_b = Eigen::Vector3d::Zero();
+    if (!imu.empty() && t >= imu.front().t_ns && t <= imu.back().t_ns)
+      w_b = backend::ImuPreintegration::interpolate(imu, t).gyro - st.bias_gyro;
+    const Eigen::Vector3d p_b_c = cal.T_c_b.inverse().translation;  // camera centre, body frame
+    m->v_c = cal.T_c_b.rotation * (R_w_b.transpose() * v_w + w_b.cross(p_b_c));
+    m->depth_m = depth_m;
+    return m->v_c.allFinite();
   }
 
   // One chunk of raw events through the filters and the front-end.

@@ -178,6 +178,56 @@ TEST(EventFrame, TranslationWithDepth) {
   EXPECT_THROW(b.set_motion(Eigen::Vector3d::Zero(), 0.0), std::invalid_argument);
 }
 
+// A motion provider is asked once per compensated frame with the frame's reference time, and its
+// answer gives the same frame as set_motion with those values; a false answer keeps the motion set
+// before.
+TEST(EventFrame, MotionProviderAtTheReferenceTime) {
+  Event e;
+  e.t_ns = 40'000'000;
+  e.x = 119;
+  e.y = 89;
+  const int64_t t_ref = e.t_ns + 10'000'000;
+  EventFrameBuilder direct(undistorted_camera(0, Eigen::Matrix3d::Identity()), depth_options());
+  add_still_imu(&direct);
+  direct.set_motion(Eigen::Vector3d(2.0, 0, 0), 1.5);
+  const Eigen::Vector2d want = centroid(direct.build_frame(EventSpan(&e, 1), t_ref).accumulator);
+
+  EventFrameBuilder b(undistorted_camera(0, Eigen::Matrix3d::Identity()), depth_options());
+  add_still_imu(&b);
+  std::vector<int64_t> asked;
+  bool answer = true;
+  b.set_motion_provider([&](int64_t t, FrameMotion* m) {
+    asked.push_back(t);
+    m->v_c = Eigen::Vector3d(2.0, 0, 0);
+    m->depth_m = 1.5;
+    return answer;
+  });
+  const Eigen::Vector2d got = centroid(b.build_frame(EventSpan(&e, 1), t_ref).accumulator);
+  ASSERT_EQ(asked.size(), 1u);
+  EXPECT_EQ(asked[0], t_ref);
+  EXPECT_NEAR(got.x(), want.x(), 1e-6);
+  EXPECT_NEAR(got.y(), want.y(), 1e-6);
+  EXPECT_GT(std::abs(got.x() - 119.0), 0.5);  // the translation moved it
+  // false: the previous answer stays in force.
+  answer = false;
+  b.set_motion(Eigen::Vector3d(-2.0, 0, 0), 1.5);
+  const Eigen::Vector2d kept = centroid(b.build_frame(EventSpan(&e, 1), t_ref).accumulator);
+  EXPECT_NEAR(kept.x(), 2 * 119.0 - want.x(), 1e-3);  // the opposite velocity: mirrored about the pixel
+  EXPECT_GT(kept.x(), 119.0);
+  // Not asked without use_depth.
+  EventFrameOptions o = depth_options();
+  o.use_depth = false;
+  EventFrameBuilder off(undistorted_camera(0, Eigen::Matrix3d::Identity()), o);
+  add_still_imu(&off);
+  asked.clear();
+  off.set_motion_provider([&](int64_t t, FrameMotion*) {
+    asked.push_back(t);
+    return true;
+  });
+  off.build_frame(EventSpan(&e, 1), t_ref);
+  EXPECT_TRUE(asked.empty());
+}
+
 // Per-event depth from a plane: a fronto-parallel plane z = D gives the frame of set_motion(v, D)
 // bit for bit; a tilted plane puts an off-axis event at the plane's own depth there.
 TEST(EventFrame, TranslationWithAScenePlane) {

@@ -305,6 +305,26 @@ TEST(VioPipelineSimulated, FramesFrontEndOnPoster6dof) {
   }
 }
 
+// frame_velocity_at_reference: each frame's translation compensation takes the latest state
+// propagated with the IMU to the frame's stamp (not the velocity fed back after the frame before).
+TEST(VioPipelineSimulated, FrameVelocityAtTheReferenceTime) {
+  const Sequence& s = poster_sequence();
+  VioPipelineOptions o = simulated_sensor_options();
+  o.frame_velocity_at_reference = true;
+  const VioResult r = run_imu_first(o, s);
+  const double mpe = check_trajectory(r, s.groundtruth);
+  const VioResult d = run_imu_first(simulated_sensor_options(), s);
+  std::printf("velocity at the reference time: %zu states, mean position error %.3f%% (default %.3f%%)\n",
+              r.trajectory.size(), mpe, check_trajectory(d, s.groundtruth));
+  EXPECT_EQ(r.stats.event_frames.frames_uncompensated, 0);
+  EXPECT_EQ(r.stats.frontend_frames, d.stats.frontend_frames);
+  ASSERT_EQ(r.trajectory.size(), d.trajectory.size());
+  EXPECT_NE(r.trajectory.back().T_w_b.translation, d.trajectory.back().T_w_b.translation);  // it changed the frames
+  // Measured 0.661% against 0.340% at the default on these 4 s (bound ~1.3x): the tracks no longer
+  // run ahead, but the events' lag behind the edges is no longer countered (README, issue 16).
+  EXPECT_LT(mpe, 0.86);
+}
+
 TEST(VioPipelineSimulated, CornersFrontEndOnPoster6dof) {
   const Sequence& s = poster_sequence();
   VioPipelineOptions o = simulated_sensor_options();

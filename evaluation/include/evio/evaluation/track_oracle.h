@@ -69,8 +69,8 @@ struct TrackOracleStats {
 std::optional<VioState> groundtruth_state(const Trajectory& groundtruth, int64_t t_ns);
 
 // The true motion the event frames' translation compensation needs at a front-end frame (IMU
-// clock): the camera velocity in the camera frame (m/s; central difference of the ground truth
-// over 10 ms) and the median z-depth (m) of the frame's tracks (each bearing cast into the scene
+// clock): the velocity of the camera centre in the camera frame (m/s; central difference of the
+// ground-truth camera positions over 10 ms, so a camera-IMU lever arm is included) and the median z-depth (m) of the frame's tracks (each bearing cast into the scene
 // at the true pose). False when the ground truth does not cover the frame or no ray hits.
 // plane_c (optional): the least-squares plane n . P = d (camera frame, n unit, d > 0) through
 // those scene points (d = 0 when fewer than 3 hit or they do not span a plane).
