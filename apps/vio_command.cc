@@ -124,6 +124,7 @@ std::string config_yaml(const VioConfig& c) {
     << ", min_events: " << fr.min_events << ", motion_compensation: " << (fr.motion_compensation ? "true" : "false")
     << ", use_depth: " << (fr.use_depth ? "true" : "false")
     << ", velocity_at_reference: " << (c.frame_velocity_at_reference ? "true" : "false")
+    << ", event_lag_px: " << num(fr.event_lag_px)
     << ", clip_percentile: " << num(fr.clip_percentile) << ", clip_count: " << num(fr.clip_count)
     << ", overlap: " << num(fr.overlap) << "}\n";
   y << tracker_yaml("tracker", c.tracker);
@@ -188,7 +189,7 @@ VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
       if (top.has("frames")) {
         const Section s = top.child("frames", false, "a map");
         s.allow({"events_per_frame", "min_window_ms", "max_window_ms", "min_events", "motion_compensation", "use_depth", "clip_percentile",
-                 "clip_count", "overlap", "velocity_at_reference"});
+                 "clip_count", "overlap", "velocity_at_reference", "event_lag_px"});
         auto& f = c.frames;
         f.events_per_frame = s.integer("events_per_frame", f.events_per_frame, 1, 100000000);
         f.max_window_ns = ms_to_ns(s.number("max_window_ms", ns_to_ms(f.max_window_ns), Range::kPositive, "ms"));
@@ -200,6 +201,7 @@ VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
         f.clip_percentile = s.number("clip_percentile", f.clip_percentile, Range::kUnit, "");
         f.clip_count = s.number("clip_count", f.clip_count, Range::kNonNegative, "events per pixel");
         f.overlap = s.number("overlap", f.overlap, Range::kNonNegative, "fraction of a frame's events");
+        f.event_lag_px = s.number("event_lag_px", f.event_lag_px, Range::kNonNegative, "px");
         std::string why;
         if (!f.Validate(&why)) s.fail("invalid frame settings: " + why, "consistent settings");
       }

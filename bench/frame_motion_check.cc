@@ -12,6 +12,9 @@
 //       EXACT=1 the velocity at each frame's stamp (else the last tracked frame's, as the pipeline
 //       fed it back), STALE=1 / STALEV=1 / STALER=1 the window's first event's velocity / world
 //       velocity / rotation, AGE, ROT, NOFB, WIN, EPS, LEVELS tracker options.
+//   frame_motion_check SEQ SCENE -2 [f] : frames streamed as the pipeline builds them (add_events),
+//       compensated with the true motion at each frame's stamp (set_motion_provider), every 10th
+//       after 1 s against the rendered edges; LAG=px sets event_lag_px, VERBOSE=1 per frame.
 // A fourth argument applies the pipeline's refractory and background-activity filters first.
 #include <cstdio>
 #include <iostream>
@@ -34,6 +37,53 @@
 #include <map>
 #include <opencv2/features2d.hpp>
 using namespace evio;
+// Mean shift (px) of 32-px patches of a compensated accumulator against the edge density
+// |grad log I . flow| the simulator renders at t_ref (camera clock), along and across the local
+// flow; patches with too few events, a weak correlation or shifts over 5 px are skipped.
+struct Shift { double along = 0, across = 0, flow = 0; int n = 0; };
+Shift edge_shift(const calib::CameraCalibration& cal, const sim::Simulator& sim, const cv::Mat& acc, int64_t t_ref) {
+  const calib::CameraIntrinsics& in = cal.camera.intrinsics();
+  const sim::RenderedView rv = sim.render(t_ref + cal.time_shift_ns, true);
+  cv::Mat dd(rv.intensity.size(), CV_32F, cv::Scalar(0));
+  for (int y = 1; y + 1 < dd.rows; ++y)
+    for (int x = 1; x + 1 < dd.cols; ++x) {
+      auto L = [&](int xx, int yy) { return std::log(rv.intensity.at<float>(yy, xx) + 1e-3f); };
+      const float gx = 0.5f * (L(x + 1, y) - L(x - 1, y)), gy = 0.5f * (L(x, y + 1) - L(x, y - 1));
+      const cv::Vec2f fl = rv.flow.at<cv::Vec2f>(y, x);
+      dd.at<float>(y, x) = std::abs(gx * fl[0] + gy * fl[1]);
+    }
+  cv::Mat P(dd.size(), CV_32F, cv::Scalar(0)), FX(dd.size(), CV_32F, cv::Scalar(0)), FY(dd.size(), CV_32F, cv::Scalar(0));
+  for (int y = 0; y < P.rows; ++y)
+    for (int x = 0; x < P.cols; ++x) {
+      Eigen::Vector2d px;
+      if (!cal.camera.project(Eigen::Vector3d((x - in.cx) / in.fx, (y - in.cy) / in.fy, 1.0), &px)) continue;
+      const int x0 = (int)std::floor(px.x()), y0 = (int)std::floor(px.y());
+      if (x0 < 0 || y0 < 0 || x0 + 1 >= dd.cols || y0 + 1 >= dd.rows) continue;
+      const float ax = px.x() - x0, ay = px.y() - y0;
+      P.at<float>(y, x) = (1 - ax) * (1 - ay) * dd.at<float>(y0, x0) + ax * (1 - ay) * dd.at<float>(y0, x0 + 1) + (1 - ax) * ay * dd.at<float>(y0 + 1, x0) + ax * ay * dd.at<float>(y0 + 1, x0 + 1);
+      FX.at<float>(y, x) = rv.flow.at<cv::Vec2f>(y0, x0)[0];
+      FY.at<float>(y, x) = rv.flow.at<cv::Vec2f>(y0, x0)[1];
+    }
+  Shift r;
+  const int S = 32;
+  for (int y = 8; y + S <= P.rows - 8; y += S)
+    for (int x = 8; x + S <= P.cols - 8; x += S) {
+      cv::Rect q(x, y, S, S);
+      cv::Mat a = acc(q).clone(), p = P(q).clone();
+      if (cv::sum(a)[0] < 50 || cv::sum(p)[0] <= 0) continue;
+      double resp = 0;
+      cv::Point2d sh = cv::phaseCorrelate(p, a, cv::noArray(), &resp);
+      if (resp < 0.1 || std::hypot(sh.x, sh.y) > 5) continue;
+      const double fx = cv::mean(FX(q))[0], fy = cv::mean(FY(q))[0], fn = std::hypot(fx, fy);
+      if (fn < 1) continue;
+      r.along += (sh.x * fx + sh.y * fy) / fn;
+      r.across += (-sh.x * fy + sh.y * fx) / fn;
+      r.flow += fn;
+      ++r.n;
+    }
+  return r;
+}
+
 int main(int argc, char** argv) {
   const std::string seq = argv[1], scene = argv[2];
   auto reader = open_dataset(seq);
@@ -42,8 +92,8 @@ int main(int argc, char** argv) {
   std::vector<Event> ev; EventBuffer chunk;
   while (reader->read_events(&chunk, size_t{1} << 20) > 0) { ev.insert(ev.end(), chunk.begin(), chunk.end()); chunk.clear(); }
   if (argc > 4) {
-    frontend::RefractoryFilter rf(240, 180);
-    frontend::BackgroundActivityFilter bf(240, 180);
+    frontend::RefractoryFilter rf(cal.camera.width(), cal.camera.height());
+    frontend::BackgroundActivityFilter bf(cal.camera.width(), cal.camera.height());
     std::vector<Event> kept;
     for (const Event& e : ev) if (rf.accept(e) && bf.accept(e)) kept.push_back(e);
     printf("filters keep %zu of %zu\n", kept.size(), ev.size());
@@ -61,7 +111,46 @@ int main(int argc, char** argv) {
   for (auto& s : imu) b.add_imu(s);
   
 
-  if (argc > 3 && std::atoi(argv[3]) < 0) {
+
+  if (argc > 3 && std::atoi(argv[3]) == -2) {
+    // Frames as the pipeline streams them (add_events), compensated with the true motion at each
+    // frame's stamp, LAG=px for event_lag_px: their shift against the rendered edges.
+    const auto K0 = b.K();
+    frontend::EventFrameOptions lo = o;
+    lo.min_window_ns = 10'000'000;
+    if (getenv("LAG")) lo.event_lag_px = std::atof(getenv("LAG"));
+    frontend::EventFrameBuilder fb(cal, lo);
+    for (auto& x : imu) fb.add_imu(x);
+    fb.set_motion_provider([&](int64_t t_ref, frontend::FrameMotion* m) {
+      FeatureObservations g;
+      g.t_ns = t_ref + cal.time_shift_ns;
+      for (int y = 20; y < 180; y += 20)
+        for (int x = 20; x < 240; x += 20)
+          g.observations.push_back({y * 1000 + x, Eigen::Vector3d((x - K0(0, 2)) / K0(0, 0), (y - K0(1, 2)) / K0(1, 1), 1).normalized()});
+      Eigen::Vector4d pl;
+      if (!evaluation::true_frame_motion(gt, cal.T_c_b, cast, g, &m->v_c, &m->depth_m, &pl)) return false;
+      if (pl.w() > 0) { m->plane_n_c = pl.head<3>(); m->plane_d_m = pl.w(); }
+      return true;
+    });
+    std::vector<frontend::EventFrame> out;
+    Shift sum;
+    int frames = 0;
+    for (size_t i = 0; i < ev.size(); i += 3750) {
+      out.clear();
+      fb.add_events(EventSpan(ev.data() + i, std::min<size_t>(3750, ev.size() - i)), &out);
+      for (auto& ef : out) {
+        if (ef.t_ns < 1'000'000'000 || (frames++ % 10) != 0) continue;
+        const Shift r = edge_shift(cal, sim, ef.accumulator, ef.t_ns);
+        if (r.n == 0) continue;
+        sum.along += r.along / r.n; sum.across += r.across / r.n; sum.flow += r.flow / r.n; ++sum.n;
+        if (getenv("VERBOSE")) printf("  frame at %.2f s: along %+.3f px, flow %.0f px/s, window %.1f ms\n", ef.t_ns * 1e-9, r.along / r.n, r.flow / r.n, (ef.t_end_ns - ef.t_begin_ns) * 1e-6);
+      }
+    }
+    printf("LAG %s: %d frames, mean shift against the rendered edges along the flow %+.3f px, across %+.3f px (flow %.0f px/s)\n",
+           getenv("LAG") ? getenv("LAG") : "0", sum.n, sum.along / sum.n, sum.across / sum.n, sum.flow / sum.n);
+    return 0;
+  }
+  if (argc > 3 && std::atoi(argv[3]) == -1) {
     // the pipeline's tracker on frames built like the pipeline's, with the true motion fed back
     const auto K0 = b.K();
     pipeline::VioPipelineOptions po;

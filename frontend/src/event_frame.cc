@@ -61,6 +61,7 @@ bool EventFrameOptions::Validate(std::string* why) const {
   if (knot_spacing_ns <= 0) return fail("knot_spacing_ns must be > 0 ns");
   if (max_imu_extrapolation_ns < 0) return fail("max_imu_extrapolation_ns must be >= 0 ns");
   if (max_imu_gap_ns <= 0) return fail("max_imu_gap_ns must be > 0 ns");
+  if (!(event_lag_px >= 0) || !std::isfinite(event_lag_px)) return fail("event_lag_px must be finite and >= 0 px");
   return true;
 }
 
@@ -233,6 +234,12 @@ EventFrame EventFrameBuilder::build_frame(EventSpan events, int64_t t_ref_ns) {
   // (time-ordered) events pass the knots, which avoids a 64-bit division per event.
   int64_t i = 0, i_t = 0;  // step, and its start i * h
   const float vx = v_over_d.x(), vy = v_over_d.y(), vz = v_over_d.z();
+  // Event lag: the image motion at the reference time, -w x q - (v / Z) + x (v / Z)_z per
+  // normalised point q = (x, y, 1), w the camera's angular velocity there.
+  const bool lag = compensate && o_.event_lag_px > 0;
+  Eigen::Vector3f w_c = Eigen::Vector3f::Zero();
+  if (lag) w_c = (R_c_b_ * gyro_at(t_ref_ns + time_shift_ns_)).cast<float>();
+  const float lag_px = static_cast<float>(o_.event_lag_px);
   const Event* ev = events.data();
   const size_t n_events = events.size();
   constexpr size_t kAhead = 16;  // events: the bearing table is read at random pixels, fetched ahead
@@ -288,7 +295,25 @@ EventFrame EventFrameBuilder::build_frame(EventSpan events, int64_t t_ref_ns) {
       continue;
     }
     const float iz = 1.0f / pz;
-    const float u = fx_ * px * iz + cx_, v = fy_ * py * iz + cy_;
+    float u = fx_ * px * iz + cx_, v = fy_ * py * iz + cy_;
+    if (lag) {
+      const float x = px * iz, y = py * iz;
+      // Rotation: q' = -w x q.
+      float mx = -(w_c.y() - w_c.z() * y), my = -(w_c.z() * x - w_c.x()), mz = -(w_c.x() * y - w_c.y() * x);
+      if (translate) {  // - v / Z, with 1 / Z = 1 / D or (n . q) / d
+        const float inv_z = plane ? pnx * x + (pny * y + pnz) : 1.0f;
+        mx -= vx * inv_z;
+        my -= vy * inv_z;
+        mz -= vz * inv_z;
+      }
+      const float dx = (mx - x * mz) * fx_, dy = (my - y * mz) * fy_;  // px/s
+      const float n2 = dx * dx + dy * dy;
+      if (n2 > 1e-12f) {
+        const float k = lag_px / std::sqrt(n2);
+        u += dx * k;
+        v += dy * k;
+      }
+    }
     if (!(u >= 0.0f && v >= 0.0f && u <= w_max && v <= h_max)) {
       ++outside;
       continue;

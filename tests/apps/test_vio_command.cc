@@ -84,6 +84,7 @@ TEST(VioConfig, ErrorsNameFileLineAndKey) {
   expect_error("tracker: {seed: -3}\n", "tracker.seed");
   expect_error("frames: {overlap: 0.95}\n", "overlap");
   expect_error("frames: {velocity_at_reference: often}\n", "velocity_at_reference");
+  expect_error("frames: {event_lag_px: -0.5}\n", "event_lag_px");
   expect_error("window: {tracked_landmark_marginalisation: keep}\n", "window.tracked_landmark_marginalisation");
   expect_error("window: {function_tolerance: 0}\n", "function_tolerance");
   expect_error("window: {function_tolerance: 1}\n", "function_tolerance");
@@ -100,7 +101,7 @@ TEST(VioConfig, ResolvedConfigReadsBackToTheSameValues) {
   const VioConfig a = load_vio_config(
       dir.write("c.yaml", "frontend: corners\nwindow: {size: 7, pixel_sigma: 0.8, loss: cauchy, init_bias_gyro_turn_on_radps: 0.0002,\n"
                           "  estimate_time_offset: true, time_offset_sigma_ms: 4, tracked_landmark_marginalisation: restart,\n"
-                          "  function_tolerance: 0.0001, rotation_only_min_duration_ms: 120}\nframes: {events_per_frame: 9000, overlap: 0.25, velocity_at_reference: true}\n"
+                          "  function_tolerance: 0.0001, rotation_only_min_duration_ms: 120}\nframes: {events_per_frame: 9000, overlap: 0.25, velocity_at_reference: true, event_lag_px: 0.3}\n"
                           "tracker: {ransac: five_point, fast_threshold: 30, template_max_age_frames: 4, template_fallback: false,\n"
                           "  template_max_rotation_deg: 2.5, anchor_frames: 7, anchor_ransac_threshold_px: 1.5}\n"
                           "init: {method: static, window_ms: 1500}\n"
@@ -116,6 +117,7 @@ TEST(VioConfig, ResolvedConfigReadsBackToTheSameValues) {
   EXPECT_EQ(b.frames.events_per_frame, 9000);
   EXPECT_DOUBLE_EQ(b.frames.overlap, 0.25);
   EXPECT_TRUE(b.frame_velocity_at_reference);
+  EXPECT_DOUBLE_EQ(b.frames.event_lag_px, 0.3);
   EXPECT_EQ(b.tracker.ransac, frontend::RansacModel::kFivePoint);
   EXPECT_EQ(b.tracker.fast_threshold, 30);
   EXPECT_EQ(b.init, "static");

@@ -146,6 +146,52 @@ TEST(EventFrame, RotationWarpMatchesClosedForm) {
   EXPECT_LT((got - Eigen::Vector2d(100, 70)).norm(), 1e-3);
 }
 
+// event_lag_px moves each warped event that far along the image motion at its position at the
+// reference time: rotation (the gyro), and translation with use_depth.
+TEST(EventFrame, EventLagMovesEventsAlongTheImageMotion) {
+  const Eigen::Matrix3d R_c_b = camera_from_body_rotation();
+  const CameraCalibration cam = undistorted_camera(0, R_c_b);
+  const Eigen::Vector3d w_b(0.7, -2.1, 3.3);
+  const Eigen::Vector3d w_c = R_c_b * w_b;
+  Event e;
+  e.t_ns = 50'000'000;
+  e.x = 100;
+  e.y = 70;
+  const int64_t t_ref = e.t_ns + 10'000'000;
+  for (const bool translate : {false, true}) {
+    EventFrameOptions o;
+    o.min_events = 1;
+    o.use_depth = translate;
+    EventFrameBuilder plain(cam, o);
+    o.event_lag_px = 0.5;
+    EventFrameBuilder lagged(cam, o);
+    const Eigen::Vector3d v_c(0.4, -0.2, 0.3);
+    const double depth = 1.5;
+    for (EventFrameBuilder* b : {&plain, &lagged}) {
+      for (const ImuSample& s : constant_gyro(0, 200'000'000, 1'000'000, w_b)) b->add_imu(s);
+      if (translate) b->set_motion(v_c, depth);
+    }
+    const Eigen::Vector2d p0 = centroid(plain.build_frame(EventSpan(&e, 1), t_ref).accumulator);
+    const Eigen::Vector2d p1 = centroid(lagged.build_frame(EventSpan(&e, 1), t_ref).accumulator);
+    // The image motion at p0: the point at depth `depth` on p0's ray, moved for a short time by
+    // dP/dt = -w x P - v.
+    const Eigen::Vector3d q((p0.x() - 119.5) / 200.0, (p0.y() - 89.5) / 200.0, 1.0);
+    const Eigen::Vector3d P = q * depth;
+    const Eigen::Vector3d Pdot = -w_c.cross(P) - (translate ? v_c : Eigen::Vector3d::Zero());
+    const Eigen::Vector3d P2 = P + 1e-5 * Pdot;
+    const Eigen::Vector2d flow(200.0 * (P2.x() / P2.z() - q.x()), 200.0 * (P2.y() / P2.z() - q.y()));
+    const Eigen::Vector2d want = p0 + 0.5 * flow.normalized();
+    std::printf("translate %d: without lag (%.4f, %.4f), with (%.4f, %.4f), expected (%.4f, %.4f)\n", translate, p0.x(),
+                p0.y(), p1.x(), p1.y(), want.x(), want.y());
+    EXPECT_LT((p1 - want).norm(), 2e-3);
+  }
+  EventFrameOptions bad;
+  bad.event_lag_px = -0.1;
+  std::string why;
+  EXPECT_FALSE(bad.Validate(&why));
+  EXPECT_NE(why.find("event_lag_px"), std::string::npos);
+}
+
 // Translation tests: one event per frame is enough, and the camera does not turn.
 EventFrameOptions depth_options() {
   EventFrameOptions o;
