@@ -17,6 +17,7 @@
 #include "evio/calib/error.h"
 #include "evio/calib/geometry.h"
 #include "evio/calib/log.h"
+#include "evio/sensors/time.h"
 #include "evio/sensors/trajectory.h"
 #include "json_util.h"
 #include "progress.h"
@@ -95,6 +96,10 @@ std::string config_yaml(const MosaicConfig& c) {
     << ", calibration_min_texel_updates: " << c.calibration_min_texel_updates
     << ", calibration_min_samples: " << c.calibration_min_samples << ", gyro_window_ms: " << num(c.gyro_bootstrap_window_ns * 1e-6)
     << ", gyro_step_ms: " << num(c.gyro_integration_step_ns * 1e-6) << "}\n";
+  y << "failure: {probe_every_batches: " << c.failure_probe_every_batches << ", probe_offset_rad: " << num(c.failure_probe_offset_rad)
+    << ", window_ms: " << num(c.failure_window_ns * 1e-6) << ", lost_contrast: " << num(c.failure_lost_contrast)
+    << ", recovered_contrast: " << num(c.failure_recovered_contrast) << ", freeze_map: " << (c.failure_freeze_map ? "true" : "false")
+    << ", relocalize_spread_rad: " << num(c.failure_relocalize_spread_rad) << "}\n";
   y << "output: {trajectory_ms: " << num(c.trajectory_period_ns * 1e-6) << ", snapshot_ms: " << num(c.snapshot_period_ns * 1e-6)
     << ", gamma: " << num(c.display.gamma) << ", low_percentile: " << num(c.display.low_percentile)
     << ", high_percentile: " << num(c.display.high_percentile)
@@ -125,7 +130,7 @@ MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_y
   if (!root.IsNull()) {
     if (!root.IsMap()) parser.fail(root, "", "is not a map", expected);
     const Section top(&parser, root, "");
-    top.allow({"mosaic", "tracker", "bootstrap", "output", "description"});
+    top.allow({"mosaic", "tracker", "bootstrap", "failure", "output", "description"});
     if (top.has("mosaic")) {
       const Section s = top.child("mosaic", false, "a map");
       s.allow({"width", "height", "contrast_threshold", "initial_gradient_std", "measurement_std_abs",
@@ -231,6 +236,20 @@ MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_y
       c.calibration_min_samples = s.integer("calibration_min_samples", c.calibration_min_samples, 1, 100000000);
       c.gyro_bootstrap_window_ns = ms_ns(s, "gyro_window_ms", c.gyro_bootstrap_window_ns, Range::kPositive);
       c.gyro_integration_step_ns = ms_ns(s, "gyro_step_ms", c.gyro_integration_step_ns, Range::kPositive);
+    }
+    if (top.has("failure")) {
+      const Section s = top.child("failure", false, "a map");
+      s.allow({"probe_every_batches", "probe_offset_rad", "window_ms", "lost_contrast", "recovered_contrast", "freeze_map",
+               "relocalize_spread_rad"});
+      c.failure_probe_every_batches = s.integer("probe_every_batches", c.failure_probe_every_batches, 0, 1000000);
+      c.failure_probe_offset_rad = s.number("probe_offset_rad", c.failure_probe_offset_rad, Range::kPositive, "rad");
+      c.failure_window_ns = ms_ns(s, "window_ms", c.failure_window_ns, Range::kPositive);
+      c.failure_lost_contrast = s.number("lost_contrast", c.failure_lost_contrast, Range::kAny, "log-likelihood per event");
+      c.failure_recovered_contrast = s.number("recovered_contrast", c.failure_recovered_contrast, Range::kAny, "log-likelihood per event");
+      c.failure_freeze_map = s.boolean("freeze_map", c.failure_freeze_map);
+      c.failure_relocalize_spread_rad = s.number("relocalize_spread_rad", c.failure_relocalize_spread_rad, Range::kNonNegative, "rad");
+      std::string why;
+      if (!c.Validate(&why)) s.fail("invalid failure settings: " + why, "consistent settings");
     }
     if (top.has("output")) {
       const Section s = top.child("output", false, "a map");
@@ -373,8 +392,19 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
       << ", \"initial_relative_residual\": " << num(rec.weighted_stats.initial_relative_residual)
       << ", \"relative_residual\": " << num(rec.weighted_stats.relative_residual)
       << ", \"converged\": " << (rec.weighted_stats.converged ? "true" : "false") << "}"
-      << ",\n  \"snapshots\": " << snapshots << "\n}\n";
+      << ",\n  \"snapshots\": " << snapshots << ",\n  \"quality\": {\"windows\": " << ms.quality_windows
+      << ", \"probe_contrast_min\": " << num(ms.quality_min) << ", \"probe_contrast_mean\": " << num(ms.quality_mean)
+      << ", \"events_unmapped_lost\": " << ms.events_unmapped_lost << "},\n  \"tracking_lost_segments\": [";
+    for (size_t k = 0; k < result.tracking_lost.size(); ++k) {
+      const pipeline::MosaicLostSegment& g = result.tracking_lost[k];
+      f << (k ? ", " : "") << "{\"t_begin_s\": " << format_seconds(g.t_begin_ns) << ", \"t_end_s\": " << format_seconds(g.t_end_ns)
+        << ", \"recovered\": " << (g.recovered ? "true" : "false") << ", \"relocalizations\": " << g.relocalizations << "}";
+    }
+    f << "]\n}\n";
   }
+  for (const pipeline::MosaicLostSegment& g : result.tracking_lost)
+    out << "tracking lost " << format_seconds(g.t_begin_ns) << " s to " << format_seconds(g.t_end_ns) << " s ("
+        << (g.recovered ? "recovered" : "not recovered") << ", " << g.relocalizations << " re-localisations)\n";
   out << "events        " << events << " over " << num(duration_s) << " s, bootstrap "
       << (args.use_imu ? "gyro" : "contrast maximisation") << " " << num((bs.t_end_ns - t0) * 1e-9) << " s\n";
   out << "speed         " << num(processing_s) << " s processing, real-time factor "

@@ -94,6 +94,12 @@ bool RotationParticleFilterOptions::Validate(std::string* why) const {
   if (num_particles < 1) return fail(why, "num_particles " + std::to_string(num_particles) + " (expected >= 1)");
   if (batch_size < 1) return fail(why, "batch_size " + std::to_string(batch_size) + " (expected >= 1 events)");
   if (event_stride < 1) return fail(why, "event_stride " + std::to_string(event_stride) + " (expected >= 1)");
+  if (probe_every_batches < 0) return fail(why, "probe_every_batches " + std::to_string(probe_every_batches) + " (expected >= 0)");
+  if (!(probe_offset_rad > 0) || !std::isfinite(probe_offset_rad))
+    return fail(why, "probe_offset_rad " + num(probe_offset_rad) + " (expected > 0 rad)");
+  if (probe_every_batches > 0 && linearize_max_spread_rad > 0 && probe_offset_rad > linearize_max_spread_rad)
+    return fail(why, "probe_offset_rad " + num(probe_offset_rad) + " (expected <= linearize_max_spread_rad " +
+                         num(linearize_max_spread_rad) + ": probes outside it would change how batches are weighed)");
   if (max_batch_duration_ns <= 0)
     return fail(why, "max_batch_duration_ns " + std::to_string(max_batch_duration_ns) + " (expected > 0 ns)");
   if (motion_model != RotationMotionModel::kRandomWalk && motion_model != RotationMotionModel::kConstantVelocity &&
@@ -468,9 +474,21 @@ void RotationParticleFilter::process_batch(const LogIntensityMapView& map) {
 
   const size_t m = starget_.size();
   if (m > 0) {
+    // Probes (probe_every_batches): six turned copies of the mean appended for the weighing only.
+    const size_t n_real = particles_.size();
+    const bool probe = options_.probe_every_batches > 0 && weighted_batch_counter_++ % options_.probe_every_batches == 0;
+    if (probe) {
+      for (int axis = 0; axis < 3; ++axis)
+        for (double sgn : {1.0, -1.0}) {
+          Eigen::Vector3d a = Eigen::Vector3d::Zero();
+          a[axis] = sgn * options_.probe_offset_rad;
+          particles_.push_back((mean_ * exp_quat(a)).normalized());
+          if (!vel_.empty()) vel_.push_back(vel_mean_);
+        }
+    }
     const size_t np = particles_.size();
-    stats_.particle_evaluations += static_cast<int64_t>(np * m);
-    stats_.particle_batches += static_cast<int64_t>(np);
+    stats_.particle_evaluations += static_cast<int64_t>(np * m);  // probes included (work)
+    stats_.particle_batches += static_cast<int64_t>(n_real);
     ++stats_.weighted_batches;
     rot_.resize(9 * np);
     for (size_t i = 0; i < np; ++i) {
@@ -546,28 +564,55 @@ void RotationParticleFilter::process_batch(const LogIntensityMapView& map) {
     // particles that see a known texel for the same event (neutral), so the cloud is not pulled
     // towards the mapped part of the mosaic while the camera explores. An event no particle can
     // evaluate weights nobody.
+    size_t known_events = 0;
+    double probe_sum = std::nan("");
+    // (Probes neither count nor set the fill: they take the real particles' fill.)
     for (size_t j = 0; j < m; ++j) {
       float sum = 0;
       int known = 0;
+      bool any_nan = false;
       for (size_t i = 0; i < np; ++i) {
         const float v = ll_[i * m + j];
-        if (!std::isnan(v)) {
+        if (std::isnan(v)) {
+          any_nan = true;
+        } else if (i < n_real) {
           sum += v;
           ++known;
         }
       }
-      if (known > 0) ++stats_.events_used;
-      if (known == static_cast<int>(np)) continue;
+      if (known > 0) {
+        ++stats_.events_used;
+        ++known_events;
+      }
+      if (!any_nan) continue;
       const float fill = known > 0 ? sum / static_cast<float>(known) : 0.0f;
       if (known == 0) ++stats_.skipped_unknown_map;
       for (size_t i = 0; i < np; ++i)
         if (std::isnan(ll_[i * m + j])) ll_[i * m + j] = fill;
     }
-    for (size_t i = 0; i < np; ++i) {
+    if (probe) {
+      double sum = 0;
+      for (size_t i = n_real; i < np; ++i)
+        for (size_t j = 0; j < m; ++j) sum += static_cast<double>(ll_[i * m + j]);
+      probe_sum = known_events > 0 ? sum / static_cast<double>((np - n_real) * known_events) : std::nan("");
+      particles_.resize(n_real);
+      if (!vel_.empty()) vel_.resize(n_real);
+    }
+    double weighted_ll = 0;  // the batch's log-likelihood under the prior weights
+    for (size_t i = 0; i < n_real; ++i) {
       const float* ll_i = &ll_[i * m];
       float acc = 0;
       for (size_t j = 0; j < m; ++j) acc += ll_i[j];
+      weighted_ll += std::exp(log_w_[i]) * static_cast<double>(acc);
       log_w_[i] += static_cast<double>(acc);
+    }
+    if (known_events > 0) {
+      last_loglik_ = weighted_ll / static_cast<double>(known_events);
+      last_loglik_events_ = static_cast<int64_t>(known_events);
+      if (probe && std::isfinite(probe_sum)) {
+        last_probe_ = last_loglik_ - probe_sum;
+        last_probe_t_ = t_ns_;
+      }
     }
     normalize_weights();
     compute_mean();

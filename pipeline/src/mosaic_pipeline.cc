@@ -9,6 +9,7 @@
 #include <exception>
 #include <limits>
 #include <mutex>
+#include <random>
 #include <stdexcept>
 #include <thread>
 #include <utility>
@@ -28,8 +29,19 @@ bool MosaicPipelineOptions::Validate(std::string* why) const {
   };
   std::string w;
   if (!mosaic.Validate(&w)) return fail("mosaic: " + w);
-  if (!tracker.Validate(&w)) return fail("tracker: " + w);
+  frontend::RotationParticleFilterOptions probed = tracker;  // as the pipeline runs it
+  probed.probe_every_batches = failure_probe_every_batches;
+  probed.probe_offset_rad = failure_probe_offset_rad;
+  if (!probed.Validate(&w)) return fail("tracker: " + w);
   if (!cmax.Validate(&w)) return fail("cmax: " + w);
+  if (failure_probe_every_batches < 0) return fail("failure_probe_every_batches must be >= 0");
+  if (!(failure_probe_offset_rad > 0) || !std::isfinite(failure_probe_offset_rad)) return fail("failure_probe_offset_rad must be > 0 rad");
+  if (failure_window_ns <= 0) return fail("failure_window_ns must be > 0 ns");
+  if (!std::isfinite(failure_lost_contrast) || !std::isfinite(failure_recovered_contrast) ||
+      !(failure_recovered_contrast >= failure_lost_contrast))
+    return fail("failure_recovered_contrast must be finite and >= failure_lost_contrast");
+  if (!(failure_relocalize_spread_rad >= 0) || !std::isfinite(failure_relocalize_spread_rad))
+    return fail("failure_relocalize_spread_rad must be finite and >= 0 rad");
   if (reconstruct_events < 1) return fail("reconstruct_events must be >= 1");
   if (reconstruct_period_ns <= 0) return fail("reconstruct_period_ns must be > 0");
   if (reconstruct_latency_events < 0) return fail("reconstruct_latency_events must be >= 0");
@@ -560,6 +572,8 @@ struct MosaicPipeline::Impl {
     mapper.boot_segments = {};
     bs.tracker_contrast = contrast_used;
     frontend::RotationParticleFilterOptions tracker_options = opt.tracker;
+    tracker_options.probe_every_batches = opt.failure_probe_every_batches;
+    tracker_options.probe_offset_rad = opt.failure_probe_offset_rad;
     tracker_options.contrast_threshold = contrast_used;
     pf = std::make_unique<frontend::RotationParticleFilter>(undistorter, tracker_options);
     pf->reset(Eigen::Quaterniond(R), t_track0);
@@ -574,6 +588,66 @@ struct MosaicPipeline::Impl {
   }
 
   // ---- tracking and mapping ----------------------------------------------------------------------
+
+  // ---- tracking failure ---------------------------------------------------------------------------
+
+  bool lost = false;
+  int64_t probe_seen_t = INT64_MIN, window_t0 = INT64_MIN;
+  double window_sum = 0, quality_sum = 0;
+  int64_t window_n = 0;
+  std::mt19937_64 relocalize_rng{0x5eed};
+
+  // Collects the tracker's probe contrast; at the end of each failure window decides lost /
+  // recovered and re-localises while lost.
+  void watch_quality(int64_t t_now) {
+    if (opt.failure_probe_every_batches <= 0) return;
+    if (window_t0 == INT64_MIN) window_t0 = t_now;
+    if (pf->last_probe_t_ns() != probe_seen_t && std::isfinite(pf->last_probe_contrast())) {
+      probe_seen_t = pf->last_probe_t_ns();
+      window_sum += pf->last_probe_contrast();
+      ++window_n;
+    }
+    if (t_now - window_t0 < opt.failure_window_ns) return;
+    if (window_n > 0) {
+      const double q = window_sum / static_cast<double>(window_n);
+      MosaicStats& st = result.stats;
+      st.quality_min = st.quality_windows == 0 ? q : std::min(st.quality_min, q);
+      quality_sum += q;
+      ++st.quality_windows;
+      st.quality_mean = quality_sum / static_cast<double>(st.quality_windows);
+      if (!lost && q < opt.failure_lost_contrast) {
+        lost = true;
+        result.tracking_lost.push_back({window_t0, t_now, false, 0});
+        log_warning("MosaicPipeline: tracking lost at " + std::to_string(1e-9 * static_cast<double>(window_t0)) +
+                    " s (probe contrast " + std::to_string(q) + " per event)");
+      } else if (lost && q >= opt.failure_recovered_contrast) {
+        lost = false;
+        result.tracking_lost.back().t_end_ns = t_now;
+        result.tracking_lost.back().recovered = true;
+      }
+      if (lost) {
+        result.tracking_lost.back().t_end_ns = t_now;
+        if (opt.failure_relocalize_spread_rad > 0) relocalize();
+      }
+    }
+    window_sum = 0;
+    window_n = 0;
+    window_t0 = t_now;
+  }
+
+  // Spreads the particles around the mean (Gaussian, failure_relocalize_spread_rad per axis),
+  // equal weights; their velocities stay.
+  void relocalize() {
+    std::normal_distribution<double> g(0.0, opt.failure_relocalize_spread_rad);
+    const Eigen::Quaterniond m = pf->mean();
+    std::vector<Eigen::Quaterniond> p(pf->particles().size());
+    for (size_t i = 0; i < p.size(); ++i) {
+      const Eigen::Vector3d d(g(relocalize_rng), g(relocalize_rng), g(relocalize_rng));
+      p[i] = i == 0 ? m : (m * calib::so3_exp_quat(d)).normalized();
+    }
+    pf->set_particles(p, std::vector<double>(p.size(), 1.0));
+    ++result.tracking_lost.back().relocalizations;
+  }
 
   // Processes one particle-filter batch when its events (and IMU) are complete; false when waiting.
   bool tracking_step() {
@@ -600,12 +674,17 @@ struct MosaicPipeline::Impl {
     }
     pf->update(ev, n, view);
     pf->flush(view);
+    watch_quality(t_now);
     const Eigen::Matrix3d R_pf = pf->mean().toRotationMatrix();
     const Eigen::Vector3d w_c = pf->angular_velocity_c();
     const int64_t t_pf = pf->time_ns();
-    block.events.insert(block.events.end(), ev, ev + n);
-    block.steps.push_back({MapperBlock::Kind::kEvents, block.events.size(), R_pf, w_c, t_pf,
-                           mapping::GradientMosaic::ReconstructMode::kAuto, 0});
+    if (lost && opt.failure_freeze_map) {
+      result.stats.events_unmapped_lost += static_cast<int64_t>(n);
+    } else {
+      block.events.insert(block.events.end(), ev, ev + n);
+      block.steps.push_back({MapperBlock::Kind::kEvents, block.events.size(), R_pf, w_c, t_pf,
+                             mapping::GradientMosaic::ReconstructMode::kAuto, 0});
+    }
     record(t_pf, R_pf);
     head += n;
     processed += static_cast<int64_t>(n);

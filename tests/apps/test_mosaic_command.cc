@@ -173,6 +173,27 @@ TEST(MosaicConfig, ErrorsNameFileLineAndKey) {
   EXPECT_DOUBLE_EQ(h.tracker.relative_max_path_rad, 0.2);
   std::ofstream(p) << "tracker: {relative_max_path_rad: 0}\n";
   EXPECT_THROW(load_mosaic_config(p), InputError);
+  // Tracking-failure keys: read, resolved, read back; bad values rejected with the key.
+  std::ofstream(p) << "failure: {probe_every_batches: 2, probe_offset_rad: 0.015, window_ms: 80, lost_contrast: 0.04, "
+                      "recovered_contrast: 0.12, freeze_map: false, relocalize_spread_rad: 0}\n";
+  std::string resolved_f;
+  const MosaicConfig k = load_mosaic_config(p, &resolved_f);
+  EXPECT_EQ(k.failure_probe_every_batches, 2);
+  EXPECT_DOUBLE_EQ(k.failure_probe_offset_rad, 0.015);
+  EXPECT_EQ(k.failure_window_ns, 80'000'000);
+  EXPECT_DOUBLE_EQ(k.failure_lost_contrast, 0.04);
+  EXPECT_DOUBLE_EQ(k.failure_recovered_contrast, 0.12);
+  EXPECT_FALSE(k.failure_freeze_map);
+  EXPECT_DOUBLE_EQ(k.failure_relocalize_spread_rad, 0.0);
+  std::ofstream(p) << resolved_f;
+  const MosaicConfig k2 = load_mosaic_config(p);
+  EXPECT_EQ(k2.failure_window_ns, 80'000'000);
+  EXPECT_DOUBLE_EQ(k2.failure_recovered_contrast, 0.12);
+  for (const char* bad : {"failure: {window_ms: 0}\n", "failure: {lost_contrast: 0.2}\n", "failure: {probe_offset_rad: 0.5}\n",
+                          "failure: {freeze_map: often}\n"}) {
+    std::ofstream(p) << bad;
+    EXPECT_THROW(load_mosaic_config(p), InputError) << bad;
+  }
   std::ofstream(p) << "tracker: {velocity_noise_rad_s_per_sqrt_s: -1}\n";
   EXPECT_THROW(load_mosaic_config(p), InputError);
   std::ofstream(p) << "mosaic: {threads: 3}\n";

@@ -74,6 +74,18 @@ TEST(MosaicPipelineOptions, DefaultsAreValidAndBadValuesAreRejectedWithAReason) 
   o.tracker.num_particles = 0;  // a nested option struct's own check
   rejected(o, "tracker: ");
   o = {};
+  o.failure_window_ns = 0;
+  rejected(o, "failure_window_ns");
+  o = {};
+  o.failure_recovered_contrast = 0.01;  // below the lost level
+  rejected(o, "failure_recovered_contrast");
+  o = {};
+  o.failure_relocalize_spread_rad = -0.1;
+  rejected(o, "failure_relocalize_spread_rad");
+  o = {};
+  o.failure_probe_offset_rad = 0.05;  // beyond the tracker's linearisation spread
+  rejected(o, "tracker: probe_offset_rad");
+  o = {};
   o.mosaic.width = 0;
   rejected(o, "mosaic: ");
   EXPECT_THROW(MosaicPipeline(o, test_camera()), std::invalid_argument);
@@ -241,6 +253,14 @@ TEST(MosaicPipelineSimulated, PosterRotationWithGyro) {
   // 0.098 / 0.167 with the new schedule and 100 particles: the adaptive count costs a little).
   EXPECT_LT(rms, 0.12);
   EXPECT_LT(mx, 0.27);
+  // Tracking quality: no lost segment; the probe contrast's 100 ms means stay well above the lost
+  // level (0.05).
+  std::printf("gyro: probe contrast over %lld windows: min %.3f, mean %.3f\n", static_cast<long long>(r.stats.quality_windows),
+              r.stats.quality_min, r.stats.quality_mean);
+  EXPECT_TRUE(r.tracking_lost.empty());
+  EXPECT_GE(r.stats.quality_windows, 10);
+  EXPECT_GT(r.stats.quality_min, 0.25);  // measured 0.336 (mean 0.398)
+  EXPECT_EQ(r.stats.events_unmapped_lost, 0);
   // The bootstrap alone (gyro integration over 0.3 s): measured 0.091 deg RMS, 0.154 deg max.
   const auto [boot_rms, boot_max] = rotation_error_deg(r.rotation, s.groundtruth, r.stats.bootstrap.t_end_ns);
   std::printf("gyro bootstrap: rotation error rms %.3f deg, max %.3f deg\n", boot_rms, boot_max);
@@ -274,6 +294,10 @@ TEST(MosaicPipelineSimulated, PosterRotationEventsOnly) {
   // map re-solved every 20 ms and 100 particles, 1.081 / 2.108 with the new schedule and 100).
   EXPECT_LT(rms, 1.4);
   EXPECT_LT(mx, 2.75);
+  std::printf("events only: probe contrast over %lld windows: min %.3f, mean %.3f\n",
+              static_cast<long long>(r.stats.quality_windows), r.stats.quality_min, r.stats.quality_mean);
+  EXPECT_TRUE(r.tracking_lost.empty());
+  EXPECT_GT(r.stats.quality_min, 0.28);  // measured 0.371 (mean 0.401)
   // The bootstrap alone (CMax rates per window over 0.3 s): measured 0.371 deg RMS, 0.612 deg max.
   const auto [boot_rms, boot_max] = rotation_error_deg(r.rotation, s.groundtruth, r.stats.bootstrap.t_end_ns);
   std::printf("CMax bootstrap: rotation error rms %.3f deg, max %.3f deg\n", boot_rms, boot_max);
@@ -317,6 +341,37 @@ TEST(MosaicPipelineSimulated, PosterRotationEventsOnlyParticleVelocity) {
   EXPECT_LT(rms, 0.55);
   EXPECT_LT(mx, 0.75);
   EXPECT_LT(g_rms, 0.25);
+}
+
+// Tracking failure: the events after 0.8 s come mirrored left-right (a view the map cannot
+// explain): the probe contrast collapses, a lost segment is reported from the first window after
+// the change, the mosaic is not written while lost, and the particle spreads do not bring back a
+// view that does not exist. Before the change the run is the unchanged one.
+TEST(MosaicPipelineSimulated, MirroredViewIsDetectedAsLost) {
+  const Sequence& s = rotation_sequence();
+  Sequence m = s;
+  const int64_t t_change = s.events.front().t_ns + 800'000'000;
+  const int W = s.camera.camera.width();
+  for (Event& e : m.events)
+    if (e.t_ns >= t_change) e.x = static_cast<uint16_t>(W - 1 - e.x);
+  const MosaicPipelineOptions o = command_options(true);
+  const MosaicResult r = run(o, m, size_t{1} << 18, true).result;
+  std::printf("mirrored after 0.8 s: %zu lost segments", r.tracking_lost.size());
+  for (const MosaicLostSegment& g : r.tracking_lost)
+    std::printf(" [%.3f, %.3f] s (%s, %lld re-localisations)", 1e-9 * (g.t_begin_ns - s.events.front().t_ns),
+                1e-9 * (g.t_end_ns - s.events.front().t_ns), g.recovered ? "recovered" : "not recovered",
+                static_cast<long long>(g.relocalizations));
+  std::printf("; probe contrast min %.3f mean %.3f; %lld events not mapped\n", r.stats.quality_min, r.stats.quality_mean,
+              static_cast<long long>(r.stats.events_unmapped_lost));
+  ASSERT_EQ(r.tracking_lost.size(), 1u);
+  const MosaicLostSegment& g = r.tracking_lost.front();
+  EXPECT_GE(g.t_begin_ns, t_change - o.failure_window_ns);
+  EXPECT_LE(g.t_begin_ns, t_change + 2 * o.failure_window_ns);  // measured: the window from 0.900 s
+  EXPECT_FALSE(g.recovered);
+  EXPECT_GE(g.t_end_ns, s.events.back().t_ns - o.failure_window_ns);
+  EXPECT_GT(g.relocalizations, 2);
+  EXPECT_GT(r.stats.events_unmapped_lost, static_cast<int64_t>(m.events.size() / 4));
+  EXPECT_LT(r.stats.quality_min, 0.05);
 }
 
 // The mapper on a second thread (threads = 2) gives bit-identical results: trajectory, final

@@ -110,6 +110,26 @@ struct MosaicPipelineOptions {
   // tracker.contrast_threshold (MosaicResult::bootstrap.contrast_calibrated = false).
   int calibration_min_samples = 1000;
 
+  // Tracking failure. Every failure_probe_every_batches-th particle-filter batch (count, >= 0;
+  // 0: no detection) is also weighed under six rotations failure_probe_offset_rad (rad, > 0) off
+  // the mean (RotationParticleFilterOptions::probe_*): the cloud's log-likelihood per event minus
+  // the probes' is positive while the estimate sits on the map's optimum and near zero once the
+  // filter is lost, whatever the scene. Its mean over failure_window_ns (ns, > 0) below
+  // failure_lost_contrast starts a lost segment; a window mean at or above
+  // failure_recovered_contrast (>= the lost level) ends it. Measured on 1.5-4 s rotation
+  // sequences (100 ms means): tracking 0.11-0.50 (poster slow/medium/fast, boxes, shapes with the
+  // gyro), lost -0.02-0.01 (shapes events only, from 0.9 s).
+  int failure_probe_every_batches = 4;
+  double failure_probe_offset_rad = 0.01;
+  int64_t failure_window_ns = 100'000'000;
+  double failure_lost_contrast = 0.05;
+  double failure_recovered_contrast = 0.1;
+  // While lost, events are not mapped (the mosaic is not written with a wrong rotation).
+  bool failure_freeze_map = true;
+  // While lost, each failure window ends by spreading the particles around the mean by this much
+  // (rad, >= 0; 0: no re-localisation), so the cloud can find the map's optimum again.
+  double failure_relocalize_spread_rad = 0.05;
+
   // The rotation trajectory keeps one pose per this period at most, ns (> 0).
   int64_t trajectory_period_ns = 5'000'000;
   // Snapshot callback (set_snapshot_callback) at the first tracked batch and then after every
@@ -139,6 +159,15 @@ struct MosaicBootstrapStats {
   int64_t contrast_samples = 0;   // calibration samples used
 };
 
+// A span of lost tracking (camera clock): from the start of the first failure window below the
+// lost level to the end of the window that recovered (or the last event).
+struct MosaicLostSegment {
+  int64_t t_begin_ns = 0;
+  int64_t t_end_ns = 0;
+  bool recovered = false;        // a window reached failure_recovered_contrast again
+  int64_t relocalizations = 0;   // particle spreads while lost
+};
+
 struct MosaicStats {
   int64_t events = 0;                 // events given to add_events
   int64_t imu_samples = 0;            // IMU samples given to add_imu
@@ -151,6 +180,12 @@ struct MosaicStats {
   double seen_fraction = 0;           // seen_pixels / mosaic texels
   MosaicBootstrapStats bootstrap;
   frontend::RotationParticleFilterStats tracker;
+  // Tracking quality (failure_probe_every_batches > 0): the failure windows' mean probe contrast
+  // (log-likelihood per event), lowest and mean over the windows; events not mapped while lost.
+  int64_t quality_windows = 0;
+  double quality_min = 0;
+  double quality_mean = 0;
+  int64_t events_unmapped_lost = 0;
 };
 
 struct MosaicResult {
@@ -161,6 +196,7 @@ struct MosaicResult {
   // per output_weighting.
   mapping::MosaicReconstruction reconstruction;
   MosaicStats stats;
+  std::vector<MosaicLostSegment> tracking_lost;
 };
 
 class MosaicPipeline {
