@@ -12,20 +12,24 @@
 # / wall time, and events / CPU time (the figure to trust on a shared machine: it does not count
 # time spent waiting for the core). THREADS=2 runs the mapper on a second thread.
 #   bench/mosaic_tables.sh [SEQ_DIR] [OUT]     (defaults: build/mosaic_sequences, build/mosaic_tables)
-#   EVIO=path/to/evio   QUICK=1 (sweep table only)   THREADS=2
+#   EVIO=path/to/evio   QUICK=1 (sweep table only)   THREADS=2   SCENE=boxes_rotation (any
+#   datasets/*_rotation.yaml with the poster's sinusoid frequencies; default poster_rotation; use a
+#   SEQ_DIR per scene)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 evio=${EVIO:-build/apps/evio}
 seqs=${1:-build/mosaic_sequences}
 out=${2:-build/mosaic_tables}
 [ -x "$evio" ] || { echo "mosaic_tables: $evio not found (build the evio target or set EVIO)" >&2; exit 1; }
+scene=${SCENE:-poster_rotation}
+[ -f "datasets/$scene.yaml" ] || { echo "mosaic_tables: datasets/$scene.yaml not found (SCENE)" >&2; exit 1; }
 mkdir -p "$seqs" "$out/runs"
 
 simulate() {  # name duration_s [extra args...]
   local name=$1 dur=$2; shift 2
   if [ ! -f "$seqs/$name/simulation.json" ]; then
-    echo "== evio simulate datasets/poster_rotation.yaml --duration $dur $* --out $seqs/$name" >&2
-    "$evio" -q simulate datasets/poster_rotation.yaml --duration "$dur" "$@" --out "$seqs/$name" >&2
+    echo "== evio simulate datasets/$scene.yaml --duration $dur $* --out $seqs/$name" >&2
+    "$evio" -q simulate "datasets/$scene.yaml" --duration "$dur" "$@" --out "$seqs/$name" >&2
   fi
 }
 simulate slow 30 --set "trajectory.angle_frequency_hz=[0.275, 0.225, 0.175]"

@@ -308,22 +308,29 @@ bool RotationParticleFilter::gyro_fresh(int64_t t_ns) const {
   return !gyro_.empty() && t_ns - gyro_.back().first <= options_.gyro_max_age_ns;
 }
 
-// Piecewise-constant integral of the gyro rates over [t0, t1]: each sample's rate holds from its
-// time to the next sample's (the first sample's rate also before it). Drops samples no longer
-// needed and remembers the rate at t1.
+// Integral of the gyro rates over [t0, t1], the rate linear between consecutive samples (a sample
+// is the rate at its time) and held beyond the last one (and before the first): each piece between
+// sample times is one step at its midpoint rate. Holding each sample until the next instead lags
+// the rotation by half a sample period (0.5 ms at 1 kHz: 0.33 deg at 670 deg/s). Drops samples no
+// longer needed and remembers the rate at t1.
 Eigen::Quaterniond RotationParticleFilter::gyro_increment(int64_t t0, int64_t t1) {
   while (gyro_.size() >= 2 && gyro_[1].first <= t0) gyro_.pop_front();
+  auto rate_at = [&](size_t k, int64_t t) {  // between samples k and k + 1 (held beyond them)
+    if (k + 1 >= gyro_.size() || t <= gyro_[k].first) return gyro_[k].second;
+    const double a = static_cast<double>(t - gyro_[k].first) / static_cast<double>(gyro_[k + 1].first - gyro_[k].first);
+    return Eigen::Vector3d(gyro_[k].second + std::min(a, 1.0) * (gyro_[k + 1].second - gyro_[k].second));
+  };
   Eigen::Quaterniond dq = Eigen::Quaterniond::Identity();
   int64_t s = t0;
   size_t k = 0;
   while (s < t1) {
     const int64_t seg_end = k + 1 < gyro_.size() ? std::min(t1, gyro_[k + 1].first) : t1;
-    if (seg_end > s) dq = dq * exp_quat(gyro_[k].second * (1e-9 * static_cast<double>(seg_end - s)));
+    if (seg_end > s) dq = dq * exp_quat(rate_at(k, s + (seg_end - s) / 2) * (1e-9 * static_cast<double>(seg_end - s)));
     s = seg_end;
     if (k + 1 < gyro_.size() && gyro_[k + 1].first <= s) ++k;
   }
   while (gyro_.size() >= 2 && gyro_[1].first <= t1) gyro_.pop_front();
-  omega_gyro_c_ = gyro_.front().second;
+  omega_gyro_c_ = rate_at(0, t1);
   have_gyro_ = true;
   return dq.normalized();
 }

@@ -426,14 +426,19 @@ struct MosaicPipeline::Impl {
   }
   bool imu_ready(int64_t t_cam) const { return !opt.use_gyro || finishing || imu_covers(t_cam) || imu_missing(); }
 
-  // Camera-frame rate of the last sample at or before the camera-clock time (the first sample
-  // before it; zero without any sample), piecewise constant.
+  // Camera-frame rate at the camera-clock time, linear between the samples around it (held before
+  // the first and after the last; zero without any sample). Holding each sample until the next
+  // lagged the gyro bootstrap by half a sample period (poster fast: 0.29 deg RMS).
   Eigen::Vector3d gyro_c_at(int64_t t_cam) const {
     if (imu.empty()) return Eigen::Vector3d::Zero();
     const int64_t t = t_cam + shift;
     auto it = std::upper_bound(imu.begin(), imu.end(), t, [](int64_t a, const ImuSample& s) { return a < s.t_ns; });
-    if (it != imu.begin()) --it;
-    return frontend::RotationParticleFilter::camera_rate_from_imu(*it, q_c_b);
+    if (it == imu.begin()) return frontend::RotationParticleFilter::camera_rate_from_imu(*it, q_c_b);
+    const ImuSample& a = *(it - 1);
+    if (it == imu.end()) return frontend::RotationParticleFilter::camera_rate_from_imu(a, q_c_b);
+    const double s = static_cast<double>(t - a.t_ns) / static_cast<double>(it->t_ns - a.t_ns);
+    return (1 - s) * frontend::RotationParticleFilter::camera_rate_from_imu(a, q_c_b) +
+           s * frontend::RotationParticleFilter::camera_rate_from_imu(*it, q_c_b);
   }
 
   // ---- trajectory ------------------------------------------------------------------------------
@@ -665,8 +670,11 @@ struct MosaicPipeline::Impl {
         if (next_imu > 0) --next_imu;
         imu_started = true;
       }
-      for (; next_imu < imu.size() && imu[next_imu].t_ns - shift <= t_now; ++next_imu)
+      // Every sample up to the batch's end and the first one after it (the rate is interpolated).
+      for (bool after = false; next_imu < imu.size() && !after; ++next_imu) {
+        after = imu[next_imu].t_ns - shift > t_now;
         pf->add_gyro(imu[next_imu].t_ns - shift, frontend::RotationParticleFilter::camera_rate_from_imu(imu[next_imu], q_c_b));
+      }
       if (next_imu >= 4096) {  // the filter has every sample before next_imu
         imu.erase(imu.begin(), imu.begin() + static_cast<std::ptrdiff_t>(next_imu));
         next_imu = 0;

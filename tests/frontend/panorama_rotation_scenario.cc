@@ -178,8 +178,10 @@ PanoramaRunResult run_panorama_filter(const PanoramaScenario& s, const RotationP
 
   // Cut times: gyro samples (added after the events before them), chunk ends, evaluation times.
   std::vector<std::pair<int64_t, int>> cuts;  // (time, kind bits: 1 gyro, 2 eval)
+  // Each gyro sample is added when the events reach the sample before it: the filter then has the
+  // first sample after every batch and interpolates the rate (RotationParticleFilter::add_gyro).
   if (use_gyro)
-    for (const auto& g : s.gyro) cuts.emplace_back(g.first, 1);
+    for (size_t k = 0; k < s.gyro.size(); ++k) cuts.emplace_back(k == 0 ? s.gyro[0].first : s.gyro[k - 1].first, 1);
   for (int64_t t = chunk_ns; t <= s.end_ns(); t += chunk_ns) cuts.emplace_back(t, 0);
   for (int64_t t = kEvalNs; t <= s.end_ns(); t += kEvalNs) cuts.emplace_back(t, 2);
   std::stable_sort(cuts.begin(), cuts.end(), [](const auto& a, const auto& b) { return a.first < b.first; });

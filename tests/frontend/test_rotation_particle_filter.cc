@@ -271,7 +271,9 @@ TEST(RotationParticleFilter, ParticleVelocityPredictionTurnsEachParticleByItsVel
   for (const auto& v : pf.particle_velocities()) EXPECT_EQ(v, v3);
 }
 
-TEST(RotationParticleFilter, GyroPredictionIntegratesPiecewiseConstantRates) {
+// The gyro's rate is linear between samples (a sample is the rate at its time) and held after the
+// last one; each piece between sample times is integrated at its midpoint rate.
+TEST(RotationParticleFilter, GyroPredictionIntegratesLinearRates) {
   RotationParticleFilterOptions o;
   o.num_particles = 200;
   o.gyro_noise_rad_per_sqrt_s = 1e-6;
@@ -279,12 +281,24 @@ TEST(RotationParticleFilter, GyroPredictionIntegratesPiecewiseConstantRates) {
   const Eigen::Quaterniond R0(calib::so3_exp(Eigen::Vector3d(-0.4, 0.1, 0.2)));
   pf.reset(R0, 0);
   const Eigen::Vector3d w1(1.0, -2.0, 0.5), w2(-3.0, 0.2, 1.0);
+  auto rate = [&](double t_s) { return t_s >= 0.05 ? w2 : Eigen::Vector3d(w1 + (w2 - w1) * (t_s / 0.05)); };
   pf.add_gyro(0, w1);
-  pf.add_gyro(50'000'000, w2);      // rate changes at 50 ms
-  pf.predict(30'000'000);           // 30 ms of w1
-  pf.predict(65'000'000);           // 20 ms of w1, 15 ms of w2
-  const Eigen::Quaterniond expected = R0 * calib::so3_exp_quat(w1 * 0.05) * calib::so3_exp_quat(w2 * 0.015);
+  pf.add_gyro(50'000'000, w2);      // samples at 0 and 50 ms
+  pf.predict(30'000'000);           // [0, 30] ms
+  EXPECT_LT((pf.angular_velocity_c() - rate(0.03)).norm(), 1e-12);
+  pf.predict(65'000'000);           // [30, 50] ms between the samples, [50, 65] ms held at w2
+  const Eigen::Quaterniond expected = R0 * calib::so3_exp_quat(rate(0.015) * 0.03) *
+                                      calib::so3_exp_quat(rate(0.04) * 0.02) * calib::so3_exp_quat(w2 * 0.015);
   EXPECT_LT(angle_between(pf.mean(), expected), 1e-5);
+  // Against a fine integration of the linear rate (1 us steps): the midpoint pieces are close;
+  // holding each sample until the next (the former scheme) is not.
+  Eigen::Quaterniond fine = R0;
+  for (int k = 0; k < 65000; ++k) fine = fine * calib::so3_exp_quat(rate((k + 0.5) * 1e-6) * 1e-6);
+  const Eigen::Quaterniond held = R0 * calib::so3_exp_quat(w1 * 0.05) * calib::so3_exp_quat(w2 * 0.015);
+  std::printf("linear gyro: %.2e rad from a fine integration; holding each sample: %.2e rad\n", angle_between(pf.mean(), fine),
+              angle_between(held, fine));
+  EXPECT_LT(angle_between(pf.mean(), fine), 6e-4);  // measured 3.9e-4
+  EXPECT_GT(angle_between(held, fine), 0.09);  // measured 0.115
   EXPECT_LT((pf.angular_velocity_c() - w2).norm(), 1e-12);
   EXPECT_LT((pf.angular_velocity_w() - pf.mean() * w2).norm(), 1e-12);
   EXPECT_EQ(pf.stats().gyro_predictions, 2);

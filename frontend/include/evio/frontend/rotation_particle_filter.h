@@ -12,8 +12,8 @@
 //    dR = Exp(w_hat_c dt) with the filter's own smoothed angular-velocity estimate, or, with
 //    kParticleVelocity, each particle carries its own camera-frame angular velocity w_i:
 //    R_i <- R_i Exp(w_i dt + n), w_i <- w_i + m, m ~ N(0, sigma_w^2 dt I_3). With gyro
-//    samples (add_gyro, camera-frame rates), dR is the piecewise-constant integral of the rates and
-//    sigma = gyro_noise_rad_per_sqrt_s.
+//    samples (add_gyro, camera-frame rates), dR is the integral of the rates, linear between
+//    samples (held beyond the last), and sigma = gyro_noise_rad_per_sqrt_s.
 //  - Measurement (Kim et al.): an event at pixel x (unit bearing b(x) in the camera frame) with
 //    polarity p says the log intensity seen by x changed by p*C since x's previous event. With
 //    L the mosaic sampled bilinearly at the equirectangular projection pi(.), and R_prev(x) the
@@ -249,9 +249,10 @@ class RotationParticleFilter {
 
   // Camera-frame angular velocity sample, rad/s, at t_ns (camera clock): the caller converts an
   // IMU sample as omega_c = R_c_b * (gyro_b - bias_b) and shifts its time to the camera clock
-  // (see camera_rate_from_imu). Samples must come in time order; predictions integrate them as
-  // piecewise constant (each rate holds from its time until the next sample), so add each sample
-  // before the events that follow it.
+  // (see camera_rate_from_imu). Samples must come in time order; predictions integrate the rate
+  // linearly interpolated between samples and held beyond the last one, so add each sample before
+  // the events that follow it, and the first sample after a batch's events before that batch
+  // (else its last interval is held at the earlier rate, which lags by up to a sample period).
   void add_gyro(int64_t t_ns, const Eigen::Vector3d& omega_c_rad_s);
   static Eigen::Vector3d camera_rate_from_imu(const ImuSample& imu, const Eigen::Quaterniond& R_c_b,
                                               const Eigen::Vector3d& gyro_bias_b = Eigen::Vector3d::Zero());
