@@ -97,7 +97,8 @@ std::string config_yaml(const MosaicConfig& c) {
     << ", calibration_min_samples: " << c.calibration_min_samples << ", gyro_window_ms: " << num(c.gyro_bootstrap_window_ns * 1e-6)
     << ", gyro_step_ms: " << num(c.gyro_integration_step_ns * 1e-6) << "}\n";
   y << "failure: {probe_every_batches: " << c.failure_probe_every_batches << ", probe_offset_rad: " << num(c.failure_probe_offset_rad)
-    << ", window_ms: " << num(c.failure_window_ns * 1e-6) << ", lost_contrast: " << num(c.failure_lost_contrast)
+    << ", window_ms: " << num(c.failure_window_ns * 1e-6) << ", min_events: " << c.failure_min_events
+    << ", min_rate_ratio: " << num(c.failure_min_rate_ratio) << ", lost_windows: " << c.failure_lost_windows << ", lost_contrast: " << num(c.failure_lost_contrast)
     << ", recovered_contrast: " << num(c.failure_recovered_contrast) << ", freeze_map: " << (c.failure_freeze_map ? "true" : "false")
     << ", relocalize_spread_rad: " << num(c.failure_relocalize_spread_rad) << "}\n";
   y << "output: {trajectory_ms: " << num(c.trajectory_period_ns * 1e-6) << ", snapshot_ms: " << num(c.snapshot_period_ns * 1e-6)
@@ -239,8 +240,11 @@ MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_y
     }
     if (top.has("failure")) {
       const Section s = top.child("failure", false, "a map");
-      s.allow({"probe_every_batches", "probe_offset_rad", "window_ms", "lost_contrast", "recovered_contrast", "freeze_map",
-               "relocalize_spread_rad"});
+      s.allow({"probe_every_batches", "probe_offset_rad", "window_ms", "min_events", "min_rate_ratio", "lost_windows", "lost_contrast", "recovered_contrast",
+               "freeze_map", "relocalize_spread_rad"});
+      c.failure_min_events = s.integer("min_events", c.failure_min_events, 0, 1000000000);
+      c.failure_min_rate_ratio = s.number("min_rate_ratio", c.failure_min_rate_ratio, Range::kNonNegative, "");
+      c.failure_lost_windows = s.integer("lost_windows", c.failure_lost_windows, 1, 1000000);
       c.failure_probe_every_batches = s.integer("probe_every_batches", c.failure_probe_every_batches, 0, 1000000);
       c.failure_probe_offset_rad = s.number("probe_offset_rad", c.failure_probe_offset_rad, Range::kPositive, "rad");
       c.failure_window_ns = ms_ns(s, "window_ms", c.failure_window_ns, Range::kPositive);
@@ -392,7 +396,7 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
       << ", \"initial_relative_residual\": " << num(rec.weighted_stats.initial_relative_residual)
       << ", \"relative_residual\": " << num(rec.weighted_stats.relative_residual)
       << ", \"converged\": " << (rec.weighted_stats.converged ? "true" : "false") << "}"
-      << ",\n  \"snapshots\": " << snapshots << ",\n  \"quality\": {\"windows\": " << ms.quality_windows
+      << ",\n  \"snapshots\": " << snapshots << ",\n  \"quality\": {\"windows\": " << ms.quality_windows << ", \"windows_undecided\": " << ms.quality_windows_undecided
       << ", \"probe_contrast_min\": " << num(ms.quality_min) << ", \"probe_contrast_mean\": " << num(ms.quality_mean)
       << ", \"events_unmapped_lost\": " << ms.events_unmapped_lost << "},\n  \"tracking_lost_segments\": [";
     for (size_t k = 0; k < result.tracking_lost.size(); ++k) {

@@ -37,6 +37,10 @@ bool MosaicPipelineOptions::Validate(std::string* why) const {
   if (failure_probe_every_batches < 0) return fail("failure_probe_every_batches must be >= 0");
   if (!(failure_probe_offset_rad > 0) || !std::isfinite(failure_probe_offset_rad)) return fail("failure_probe_offset_rad must be > 0 rad");
   if (failure_window_ns <= 0) return fail("failure_window_ns must be > 0 ns");
+  if (failure_min_events < 0) return fail("failure_min_events must be >= 0");
+  if (failure_lost_windows < 1) return fail("failure_lost_windows must be >= 1");
+  if (!(failure_min_rate_ratio >= 0) || !std::isfinite(failure_min_rate_ratio))
+    return fail("failure_min_rate_ratio must be finite and >= 0");
   if (!std::isfinite(failure_lost_contrast) || !std::isfinite(failure_recovered_contrast) ||
       !(failure_recovered_contrast >= failure_lost_contrast))
     return fail("failure_recovered_contrast must be finite and >= failure_lost_contrast");
@@ -599,31 +603,44 @@ struct MosaicPipeline::Impl {
   bool lost = false;
   int64_t probe_seen_t = INT64_MIN, window_t0 = INT64_MIN;
   double window_sum = 0, quality_sum = 0;
-  int64_t window_n = 0;
+  int64_t window_n = 0, window_events = 0;
+  int64_t window_all_events = 0;  // every event of the window's batches
+  double rate_mean = 0;           // running mean of window_all_events
+  int low_windows = 0;         // consecutive decided windows below the lost level
+  int64_t low_since = 0;       // start of the first of them
   std::mt19937_64 relocalize_rng{0x5eed};
 
   // Collects the tracker's probe contrast; at the end of each failure window decides lost /
   // recovered and re-localises while lost.
-  void watch_quality(int64_t t_now) {
+  void watch_quality(int64_t t_now, size_t batch_events) {
     if (opt.failure_probe_every_batches <= 0) return;
+    window_all_events += static_cast<int64_t>(batch_events);
     if (window_t0 == INT64_MIN) window_t0 = t_now;
     if (pf->last_probe_t_ns() != probe_seen_t && std::isfinite(pf->last_probe_contrast())) {
       probe_seen_t = pf->last_probe_t_ns();
       window_sum += pf->last_probe_contrast();
+      window_events += pf->last_batch_loglik_events();
       ++window_n;
     }
     if (t_now - window_t0 < opt.failure_window_ns) return;
-    if (window_n > 0) {
+    // Event rate against its running mean (exponential, about 20 windows): a near-still moment.
+    const double rate = static_cast<double>(window_all_events);
+    const bool moving = rate_mean <= 0 || rate >= opt.failure_min_rate_ratio * rate_mean;
+    rate_mean = rate_mean <= 0 ? rate : 0.95 * rate_mean + 0.05 * rate;
+    window_all_events = 0;
+    if (window_n > 0 && window_events >= opt.failure_min_events && moving) {
       const double q = window_sum / static_cast<double>(window_n);
       MosaicStats& st = result.stats;
       st.quality_min = st.quality_windows == 0 ? q : std::min(st.quality_min, q);
       quality_sum += q;
       ++st.quality_windows;
       st.quality_mean = quality_sum / static_cast<double>(st.quality_windows);
-      if (!lost && q < opt.failure_lost_contrast) {
+      low_windows = q < opt.failure_lost_contrast ? low_windows + 1 : 0;
+      if (low_windows == 1) low_since = window_t0;
+      if (!lost && low_windows >= opt.failure_lost_windows) {
         lost = true;
-        result.tracking_lost.push_back({window_t0, t_now, false, 0});
-        log_warning("MosaicPipeline: tracking lost at " + std::to_string(1e-9 * static_cast<double>(window_t0)) +
+        result.tracking_lost.push_back({low_since, t_now, false, 0});
+        log_warning("MosaicPipeline: tracking lost at " + std::to_string(1e-9 * static_cast<double>(low_since)) +
                     " s (probe contrast " + std::to_string(q) + " per event)");
       } else if (lost && q >= opt.failure_recovered_contrast) {
         lost = false;
@@ -632,10 +649,14 @@ struct MosaicPipeline::Impl {
       }
       if (lost) {
         result.tracking_lost.back().t_end_ns = t_now;
-        if (opt.failure_relocalize_spread_rad > 0) relocalize();
+        if (opt.failure_relocalize_spread_rad > 0 && !opt.use_gyro) relocalize();
       }
+    } else if (window_n > 0) {
+      ++result.stats.quality_windows_undecided;
+      if (lost) result.tracking_lost.back().t_end_ns = t_now;
     }
     window_sum = 0;
+    window_events = 0;
     window_n = 0;
     window_t0 = t_now;
   }
@@ -682,7 +703,7 @@ struct MosaicPipeline::Impl {
     }
     pf->update(ev, n, view);
     pf->flush(view);
-    watch_quality(t_now);
+    watch_quality(t_now, n);
     const Eigen::Matrix3d R_pf = pf->mean().toRotationMatrix();
     const Eigen::Vector3d w_c = pf->angular_velocity_c();
     const int64_t t_pf = pf->time_ns();

@@ -175,8 +175,9 @@ TEST(MosaicConfig, ErrorsNameFileLineAndKey) {
   std::ofstream(p) << "tracker: {relative_max_path_rad: 0}\n";
   EXPECT_THROW(load_mosaic_config(p), InputError);
   // Tracking-failure keys: read, resolved, read back; bad values rejected with the key.
-  std::ofstream(p) << "failure: {probe_every_batches: 2, probe_offset_rad: 0.015, window_ms: 80, lost_contrast: 0.04, "
-                      "recovered_contrast: 0.12, freeze_map: false, relocalize_spread_rad: 0}\n";
+  std::ofstream(p) << "failure: {probe_every_batches: 2, probe_offset_rad: 0.015, window_ms: 80, min_events: 500, "
+                      "min_rate_ratio: 0.3, lost_windows: 3, lost_contrast: 0.04, recovered_contrast: 0.12, freeze_map: false, "
+                      "relocalize_spread_rad: 0}\n";
   std::string resolved_f;
   const MosaicConfig k = load_mosaic_config(p, &resolved_f);
   EXPECT_EQ(k.failure_probe_every_batches, 2);
@@ -186,12 +187,16 @@ TEST(MosaicConfig, ErrorsNameFileLineAndKey) {
   EXPECT_DOUBLE_EQ(k.failure_recovered_contrast, 0.12);
   EXPECT_FALSE(k.failure_freeze_map);
   EXPECT_DOUBLE_EQ(k.failure_relocalize_spread_rad, 0.0);
+  EXPECT_EQ(k.failure_min_events, 500);
+  EXPECT_DOUBLE_EQ(k.failure_min_rate_ratio, 0.3);
+  EXPECT_EQ(k.failure_lost_windows, 3);
   std::ofstream(p) << resolved_f;
   const MosaicConfig k2 = load_mosaic_config(p);
   EXPECT_EQ(k2.failure_window_ns, 80'000'000);
   EXPECT_DOUBLE_EQ(k2.failure_recovered_contrast, 0.12);
+  EXPECT_EQ(k2.failure_lost_windows, 3);
   for (const char* bad : {"failure: {window_ms: 0}\n", "failure: {lost_contrast: 0.2}\n", "failure: {probe_offset_rad: 0.5}\n",
-                          "failure: {freeze_map: often}\n"}) {
+                          "failure: {freeze_map: often}\n", "failure: {lost_windows: 0}\n"}) {
     std::ofstream(p) << bad;
     EXPECT_THROW(load_mosaic_config(p), InputError) << bad;
   }

@@ -80,6 +80,12 @@ TEST(MosaicPipelineOptions, DefaultsAreValidAndBadValuesAreRejectedWithAReason) 
   o.failure_recovered_contrast = 0.01;  // below the lost level
   rejected(o, "failure_recovered_contrast");
   o = {};
+  o.failure_lost_windows = 0;
+  rejected(o, "failure_lost_windows");
+  o = {};
+  o.failure_min_rate_ratio = -1;
+  rejected(o, "failure_min_rate_ratio");
+  o = {};
   o.failure_relocalize_spread_rad = -0.1;
   rejected(o, "failure_relocalize_spread_rad");
   o = {};
@@ -259,7 +265,7 @@ TEST(MosaicPipelineSimulated, PosterRotationWithGyro) {
   std::printf("gyro: probe contrast over %lld windows: min %.3f, mean %.3f\n", static_cast<long long>(r.stats.quality_windows),
               r.stats.quality_min, r.stats.quality_mean);
   EXPECT_TRUE(r.tracking_lost.empty());
-  EXPECT_GE(r.stats.quality_windows, 10);
+  EXPECT_GE(r.stats.quality_windows, 8);  // measured 9 decided (of 11)
   EXPECT_GT(r.stats.quality_min, 0.25);  // measured 0.330 (mean 0.395)
   EXPECT_EQ(r.stats.events_unmapped_lost, 0);
   // The bootstrap alone (gyro integration over 0.3 s): measured 0.009 deg RMS, 0.014 deg max.
@@ -345,9 +351,9 @@ TEST(MosaicPipelineSimulated, PosterRotationEventsOnlyParticleVelocity) {
 }
 
 // Tracking failure: the events after 0.8 s come mirrored left-right (a view the map cannot
-// explain): the probe contrast collapses, a lost segment is reported from the first window after
-// the change, the mosaic is not written while lost, and the particle spreads do not bring back a
-// view that does not exist. Before the change the run is the unchanged one.
+// explain): the probe contrast collapses, a lost segment is reported from the first low window
+// after the change (declared after two), the mosaic is not written while lost, and with the gyro
+// the particles are not spread.
 TEST(MosaicPipelineSimulated, MirroredViewIsDetectedAsLost) {
   const Sequence& s = rotation_sequence();
   Sequence m = s;
@@ -370,8 +376,9 @@ TEST(MosaicPipelineSimulated, MirroredViewIsDetectedAsLost) {
   EXPECT_LE(g.t_begin_ns, t_change + 2 * o.failure_window_ns);  // measured: the window from 0.900 s
   EXPECT_FALSE(g.recovered);
   EXPECT_GE(g.t_end_ns, s.events.back().t_ns - o.failure_window_ns);
-  EXPECT_GT(g.relocalizations, 2);
-  EXPECT_GT(r.stats.events_unmapped_lost, static_cast<int64_t>(m.events.size() / 4));
+  EXPECT_EQ(g.relocalizations, 0);  // not with the gyro: its prediction holds
+  // Measured 0.82 M of the 5.0 M events unmapped: the loss is declared after two low windows.
+  EXPECT_GT(r.stats.events_unmapped_lost, static_cast<int64_t>(m.events.size() / 8));
   EXPECT_LT(r.stats.quality_min, 0.05);
 }
 

@@ -115,19 +115,32 @@ struct MosaicPipelineOptions {
   // the mean (RotationParticleFilterOptions::probe_*): the cloud's log-likelihood per event minus
   // the probes' is positive while the estimate sits on the map's optimum and near zero once the
   // filter is lost, whatever the scene. Its mean over failure_window_ns (ns, > 0) below
-  // failure_lost_contrast starts a lost segment; a window mean at or above
+  // failure_lost_contrast (failure_lost_windows times in a row) starts a lost segment; a window mean at or above
   // failure_recovered_contrast (>= the lost level) ends it. Measured on 1.5-4 s rotation
   // sequences (100 ms means): tracking 0.11-0.50 (poster slow/medium/fast, boxes, shapes with the
   // gyro), lost -0.02-0.01 (shapes events only, from 0.9 s).
   int failure_probe_every_batches = 4;
   double failure_probe_offset_rad = 0.01;
   int64_t failure_window_ns = 100'000'000;
+  // A window decides nothing when its probed batches weighed fewer events than failure_min_events
+  // (count, >= 0) or its event count is below failure_min_rate_ratio (>= 0) times the running mean
+  // of the windows' counts: near a still moment the measurement hardly depends on the rotation.
+  // The turning points of a slow pan (12-16 deg/s against 66 at the peak) gave 0.3-0.4 s of low
+  // contrast while tracking at 0.4-0.6 deg (poster slow 30 s events only; shapes slow 30 s with
+  // the gyro). A floor on the tracker's own speed hid real losses instead (a lost filter's
+  // velocity is small: boxes slow lost at 1 s was reported at 20.8 s).
+  int failure_min_events = 1000;
+  double failure_min_rate_ratio = 0.5;
   double failure_lost_contrast = 0.05;
+  // Decided windows in a row below failure_lost_contrast that start a lost segment (count, >= 1;
+  // default 2: one low window at a slow turning point of poster slow 30 s was a false alarm).
+  int failure_lost_windows = 2;
   double failure_recovered_contrast = 0.1;
   // While lost, events are not mapped (the mosaic is not written with a wrong rotation).
   bool failure_freeze_map = true;
-  // While lost, each failure window ends by spreading the particles around the mean by this much
-  // (rad, >= 0; 0: no re-localisation), so the cloud can find the map's optimum again.
+  // While lost, events only, each failure window ends by spreading the particles around the mean
+  // by this much (rad, >= 0; 0: no re-localisation), so the cloud can find the map's optimum again.
+  // Not with the gyro: its prediction holds, and a "lost" there is a poor map (shapes slow).
   double failure_relocalize_spread_rad = 0.05;
 
   // The rotation trajectory keeps one pose per this period at most, ns (> 0).
@@ -183,6 +196,7 @@ struct MosaicStats {
   // Tracking quality (failure_probe_every_batches > 0): the failure windows' mean probe contrast
   // (log-likelihood per event), lowest and mean over the windows; events not mapped while lost.
   int64_t quality_windows = 0;
+  int64_t quality_windows_undecided = 0;  // windows under failure_min_events or failure_min_rate_ratio
   double quality_min = 0;
   double quality_mean = 0;
   int64_t events_unmapped_lost = 0;
