@@ -336,49 +336,13 @@ int main(int argc, char** argv) {
       cv::Scalar m, sd; cv::meanStdDev(fr.accumulator, m, sd);
       var.push_back(sd[0] * sd[0]);
     }
-    // position check against the predicted edge density at t_ref
-    {
-      const calib::CameraIntrinsics& in = cal.camera.intrinsics();
-      const sim::RenderedView rv = sim.render(t_ref + cal.time_shift_ns, true);
-      cv::Mat dd(rv.intensity.size(), CV_32F, cv::Scalar(0));
-      for (int y = 1; y + 1 < dd.rows; ++y)
-        for (int x = 1; x + 1 < dd.cols; ++x) {
-          auto L = [&](int xx, int yy) { return std::log(rv.intensity.at<float>(yy, xx) + 1e-3f); };
-          const float gx = 0.5f * (L(x + 1, y) - L(x - 1, y)), gy = 0.5f * (L(x, y + 1) - L(x, y - 1));
-          const cv::Vec2f fl = rv.flow.at<cv::Vec2f>(y, x);
-          dd.at<float>(y, x) = std::abs(gx * fl[0] + gy * fl[1]);
-        }
-      cv::Mat P(dd.size(), CV_32F, cv::Scalar(0)), FX(dd.size(), CV_32F, cv::Scalar(0)), FY(dd.size(), CV_32F, cv::Scalar(0));
-      for (int y = 0; y < P.rows; ++y)
-        for (int x = 0; x < P.cols; ++x) {
-          Eigen::Vector2d px;
-          if (!cal.camera.project(Eigen::Vector3d((x - in.cx) / in.fx, (y - in.cy) / in.fy, 1.0), &px)) continue;
-          const int x0 = (int)std::floor(px.x()), y0 = (int)std::floor(px.y());
-          if (x0 < 0 || y0 < 0 || x0 + 1 >= dd.cols || y0 + 1 >= dd.rows) continue;
-          const float ax = px.x() - x0, ay = px.y() - y0;
-          P.at<float>(y, x) = (1 - ax) * (1 - ay) * dd.at<float>(y0, x0) + ax * (1 - ay) * dd.at<float>(y0, x0 + 1) + (1 - ax) * ay * dd.at<float>(y0 + 1, x0) + ax * ay * dd.at<float>(y0 + 1, x0 + 1);
-          FX.at<float>(y, x) = rv.flow.at<cv::Vec2f>(y0, x0)[0];
-          FY.at<float>(y, x) = rv.flow.at<cv::Vec2f>(y0, x0)[1];
-        }
-      for (double s : {0.0, 1.0}) {
-        b.set_motion_plane(v * s + Eigen::Vector3d(1e-12, 0, 0), pl.head<3>(), pl.w());
-        auto fr = b.build_frame(w, t_ref);
-        double along = 0, across = 0, wsum = 0, fsum = 0; int np = 0;
-        const int S = 32;
-        for (int y = 8; y + S <= P.rows - 8; y += S)
-          for (int x = 8; x + S <= P.cols - 8; x += S) {
-            cv::Rect r(x, y, S, S);
-            cv::Mat a = fr.accumulator(r).clone(), p = P(r).clone();
-            if (cv::sum(a)[0] < 50 || cv::sum(p)[0] <= 0) continue;
-            double resp = 0;
-            cv::Point2d sh = cv::phaseCorrelate(p, a, cv::noArray(), &resp);
-            if (resp < 0.1 || std::hypot(sh.x, sh.y) > 5) continue;
-            const double fx = cv::mean(FX(r))[0], fy = cv::mean(FY(r))[0], fn = std::hypot(fx, fy);
-            if (fn < 1) continue;
-            along += (sh.x * fx + sh.y * fy) / fn; across += (-sh.x * fy + sh.y * fx) / fn; fsum += fn; ++np;
-          }
-        printf("  scale %.0f: %d patches, shift along flow %+.3f px, across %+.3f px, mean flow %.0f px/s (x window %.1f px)\n", s, np, along / np, across / np, fsum / np, fsum / np * (w.back().t_ns - w.front().t_ns) * 1e-9);
-      }
+    // Position against the predicted edge density at t_ref, rotation only and with the true translation.
+    for (double sc : {0.0, 1.0}) {
+      b.set_motion_plane(v * sc + Eigen::Vector3d(1e-12, 0, 0), pl.head<3>(), pl.w());
+      const Shift r = edge_shift(cal, sim, b.build_frame(w, t_ref).accumulator, t_ref);
+      if (r.n == 0) continue;
+      printf("  scale %.0f: %d patches, shift along flow %+.3f px, across %+.3f px, mean flow %.0f px/s (x window %.1f px)\n", sc, r.n,
+             r.along / r.n, r.across / r.n, r.flow / r.n, r.flow / r.n * (w.back().t_ns - w.front().t_ns) * 1e-9);
     }
     printf("t %.2f |v| %.2f d %.2f win %.1f ms:", t_ref * 1e-9, v.norm(), pl.w(), (w.back().t_ns - w.front().t_ns) * 1e-6);
     for (size_t i = 0; i < var.size(); ++i) { printf(" %.4f", var[i] / var[4]); sum[i] += var[i] / var[4]; }
