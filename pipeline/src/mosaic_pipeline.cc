@@ -596,8 +596,6 @@ struct MosaicPipeline::Impl {
     phase = Phase::kTracking;
   }
 
-  // ---- tracking and mapping ----------------------------------------------------------------------
-
   // ---- tracking failure ---------------------------------------------------------------------------
 
   bool lost = false;
@@ -674,6 +672,8 @@ struct MosaicPipeline::Impl {
     pf->set_particles(p, std::vector<double>(p.size(), 1.0));
     ++result.tracking_lost.back().relocalizations;
   }
+
+  // ---- tracking and mapping ----------------------------------------------------------------------
 
   // Processes one particle-filter batch when its events (and IMU) are complete; false when waiting.
   bool tracking_step() {
