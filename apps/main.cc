@@ -301,7 +301,8 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"none", "real", "independent", "common_mode"}));
   vio_cmd->add_flag("--oracle-frame-motion", vio.oracle_frame_motion,
                     "With --oracle-tracks: the event frames' translation compensation (frames.use_depth) takes the true "
-                    "camera velocity and the true median depth of the frame's tracks instead of the estimate's");
+                    "camera-centre velocity at each frame's stamp and the true median depth of the latest tracked frame's "
+                    "tracks instead of the estimate's");
   vio_cmd->add_flag("--oracle-frame-plane", vio.oracle_frame_plane,
                     "With --oracle-frame-motion: each event's depth from the least-squares plane through the true scene points "
                     "of the frame's tracks instead of their median depth");
