@@ -96,7 +96,7 @@ std::string config_yaml(const MosaicConfig& c) {
     << ", calibration_min_texel_updates: " << c.calibration_min_texel_updates
     << ", calibration_min_samples: " << c.calibration_min_samples << ", gyro_window_ms: " << num(c.gyro_bootstrap_window_ns * 1e-6)
     << ", gyro_step_ms: " << num(c.gyro_integration_step_ns * 1e-6) << "}\n";
-  y << "failure: {probe_every_batches: " << c.failure_probe_every_batches << ", probe_offset_rad: " << num(c.failure_probe_offset_rad)
+  y << "failure: {probe_every_batches: " << c.tracker.probe_every_batches << ", probe_offset_rad: " << num(c.tracker.probe_offset_rad)
     << ", window_ms: " << num(c.failure_window_ns * 1e-6) << ", min_events: " << c.failure_min_events
     << ", min_rate_ratio: " << num(c.failure_min_rate_ratio) << ", lost_windows: " << c.failure_lost_windows << ", lost_contrast: " << num(c.failure_lost_contrast)
     << ", recovered_contrast: " << num(c.failure_recovered_contrast) << ", freeze_map: " << (c.failure_freeze_map ? "true" : "false")
@@ -245,8 +245,8 @@ MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_y
       c.failure_min_events = s.integer("min_events", c.failure_min_events, 0, 1000000000);
       c.failure_min_rate_ratio = s.number("min_rate_ratio", c.failure_min_rate_ratio, Range::kNonNegative, "");
       c.failure_lost_windows = s.integer("lost_windows", c.failure_lost_windows, 1, 1000000);
-      c.failure_probe_every_batches = s.integer("probe_every_batches", c.failure_probe_every_batches, 0, 1000000);
-      c.failure_probe_offset_rad = s.number("probe_offset_rad", c.failure_probe_offset_rad, Range::kPositive, "rad");
+      c.tracker.probe_every_batches = s.integer("probe_every_batches", c.tracker.probe_every_batches, 0, 1000000);
+      c.tracker.probe_offset_rad = s.number("probe_offset_rad", c.tracker.probe_offset_rad, Range::kPositive, "rad");
       c.failure_window_ns = ms_ns(s, "window_ms", c.failure_window_ns, Range::kPositive);
       c.failure_lost_contrast = s.number("lost_contrast", c.failure_lost_contrast, Range::kAny, "log-likelihood per event");
       c.failure_recovered_contrast = s.number("recovered_contrast", c.failure_recovered_contrast, Range::kAny, "log-likelihood per event");

@@ -29,13 +29,8 @@ bool MosaicPipelineOptions::Validate(std::string* why) const {
   };
   std::string w;
   if (!mosaic.Validate(&w)) return fail("mosaic: " + w);
-  frontend::RotationParticleFilterOptions probed = tracker;  // as the pipeline runs it
-  probed.probe_every_batches = failure_probe_every_batches;
-  probed.probe_offset_rad = failure_probe_offset_rad;
-  if (!probed.Validate(&w)) return fail("tracker: " + w);
+  if (!tracker.Validate(&w)) return fail("tracker: " + w);
   if (!cmax.Validate(&w)) return fail("cmax: " + w);
-  if (failure_probe_every_batches < 0) return fail("failure_probe_every_batches must be >= 0");
-  if (!(failure_probe_offset_rad > 0) || !std::isfinite(failure_probe_offset_rad)) return fail("failure_probe_offset_rad must be > 0 rad");
   if (failure_window_ns <= 0) return fail("failure_window_ns must be > 0 ns");
   if (failure_min_events < 0) return fail("failure_min_events must be >= 0");
   if (failure_lost_windows < 1) return fail("failure_lost_windows must be >= 1");
@@ -581,8 +576,6 @@ struct MosaicPipeline::Impl {
     mapper.boot_segments = {};
     bs.tracker_contrast = contrast_used;
     frontend::RotationParticleFilterOptions tracker_options = opt.tracker;
-    tracker_options.probe_every_batches = opt.failure_probe_every_batches;
-    tracker_options.probe_offset_rad = opt.failure_probe_offset_rad;
     tracker_options.contrast_threshold = contrast_used;
     pf = std::make_unique<frontend::RotationParticleFilter>(undistorter, tracker_options);
     pf->reset(Eigen::Quaterniond(R), t_track0);
@@ -611,7 +604,7 @@ struct MosaicPipeline::Impl {
   // Collects the tracker's probe contrast; at the end of each failure window decides lost /
   // recovered and re-localises while lost.
   void watch_quality(int64_t t_now, size_t batch_events) {
-    if (opt.failure_probe_every_batches <= 0) return;
+    if (opt.tracker.probe_every_batches <= 0) return;
     window_all_events += static_cast<int64_t>(batch_events);
     if (window_t0 == INT64_MIN) window_t0 = t_now;
     if (pf->last_probe_t_ns() != probe_seen_t && std::isfinite(pf->last_probe_contrast())) {

@@ -180,8 +180,8 @@ TEST(MosaicConfig, ErrorsNameFileLineAndKey) {
                       "relocalize_spread_rad: 0}\n";
   std::string resolved_f;
   const MosaicConfig k = load_mosaic_config(p, &resolved_f);
-  EXPECT_EQ(k.failure_probe_every_batches, 2);
-  EXPECT_DOUBLE_EQ(k.failure_probe_offset_rad, 0.015);
+  EXPECT_EQ(k.tracker.probe_every_batches, 2);
+  EXPECT_DOUBLE_EQ(k.tracker.probe_offset_rad, 0.015);
   EXPECT_EQ(k.failure_window_ns, 80'000'000);
   EXPECT_DOUBLE_EQ(k.failure_lost_contrast, 0.04);
   EXPECT_DOUBLE_EQ(k.failure_recovered_contrast, 0.12);

@@ -89,7 +89,7 @@ TEST(MosaicPipelineOptions, DefaultsAreValidAndBadValuesAreRejectedWithAReason) 
   o.failure_relocalize_spread_rad = -0.1;
   rejected(o, "failure_relocalize_spread_rad");
   o = {};
-  o.failure_probe_offset_rad = 0.05;  // beyond the tracker's linearisation spread
+  o.tracker.probe_offset_rad = 0.05;  // beyond the tracker's linearisation spread
   rejected(o, "tracker: probe_offset_rad");
   o = {};
   o.mosaic.width = 0;

@@ -30,7 +30,14 @@ namespace evio::pipeline {
 
 struct MosaicPipelineOptions {
   mapping::GradientMosaicOptions mosaic;            // equirectangular mosaic size (px), C, EKF noise, ...
-  frontend::RotationParticleFilterOptions tracker;  // particles, batch_size (events), event_stride, ...
+  // particles, batch_size (events), event_stride, ...; probes every 4th batch here (the filter's
+  // own default is none): tracker.probe_every_batches and probe_offset_rad drive the failure
+  // detection below.
+  frontend::RotationParticleFilterOptions tracker = [] {
+    frontend::RotationParticleFilterOptions t;
+    t.probe_every_batches = 4;
+    return t;
+  }();
 
   // Drive the bootstrap and the particles' prediction with the gyro (add_imu); false: events only.
   bool use_gyro = false;
@@ -110,17 +117,15 @@ struct MosaicPipelineOptions {
   // tracker.contrast_threshold (MosaicResult::bootstrap.contrast_calibrated = false).
   int calibration_min_samples = 1000;
 
-  // Tracking failure. Every failure_probe_every_batches-th particle-filter batch (count, >= 0;
-  // 0: no detection) is also weighed under six rotations failure_probe_offset_rad (rad, > 0) off
-  // the mean (RotationParticleFilterOptions::probe_*): the cloud's log-likelihood per event minus
-  // the probes' is positive while the estimate sits on the map's optimum and near zero once the
-  // filter is lost, whatever the scene. Its mean over failure_window_ns (ns, > 0) below
-  // failure_lost_contrast (failure_lost_windows times in a row) starts a lost segment; a window mean at or above
-  // failure_recovered_contrast (>= the lost level) ends it. Measured on 1.5-4 s rotation
-  // sequences (100 ms means): tracking 0.11-0.50 (poster slow/medium/fast, boxes, shapes with the
-  // gyro), lost -0.02-0.01 (shapes events only, from 0.9 s).
-  int failure_probe_every_batches = 4;
-  double failure_probe_offset_rad = 0.01;
+  // Tracking failure. Every tracker.probe_every_batches-th particle-filter batch (0: no
+  // detection) is also weighed under six rotations tracker.probe_offset_rad off the mean
+  // (RotationParticleFilterOptions::probe_*): the cloud's log-likelihood per event minus the
+  // probes' is positive while the estimate sits on the map's optimum and near zero once the filter
+  // is lost, whatever the scene. Its mean over failure_window_ns (ns, > 0) below
+  // failure_lost_contrast (failure_lost_windows decided windows in a row) starts a lost segment; a
+  // window mean at or above failure_recovered_contrast (>= the lost level) ends it. Measured on
+  // 1.5-4 s rotation sequences (decided 100 ms windows): tracking 0.13-0.44 (poster slow / medium
+  // / fast, boxes, shapes with the gyro), lost -0.04-0.02 (shapes events only, from 0.7 s).
   int64_t failure_window_ns = 100'000'000;
   // A window decides nothing when its probed batches weighed fewer events than failure_min_events
   // (count, >= 0) or its event count is below failure_min_rate_ratio (>= 0) times the running mean
@@ -193,7 +198,7 @@ struct MosaicStats {
   double seen_fraction = 0;           // seen_pixels / mosaic texels
   MosaicBootstrapStats bootstrap;
   frontend::RotationParticleFilterStats tracker;
-  // Tracking quality (failure_probe_every_batches > 0): the failure windows' mean probe contrast
+  // Tracking quality (tracker.probe_every_batches > 0): the failure windows' mean probe contrast
   // (log-likelihood per event), lowest and mean over the windows; events not mapped while lost.
   int64_t quality_windows = 0;
   int64_t quality_windows_undecided = 0;  // windows under failure_min_events or failure_min_rate_ratio
