@@ -342,6 +342,13 @@ int main(int argc, char** argv) {
                          "(and PSNR/SSIM against the true panorama of a simulated dataset)");
   mosaic_cmd->add_flag("--gt-bootstrap", mosaic.gt_bootstrap,
                        "Diagnostic: the bootstrap maps with the --gt rotations (no bootstrap error; needs --gt)");
+  mosaic_cmd->add_flag("--gt-mapping", mosaic.gt_mapping,
+                       "Diagnostic: the --gt rotations map every event, the bootstrap's and the tracked ones, so the "
+                       "map carries no tracking error (implies --gt-bootstrap; needs --gt)");
+  mosaic_cmd->add_flag("--oracle-map", mosaic.oracle_map,
+                       "Diagnostic: the tracker weighs its particles against the true panorama (a dataset written by "
+                       "evio simulate with a panorama scene, rendered in the mosaic frame by the --gt start pose) "
+                       "instead of the mosaic's reconstructions; no map error (needs --gt)");
   add_dataset_options(mosaic_cmd, &mosaic.dataset_options, &mosaic_format, &mosaic_unit, &mosaic_bad);
 
   try {

@@ -62,7 +62,9 @@ std::string config_yaml(const MosaicConfig& c) {
     << ", initial_gradient_std: " << num(m.initial_gradient_std) << ", measurement_std_abs: " << num(m.measurement_std_abs)
     << ", measurement_relative_std: " << num(m.measurement_relative_std) << ", min_tau_ms: " << num(m.min_tau_s * 1e3)
     << ", min_speed_px_s: " << num(m.min_speed_px_s) << ", seen_min_observations: " << m.seen_min_observations
-    << ", seen_max_gradient_std: " << num(m.seen_max_gradient_std) << ", max_path_px: " << num(m.max_path_px) << ", reconstruct_events: " << c.reconstruct_events << ", reconstruct_ms: " << num(c.reconstruct_period_ns * 1e-6)
+    << ", seen_max_gradient_std: " << num(m.seen_max_gradient_std) << ", max_path_px: " << num(m.max_path_px)
+    << ", map_viewed_texels: " << (m.map_viewed_texels ? "true" : "false")
+    << ", reconstruct_events: " << c.reconstruct_events << ", reconstruct_ms: " << num(c.reconstruct_period_ns * 1e-6)
     << ", reconstruct_latency_events: " << c.reconstruct_latency_events << ", threads: " << c.threads
     << ", footprint_ms: " << num(c.footprint_period_ns * 1e-6)
     << ", full_reconstruct_every: " << c.full_reconstruct_every
@@ -137,7 +139,7 @@ MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_y
       s.allow({"width", "height", "contrast_threshold", "initial_gradient_std", "measurement_std_abs",
                "measurement_relative_std", "min_tau_ms", "min_speed_px_s", "reconstruct_events", "reconstruct_ms",
                "reconstruct_latency_events", "threads", "footprint_ms", "full_reconstruct_every",
-               "seen_min_observations", "seen_max_gradient_std", "max_path_px", "poisson_weighting", "weight_reference_std", "viewed_edge_weight", "weight_floor",
+               "seen_min_observations", "seen_max_gradient_std", "max_path_px", "map_viewed_texels", "poisson_weighting", "weight_reference_std", "viewed_edge_weight", "weight_floor",
                "pcg_tolerance", "pcg_max_iterations", "pcg_preconditioner"});
       auto& m = c.mosaic;
       m.width = s.integer("width", m.width, 8, 1 << 15);
@@ -157,6 +159,7 @@ MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_y
       c.full_reconstruct_every = s.integer("full_reconstruct_every", c.full_reconstruct_every, 1, 1000000);
       m.seen_min_observations = s.integer("seen_min_observations", m.seen_min_observations, 1, 1000000);
       m.max_path_px = s.number("max_path_px", m.max_path_px, Range::kPositive, "mosaic px");
+      m.map_viewed_texels = s.boolean("map_viewed_texels", m.map_viewed_texels);
       m.seen_max_gradient_std = s.number("seen_max_gradient_std", m.seen_max_gradient_std, Range::kNonNegative, "log units/px");
       const std::string weighting =
           s.string("poisson_weighting", mapping::poisson_weighting_name(c.output_weighting), {"none", "information"});
@@ -314,14 +317,34 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
   }
 
   pipeline::MosaicPipeline mosaic(cfg, cal);
-  std::optional<Trajectory> boot_gt;
-  if (args.gt_bootstrap) {
-    if (args.gt.empty()) throw InputError("--gt-bootstrap", 0, "no ground truth given", "--gt FILE with --gt-bootstrap");
-    boot_gt = load_trajectory(args.gt);
-    mosaic.set_bootstrap_reference([&boot_gt](int64_t t_ns) -> std::optional<Eigen::Quaterniond> {
-      const auto T = boot_gt->interpolate(t_ns);
+  // Diagnostics with the ground truth (--gt-bootstrap, --gt-mapping, --oracle-map).
+  std::optional<Trajectory> diag_gt;
+  if (args.gt_bootstrap || args.gt_mapping || args.oracle_map) {
+    if (args.gt.empty())
+      throw InputError(args.oracle_map ? "--oracle-map" : args.gt_mapping ? "--gt-mapping" : "--gt-bootstrap", 0,
+                       "no ground truth given", "--gt FILE with it");
+    diag_gt = load_trajectory(args.gt);
+  }
+  if (args.gt_bootstrap || args.gt_mapping) {
+    mosaic.set_bootstrap_reference([&diag_gt](int64_t t_ns) -> std::optional<Eigen::Quaterniond> {
+      const auto T = diag_gt->interpolate(t_ns);
       if (!T) return std::nullopt;
       return T->rotation;
+    });
+    mosaic.set_reference_for_mapping(args.gt_mapping);
+  }
+  if (args.oracle_map) {
+    const fs::path scene = fs::path(args.dataset) / "scene_resolved.yaml";
+    if (!fs::exists(scene))
+      throw InputError(scene.string(), 0, "--oracle-map: no scene file", "a dataset written by evio simulate with a panorama scene");
+    const SimulationConfig sc = load_simulation_config(scene.string());
+    if (!sc.panorama) throw InputError(scene.string(), 0, "--oracle-map: the scene is not a panorama", "scene type panorama");
+    mosaic.set_tracker_map_reference([&diag_gt, tex = sc.panorama, &cfg, &args](const Eigen::Matrix3d& R_m_b0, int64_t t0) {
+      const auto g0 = diag_gt->interpolate(t0);
+      if (!g0) throw InputError(args.gt, 0, "--oracle-map: no ground-truth pose at the first event", "a trajectory covering the events");
+      const Eigen::Matrix3d R_w_m = g0->rotation.toRotationMatrix() * R_m_b0.transpose();
+      const mapping::ImageF ref = mapping::panorama_log_reference(*tex, R_w_m, cfg.mosaic.width, cfg.mosaic.height);
+      return std::vector<float>(ref.data(), ref.data() + ref.size());
     });
   }
   int snapshots = 0;

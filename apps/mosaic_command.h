@@ -48,6 +48,8 @@ struct MosaicArgs {
   std::string out;
   bool use_imu = false;    // drive the particles (and bootstrap) with the gyro
   bool gt_bootstrap = false;  // diagnostic: the bootstrap maps with the --gt rotations
+  bool gt_mapping = false;    // diagnostic: --gt rotations map every event (bootstrap and tracking)
+  bool oracle_map = false;    // diagnostic: the tracker tracks against the true panorama (simulated dataset)
   int particles = 0;       // > 0 overrides tracker.particles
   int batch = 0;           // > 0 overrides tracker.batch_size
   int stride = 0;          // > 0 overrides tracker.event_stride

@@ -376,7 +376,8 @@ PixelRect GradientMosaic::reconstruct_map(ReconstructMode mode, std::vector<floa
     float* row = map->data() + static_cast<size_t>(j) * static_cast<size_t>(W);
     for (int t = 0; t < r.width; ++t) {
       const int i = (((r.x + t) % W) + W) % W;
-      row[i] = is_seen(state_[index(i, j)]) ? static_cast<float>(log_intensity_(j, i)) : nan;
+      const PixelState& st = state_[index(i, j)];
+      row[i] = is_seen(st) || (options_.map_viewed_texels && st.viewed) ? static_cast<float>(log_intensity_(j, i)) : nan;
     }
   }
   return r;

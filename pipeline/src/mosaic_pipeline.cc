@@ -387,6 +387,9 @@ struct MosaicPipeline::Impl {
   Eigen::Vector3d omega_c = Eigen::Vector3d::Zero();
   int64_t t0 = 0, t_boot = 0;
   MosaicPipeline::RotationReference boot_ref;  // diagnostic: bootstrap rotations R_w_b(t)
+  bool ref_for_mapping = false;                // diagnostic: boot_ref maps the tracked events too
+  MosaicPipeline::MapReference map_ref;        // diagnostic: the tracker's fixed map
+  std::vector<float> oracle_map;               // its answer (empty: the reconstructions)
   // R_w_c in the mosaic frame from boot_ref (std::nullopt where it has no answer).
   std::optional<Eigen::Matrix3d> boot_ref_at(int64_t t) const {
     if (!boot_ref) return std::nullopt;
@@ -451,7 +454,7 @@ struct MosaicPipeline::Impl {
     T.rotation = Eigen::Quaterniond(R_w_c * cal.T_c_b.rotation.toRotationMatrix()).normalized();  // R_w_b
     T.translation.setZero();
     rotation.push_back({t, T});
-    if (opt.output_weighting == mapping::PoissonWeighting::kInformation &&
+    if ((opt.output_weighting == mapping::PoissonWeighting::kInformation || opt.mosaic.map_viewed_texels) &&
         (t_viewed == INT64_MIN || t - t_viewed >= opt.footprint_period_ns)) {
       t_viewed = t;
       if (phase == Phase::kTracking) {
@@ -541,7 +544,12 @@ struct MosaicPipeline::Impl {
     mapper.maps[1] = mapper.maps[0];
     mapper.last_region = mapping::PixelRect{0, 0, 0, 0};
     front = 0;
-    const std::vector<float>& map = mapper.maps[0];
+    if (map_ref) {
+      oracle_map = map_ref(mosaic_initial_camera_rotation() * q_c_b.toRotationMatrix(), t0);
+      if (oracle_map.size() != static_cast<size_t>(opt.mosaic.width) * static_cast<size_t>(opt.mosaic.height))
+        throw std::invalid_argument("MosaicPipeline: the tracker map reference is not mosaic.width x mosaic.height");
+    }
+    const std::vector<float>& map = oracle_map.empty() ? mapper.maps[0] : oracle_map;
     mapper.collect_segments = false;
     MosaicBootstrapStats& bs = result.stats.bootstrap;
     bs.t_end_ns = t_track0;
@@ -582,7 +590,7 @@ struct MosaicPipeline::Impl {
     if (!opt.use_gyro) pf->set_velocity(omega_c);  // the last contrast-maximisation rate (kParticleVelocity)
     view.width = opt.mosaic.width;
     view.height = opt.mosaic.height;
-    view.data = mapper.maps[front].data();
+    view.data = oracle_map.empty() ? mapper.maps[front].data() : oracle_map.data();
     rec_point = processed;
     rec_t = t_track0;
     next_snap = opt.snapshot_period_ns > 0 ? t_track0 : INT64_MAX;
@@ -704,7 +712,17 @@ struct MosaicPipeline::Impl {
       result.stats.events_unmapped_lost += static_cast<int64_t>(n);
     } else {
       block.events.insert(block.events.end(), ev, ev + n);
-      block.steps.push_back({MapperBlock::Kind::kEvents, block.events.size(), R_pf, w_c, t_pf,
+      Eigen::Matrix3d R_map = R_pf;
+      Eigen::Vector3d w_map = w_c;
+      if (ref_for_mapping) {
+        const std::optional<Eigen::Matrix3d> Ra = boot_ref_at(t_pf - 1'000'000), Rb = boot_ref_at(t_pf + 1'000'000),
+                                             Rt = boot_ref_at(t_pf);
+        if (Ra && Rb && Rt) {
+          R_map = *Rt;
+          w_map = calib::so3_log(Ra->transpose() * *Rb) / 2e-3;
+        }
+      }
+      block.steps.push_back({MapperBlock::Kind::kEvents, block.events.size(), R_map, w_map, t_pf,
                              mapping::GradientMosaic::ReconstructMode::kAuto, 0});
     }
     record(t_pf, R_pf);
@@ -738,7 +756,7 @@ struct MosaicPipeline::Impl {
     queue.wait_reconstructions(recs_in_use + 1);
     ++recs_in_use;
     front = 1 - front;
-    view.data = mapper.maps[front].data();
+    if (oracle_map.empty()) view.data = mapper.maps[front].data();
   }
 
   void process() {
@@ -775,6 +793,10 @@ void MosaicPipeline::add_imu(const ImuSample& sample) {
 }
 
 void MosaicPipeline::set_bootstrap_reference(RotationReference R_w_b_at) { impl_->boot_ref = std::move(R_w_b_at); }
+
+void MosaicPipeline::set_reference_for_mapping(bool on) { impl_->ref_for_mapping = on; }
+
+void MosaicPipeline::set_tracker_map_reference(MapReference map_at_start) { impl_->map_ref = std::move(map_at_start); }
 
 void MosaicPipeline::add_events(EventSpan events) {
   Impl& m = *impl_;

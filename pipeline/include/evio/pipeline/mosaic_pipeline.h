@@ -242,6 +242,21 @@ class MosaicPipeline {
   using RotationReference = std::function<std::optional<Eigen::Quaterniond>(int64_t t_ns)>;
   void set_bootstrap_reference(RotationReference R_w_b_at);
 
+  // Diagnostic (the map's error without the tracker's feedback): with true, the set_bootstrap_reference
+  // rotations also map every tracked event (the tracker's estimate is still written as the trajectory
+  // and the tracker still tracks against the reconstructions). Call before the first add_events.
+  void set_reference_for_mapping(bool on);
+
+  // Diagnostic (splitting the tracker's error from the map's): the tracker weighs its particles
+  // against this fixed map instead of the mosaic's reconstructions (the mosaic is still built and
+  // returned). Called once, at the tracking start, with R_m_b0 (the body's rotation at the first
+  // event in the mosaic frame) and that event's time; returns options.mosaic.height rows of
+  // options.mosaic.width log intensities (row-major, NaN = unknown), e.g. the true panorama
+  // rendered in the mosaic frame. The tracker's contrast is calibrated on it (calibrate_contrast).
+  // Call before the first add_events.
+  using MapReference = std::function<std::vector<float>(const Eigen::Matrix3d& R_m_b0, int64_t t0_ns)>;
+  void set_tracker_map_reference(MapReference map_at_start);
+
   // IMU samples in time order (IMU clock), used with use_gyro (ignored otherwise). They may all
   // come first or be interleaved with add_events.
   void add_imu(const ImuSample& sample);
