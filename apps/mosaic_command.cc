@@ -102,7 +102,13 @@ std::string config_yaml(const MosaicConfig& c) {
     << ", window_ms: " << num(c.failure_window_ns * 1e-6) << ", min_events: " << c.failure_min_events
     << ", min_rate_ratio: " << num(c.failure_min_rate_ratio) << ", lost_windows: " << c.failure_lost_windows << ", lost_contrast: " << num(c.failure_lost_contrast)
     << ", recovered_contrast: " << num(c.failure_recovered_contrast) << ", freeze_map: " << (c.failure_freeze_map ? "true" : "false")
-    << ", relocalize_spread_rad: " << num(c.failure_relocalize_spread_rad) << "}\n";
+    << ", relocalize_spread_rad: " << num(c.failure_relocalize_spread_rad)
+    << ", rollback: " << (c.failure_rollback ? "true" : "false") << ", checkpoint_ms: " << num(c.failure_checkpoint_period_ns * 1e-6)
+    << ", checkpoints: " << c.failure_checkpoints
+    << ", global_relocalize: " << (c.failure_global_relocalize ? "true" : "false")
+    << ", global_period_ms: " << num(c.failure_global_period_ns * 1e-6) << ", global_min_gain: " << num(c.failure_global_min_gain)
+    << ", global_axis_spacing_deg: " << num(c.relocalization.axis_spacing_deg)
+    << ", global_roll_step_deg: " << num(c.relocalization.roll_step_deg) << "}\n";
   y << "output: {trajectory_ms: " << num(c.trajectory_period_ns * 1e-6) << ", snapshot_ms: " << num(c.snapshot_period_ns * 1e-6)
     << ", gamma: " << num(c.display.gamma) << ", low_percentile: " << num(c.display.low_percentile)
     << ", high_percentile: " << num(c.display.high_percentile)
@@ -244,7 +250,8 @@ MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_y
     if (top.has("failure")) {
       const Section s = top.child("failure", false, "a map");
       s.allow({"probe_every_batches", "probe_offset_rad", "window_ms", "min_events", "min_rate_ratio", "lost_windows", "lost_contrast", "recovered_contrast",
-               "freeze_map", "relocalize_spread_rad"});
+               "freeze_map", "relocalize_spread_rad", "rollback", "checkpoint_ms", "checkpoints", "global_relocalize", "global_period_ms", "global_min_gain",
+               "global_axis_spacing_deg", "global_roll_step_deg"});
       c.failure_min_events = s.integer("min_events", c.failure_min_events, 0, 1000000000);
       c.failure_min_rate_ratio = s.number("min_rate_ratio", c.failure_min_rate_ratio, Range::kNonNegative, "");
       c.failure_lost_windows = s.integer("lost_windows", c.failure_lost_windows, 1, 1000000);
@@ -255,6 +262,14 @@ MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_y
       c.failure_recovered_contrast = s.number("recovered_contrast", c.failure_recovered_contrast, Range::kAny, "log-likelihood per event");
       c.failure_freeze_map = s.boolean("freeze_map", c.failure_freeze_map);
       c.failure_relocalize_spread_rad = s.number("relocalize_spread_rad", c.failure_relocalize_spread_rad, Range::kNonNegative, "rad");
+      c.failure_rollback = s.boolean("rollback", c.failure_rollback);
+      c.failure_checkpoint_period_ns = ms_ns(s, "checkpoint_ms", c.failure_checkpoint_period_ns, Range::kPositive);
+      c.failure_checkpoints = s.integer("checkpoints", c.failure_checkpoints, 1, 1000);
+      c.failure_global_relocalize = s.boolean("global_relocalize", c.failure_global_relocalize);
+      c.failure_global_period_ns = ms_ns(s, "global_period_ms", c.failure_global_period_ns, Range::kPositive);
+      c.failure_global_min_gain = s.number("global_min_gain", c.failure_global_min_gain, Range::kPositive, "ratio");
+      c.relocalization.axis_spacing_deg = s.number("global_axis_spacing_deg", c.relocalization.axis_spacing_deg, Range::kPositive, "deg");
+      c.relocalization.roll_step_deg = s.number("global_roll_step_deg", c.relocalization.roll_step_deg, Range::kPositive, "deg");
       std::string why;
       if (!c.Validate(&why)) s.fail("invalid failure settings: " + why, "consistent settings");
     }
@@ -405,7 +420,7 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
       << ",\n  \"batch_size\": " << cfg.tracker.batch_size << ",\n  \"event_stride\": " << cfg.tracker.event_stride
       << ",\n  \"measurement_model\": \"" << frontend::rotation_measurement_model_name(cfg.tracker.measurement_model) << "\"" << ",\n  \"mosaic_size\": [" << cfg.mosaic.width << ", "
       << cfg.mosaic.height << "],\n  \"bootstrap\": {\"method\": \"" << (args.use_imu ? "gyro" : "contrast_maximisation")
-      << "\", \"duration_s\": " << num((bs.t_end_ns - t0) * 1e-9) << ", \"cmax_windows\": " << bs.cmax_windows
+      << "\", \"duration_s\": " << num((bs.t_end_ns - t0) * 1e-9) << ", \"cmax_windows\": " << bs.cmax_windows << ", \"short_windows\": " << bs.short_windows
       << ", \"tracker_contrast\": " << num(bs.tracker_contrast) << ", \"contrast_samples\": " << bs.contrast_samples << "}"
       << ",\n  \"tracker\": {\"events_used\": " << st.events_used << ", \"skipped_no_previous\": " << st.skipped_no_previous
       << ", \"skipped_unknown_map\": " << st.skipped_unknown_map << ", \"skipped_stride\": " << st.skipped_stride << ", \"batches\": " << st.batches
@@ -425,13 +440,19 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
     for (size_t k = 0; k < result.tracking_lost.size(); ++k) {
       const pipeline::MosaicLostSegment& g = result.tracking_lost[k];
       f << (k ? ", " : "") << "{\"t_begin_s\": " << format_seconds(g.t_begin_ns) << ", \"t_end_s\": " << format_seconds(g.t_end_ns)
-        << ", \"recovered\": " << (g.recovered ? "true" : "false") << ", \"relocalizations\": " << g.relocalizations << "}";
+        << ", \"recovered\": " << (g.recovered ? "true" : "false") << ", \"relocalizations\": " << g.relocalizations
+        << ", \"global_searches\": " << g.global_searches << ", \"global_jumps\": " << g.global_jumps
+        << ", \"map_rolled_back_to_s\": "
+        << (g.map_rolled_back_to_ns == INT64_MIN ? std::string("null") : format_seconds(g.map_rolled_back_to_ns)) << "}";
     }
     f << "]\n}\n";
   }
   for (const pipeline::MosaicLostSegment& g : result.tracking_lost)
     out << "tracking lost " << format_seconds(g.t_begin_ns) << " s to " << format_seconds(g.t_end_ns) << " s ("
-        << (g.recovered ? "recovered" : "not recovered") << ", " << g.relocalizations << " re-localisations)\n";
+        << (g.recovered ? "recovered" : "not recovered") << ", " << g.relocalizations << " local spreads, "
+        << g.global_searches << " global searches, " << g.global_jumps << " jumps"
+        << (g.map_rolled_back_to_ns == INT64_MIN ? std::string() : ", map rolled back to " + format_seconds(g.map_rolled_back_to_ns) + " s")
+        << ")\n";
   out << "events        " << events << " over " << num(duration_s) << " s, bootstrap "
       << (args.use_imu ? "gyro" : "contrast maximisation") << " " << num((bs.t_end_ns - t0) * 1e-9) << " s\n";
   out << "speed         " << num(processing_s) << " s processing, real-time factor "

@@ -383,6 +383,21 @@ PixelRect GradientMosaic::reconstruct_map(ReconstructMode mode, std::vector<floa
   return r;
 }
 
+GradientMosaic::Checkpoint GradientMosaic::checkpoint() const {
+  Checkpoint c;
+  c.state_ = state_;
+  return c;
+}
+
+void GradientMosaic::restore(const Checkpoint& checkpoint) {
+  if (checkpoint.state_.size() != state_.size())
+    throw std::invalid_argument("GradientMosaic::restore: a checkpoint of another mosaic size");
+  state_ = checkpoint.state_;
+  solved_once_ = false;  // the next solve is full
+  dirty_x0_ = dirty_y0_ = 0;
+  dirty_x1_ = dirty_y1_ = -1;
+}
+
 Eigen::Vector2d mosaic_pixel_velocity(const calib::Equirectangular& projection, const Eigen::Matrix3d& R_w_c,
                                       const Eigen::Vector3d& omega_w, const Eigen::Vector3d& bearing_c,
                                       Eigen::Vector2d* uv_out) {

@@ -41,6 +41,12 @@ bool MosaicPipelineOptions::Validate(std::string* why) const {
     return fail("failure_recovered_contrast must be finite and >= failure_lost_contrast");
   if (!(failure_relocalize_spread_rad >= 0) || !std::isfinite(failure_relocalize_spread_rad))
     return fail("failure_relocalize_spread_rad must be finite and >= 0 rad");
+  if (failure_checkpoint_period_ns <= 0) return fail("failure_checkpoint_period_ns must be > 0 ns");
+  if (failure_checkpoints < 1) return fail("failure_checkpoints must be >= 1");
+  if (failure_global_period_ns <= 0) return fail("failure_global_period_ns must be > 0 ns");
+  if (!(failure_global_min_gain >= 1) || !std::isfinite(failure_global_min_gain))
+    return fail("failure_global_min_gain must be finite and >= 1");
+  if (!relocalization.Validate(&w)) return fail("relocalization: " + w);
   if (reconstruct_events < 1) return fail("reconstruct_events must be >= 1");
   if (reconstruct_period_ns <= 0) return fail("reconstruct_period_ns must be > 0");
   if (reconstruct_latency_events < 0) return fail("reconstruct_latency_events must be >= 0");
@@ -127,6 +133,25 @@ struct Mapper {
   bool collect_segments = false;
   int64_t events_mapped = 0;
 
+  // Checkpoints of the mosaic's state (failure_rollback), oldest first.
+  struct MapCheckpoint {
+    int64_t t;
+    mapping::GradientMosaic::Checkpoint state;
+  };
+  std::deque<MapCheckpoint> checkpoints;
+  void checkpoint(int64_t t) {
+    checkpoints.push_back({t, mosaic.checkpoint()});
+    while (checkpoints.size() > static_cast<size_t>(opt.failure_checkpoints)) checkpoints.pop_front();
+  }
+  // Back to the newest checkpoint at or before t (none: nothing changes); every pixel's path
+  // starts anew.
+  void restore_before(int64_t t) {
+    while (!checkpoints.empty() && checkpoints.back().t > t) checkpoints.pop_back();
+    if (checkpoints.empty()) return;
+    mosaic.restore(checkpoints.back().state);
+    std::fill(last_t.begin(), last_t.end(), INT64_MIN);
+  }
+
   // The tracker's maps: maps[front] is read by the tracker, a reconstruction is written into the
   // other one after copying over it the region of the previous reconstruction (which only the
   // front has).
@@ -199,13 +224,13 @@ struct Mapper {
 
 // A run of mapper steps in tracker order, with the events they map.
 struct MapperBlock {
-  enum class Kind { kEvents, kFootprint, kReconstruct };
+  enum class Kind { kEvents, kFootprint, kReconstruct, kCheckpoint, kRestore };
   struct Step {
     Kind kind;
     size_t end;                 // kEvents: maps events [previous kEvents' end, end)
     Eigen::Matrix3d R_w_c;      // kEvents: the rotation at t_ref; kFootprint: the footprint's rotation
     Eigen::Vector3d w_c;        // kEvents: camera-frame angular velocity, rad/s
-    int64_t t_ref;              // kEvents
+    int64_t t_ref;              // kEvents; kCheckpoint: its time; kRestore: the newest checkpoint time allowed
     mapping::GradientMosaic::ReconstructMode mode;  // kReconstruct
     int target;                 // kReconstruct: the map written
   };
@@ -278,6 +303,12 @@ class MapperQueue {
           break;
         case MapperBlock::Kind::kFootprint:
           mapper_->mark_footprint(s.R_w_c);
+          break;
+        case MapperBlock::Kind::kCheckpoint:
+          mapper_->checkpoint(s.t_ref);
+          break;
+        case MapperBlock::Kind::kRestore:
+          mapper_->restore_before(s.t_ref);
           break;
         case MapperBlock::Kind::kReconstruct:
           mapper_->reconstruct(s.mode, s.target);
@@ -501,6 +532,13 @@ struct MosaicPipeline::Impl {
     if (use_ref) {
       omega_c = tw1 > tw0 ? Eigen::Vector3d(calib::so3_log(R_ref0->transpose() * *R_ref1) / (1e-9 * static_cast<double>(tw1 - tw0)))
                           : omega_c;
+    } else if (!opt.use_gyro && result.stats.bootstrap.cmax_windows > 0 && tw1 == t_boot &&
+               2 * static_cast<int64_t>(j) < opt.bootstrap_window_events && 2 * (tw1 - tw0) < opt.bootstrap_window_ns) {
+      // The bootstrap's last window, cut short by its end: too little motion to constrain the rate
+      // (boxes_rotation slow 30 s: 1166 events over 0.73 ms gave about 320 deg/s against the true
+      // 26; the tracker started from it and was 19 deg off 0.1 s later, then lost). The previous
+      // window's rate holds.
+      ++result.stats.bootstrap.short_windows;
     } else if (!opt.use_gyro) {
       std::vector<Eigen::Vector3f> b;
       std::vector<int64_t> t;
@@ -641,6 +679,7 @@ struct MosaicPipeline::Impl {
         result.tracking_lost.push_back({low_since, t_now, false, 0});
         log_warning("MosaicPipeline: tracking lost at " + std::to_string(1e-9 * static_cast<double>(low_since)) +
                     " s (probe contrast " + std::to_string(q) + " per event)");
+        if (opt.failure_rollback) rollback_map(low_since - opt.failure_window_ns, t_now);
       } else if (lost && q >= opt.failure_recovered_contrast) {
         lost = false;
         result.tracking_lost.back().t_end_ns = t_now;
@@ -648,7 +687,8 @@ struct MosaicPipeline::Impl {
       }
       if (lost) {
         result.tracking_lost.back().t_end_ns = t_now;
-        if (opt.failure_relocalize_spread_rad > 0 && !opt.use_gyro) relocalize();
+        const bool jumped = !opt.use_gyro && opt.failure_global_relocalize && global_relocalize(t_now);
+        if (!jumped && opt.failure_relocalize_spread_rad > 0 && !opt.use_gyro) relocalize();
       }
     } else if (window_n > 0) {
       ++result.stats.quality_windows_undecided;
@@ -672,6 +712,84 @@ struct MosaicPipeline::Impl {
     }
     pf->set_particles(p, std::vector<double>(p.size(), 1.0));
     ++result.tracking_lost.back().relocalizations;
+  }
+
+  // Checkpoint times issued to the mapper (mirrors Mapper::checkpoints).
+  std::deque<int64_t> cp_times;
+
+  // Rolls the mosaic back to the newest checkpoint at or before t_bound and gives the tracker a
+  // full reconstruction of it.
+  void rollback_map(int64_t t_bound, int64_t t_now) {
+    while (!cp_times.empty() && cp_times.back() > t_bound) cp_times.pop_back();
+    if (cp_times.empty()) return;
+    result.tracking_lost.back().map_rolled_back_to_ns = cp_times.back();
+    block.steps.push_back({MapperBlock::Kind::kRestore, block.events.size(), Eigen::Matrix3d::Identity(),
+                           Eigen::Vector3d::Zero(), t_bound, mapping::GradientMosaic::ReconstructMode::kAuto, 0});
+    if (recs_in_use < recs_submitted) use_reconstruction();  // one reconstruction in flight at most
+    block.steps.push_back({MapperBlock::Kind::kReconstruct, block.events.size(), Eigen::Matrix3d::Identity(),
+                           Eigen::Vector3d::Zero(), 0, mapping::GradientMosaic::ReconstructMode::kFull, 1 - front});
+    ++result.stats.reconstructions;
+    queue.submit(&block);
+    ++recs_submitted;
+    rec_point = processed;
+    rec_t = t_now;
+    use_reconstruction();
+  }
+
+  // The tracker's most recent events (ring of bootstrap_window_events), for the global search.
+  std::vector<Event> recent;
+  size_t recent_next = 0;
+  int64_t last_global_t = INT64_MIN;
+  void remember(const Event* ev, size_t n) {
+    const size_t cap = static_cast<size_t>(opt.bootstrap_window_events);
+    if (recent.size() < cap) {
+      const size_t k = std::min(n, cap - recent.size());
+      recent.insert(recent.end(), ev, ev + k);
+      ev += k;
+      n -= k;
+      recent_next = recent.size() % cap;
+    }
+    for (size_t k = 0; k < n; ++k) {
+      recent[recent_next] = ev[k];
+      recent_next = (recent_next + 1) % cap;
+    }
+  }
+
+  // Searches the whole known mosaic for the view of the most recent events (see
+  // failure_global_relocalize); true when the particles were moved there.
+  bool global_relocalize(int64_t t_now) {
+    if (last_global_t != INT64_MIN && t_now - last_global_t < opt.failure_global_period_ns) return false;
+    last_global_t = t_now;
+    MosaicLostSegment& seg = result.tracking_lost.back();
+    ++seg.global_searches;
+    // The window: the ring in time order, the events within bootstrap_window_ns of the newest.
+    std::vector<Event> win;
+    const size_t n = recent.size();
+    for (size_t k = 0; k < n; ++k) win.push_back(recent[(recent_next + k) % n]);
+    if (win.empty()) return false;
+    const int64_t t_ref = win.back().t_ns;
+    std::vector<Eigen::Vector3f> b;
+    std::vector<int64_t> t;
+    for (const Event& e : win) {
+      if (t_ref - e.t_ns > opt.bootstrap_window_ns) continue;
+      if (e.x >= W || e.y >= H || !undistorter.valid(e.x, e.y)) continue;
+      b.push_back(undistorter.bearing(e.x, e.y));
+      t.push_back(e.t_ns);
+    }
+    if (b.size() < 100) return false;
+    const Eigen::Vector3d w = mapping::estimate_angular_velocity(b, t, t_ref, pf->angular_velocity_c(), cmax).omega_c;
+    for (size_t k = 0; k < b.size(); ++k)
+      b[k] = (calib::so3_exp(w * (1e-9 * static_cast<double>(t[k] - t_ref))).cast<float>() * b[k]).eval();
+    const mapping::RelocalizationMap rmap(view.data, opt.mosaic.width, opt.mosaic.height, opt.relocalization);
+    const mapping::RotationRelocalizationResult r = rmap.search(b);
+    if (!r.valid) return false;
+    // The estimate at t_ref (the filter is at t_now >= t_ref, within one batch).
+    const double current = rmap.score(pf->mean().toRotationMatrix(), b);
+    if (!(r.score > opt.failure_global_min_gain * current)) return false;
+    pf->reset(Eigen::Quaterniond(r.R_w_c), pf->time_ns());
+    pf->set_velocity(w);
+    ++seg.global_jumps;
+    return true;
   }
 
   // ---- tracking and mapping ----------------------------------------------------------------------
@@ -704,6 +822,7 @@ struct MosaicPipeline::Impl {
     }
     pf->update(ev, n, view);
     pf->flush(view);
+    if (!opt.use_gyro && opt.failure_global_relocalize && opt.tracker.probe_every_batches > 0) remember(ev, n);
     watch_quality(t_now, n);
     const Eigen::Matrix3d R_pf = pf->mean().toRotationMatrix();
     const Eigen::Vector3d w_c = pf->angular_velocity_c();
@@ -724,6 +843,13 @@ struct MosaicPipeline::Impl {
       }
       block.steps.push_back({MapperBlock::Kind::kEvents, block.events.size(), R_map, w_map, t_pf,
                              mapping::GradientMosaic::ReconstructMode::kAuto, 0});
+    }
+    if (opt.failure_rollback && !lost && opt.tracker.probe_every_batches > 0 &&
+        (cp_times.empty() || t_now - cp_times.back() >= opt.failure_checkpoint_period_ns)) {
+      block.steps.push_back({MapperBlock::Kind::kCheckpoint, block.events.size(), Eigen::Matrix3d::Identity(),
+                             Eigen::Vector3d::Zero(), t_now, mapping::GradientMosaic::ReconstructMode::kAuto, 0});
+      cp_times.push_back(t_now);
+      while (cp_times.size() > static_cast<size_t>(opt.failure_checkpoints)) cp_times.pop_front();
     }
     record(t_pf, R_pf);
     head += n;

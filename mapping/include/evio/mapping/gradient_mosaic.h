@@ -33,6 +33,14 @@
 
 namespace evio::mapping {
 
+// One pixel's state of GradientMosaic in one 48-byte record: an update touches one cache line.
+struct GradientMosaicPixelState {
+  double gu, gv;         // gradient, log units / px
+  double puu, puv, pvv;  // covariance, (log units / px)^2
+  uint32_t count;        // accepted updates
+  uint8_t viewed;        // mark_viewed (fits in the record's padding)
+};
+
 struct GradientMosaicOptions {
   int width = 1024;                   // px, mosaic columns (u, longitude; wraps)
   int height = 512;                   // px, mosaic rows (v, latitude; row 0 = up)
@@ -214,6 +222,17 @@ class GradientMosaic {
   // resized and written whole. Returns the region written (x may exceed the width: columns wrap).
   PixelRect reconstruct_map(ReconstructMode mode, std::vector<float>* map);
 
+  // The per-pixel state (gradients, covariances, counts, viewed marks) at one moment, to undo the
+  // updates made after it (e.g. those made with a rotation later found wrong). restore() puts it
+  // back; the next reconstruction is a full solve. Stats are not rolled back.
+  class Checkpoint {
+    friend class GradientMosaic;
+    std::vector<GradientMosaicPixelState> state_;
+  };
+  Checkpoint checkpoint() const;
+  // Throws std::invalid_argument for a checkpoint of another size (or an empty one).
+  void restore(const Checkpoint& checkpoint);
+
  private:
   size_t index(int i, int j) const { return static_cast<size_t>(j) * options_.width + i; }
   void update_edges(int x0, int y0, int w, int h);  // edge gradients owned by those pixels
@@ -222,13 +241,7 @@ class GradientMosaic {
   GradientMosaicOptions options_;
   PoissonSolver solver_;
   WeightedPoissonSolver weighted_solver_;
-  // One pixel's state in one 48-byte record: an update touches one cache line.
-  struct PixelState {
-    double gu, gv;         // gradient, log units / px
-    double puu, puv, pvv;  // covariance, (log units / px)^2
-    uint32_t count;        // accepted updates
-    uint8_t viewed;        // mark_viewed (fits in the record's padding)
-  };
+  using PixelState = GradientMosaicPixelState;
   bool is_seen(const PixelState& p) const;  // seen_min_observations and seen_max_gradient_std
   std::vector<PixelState> state_;
   Stats stats_;

@@ -22,6 +22,7 @@
 #include "evio/frontend/rotation_particle_filter.h"
 #include "evio/mapping/contrast_maximization.h"
 #include "evio/mapping/gradient_mosaic.h"
+#include "evio/mapping/rotation_relocalization.h"
 #include "evio/sensors/event_buffer.h"
 #include "evio/sensors/measurements.h"
 #include "evio/sensors/trajectory.h"
@@ -147,6 +148,32 @@ struct MosaicPipelineOptions {
   // by this much (rad, >= 0; 0: no re-localisation), so the cloud can find the map's optimum again.
   // Not with the gyro: its prediction holds, and a "lost" there is a poor map (shapes slow).
   double failure_relocalize_spread_rad = 0.05;
+  // Map rollback: while tracking, the mosaic's state is checkpointed every
+  // failure_checkpoint_period_ns (ns, > 0; the newest failure_checkpoints kept, count >= 1, 25 MB
+  // each at 1024 x 512). When a loss is declared, the mosaic goes back to the newest checkpoint at
+  // least one failure window before the first low window (the map agrees with a wrong rotation
+  // for a while, so a loss is detected some 0.3 s after the departure), undoing what was mapped
+  // with the wrong rotation, and the tracker's map is re-solved. false: no checkpoints. Default
+  // false: on the 30-s tables no lost run recovered with it, and with the gyro it turned the
+  // mirrored-view test's loss into a false recovery (the tracker's events then fall on texels the
+  // rollback emptied, and the probe contrast of the rest rose above the recovered level).
+  bool failure_rollback = false;
+  int64_t failure_checkpoint_period_ns = 250'000'000;
+  int failure_checkpoints = 4;
+  // While lost, events only: at most once per failure_global_period_ns (ns, > 0) a failure window
+  // also searches the whole known mosaic for the view (mapping::RelocalizationMap): the window's
+  // most recent events (at most bootstrap_window_ns and bootstrap_window_events, as a bootstrap
+  // window) are moved to its end with their contrast-maximisation angular velocity, and the best
+  // rotation replaces the particles (at the CMax velocity) when its score beats the estimate's by
+  // failure_global_min_gain (ratio, >= 1). false: local spreads only. Default false: on the 30-s
+  // tables (boxes fast, shapes) the searches jumped (1-18 times per run) but no run came back to
+  // the truth, and some windows then read as recovered while 40-100 deg off: by the time a loss
+  // is declared the map around the view was written with the wrong rotation. The search itself
+  // finds a view on a known map within 0.12-0.28 deg (tests/mapping/test_rotation_relocalization.cc).
+  bool failure_global_relocalize = false;
+  int64_t failure_global_period_ns = 500'000'000;
+  double failure_global_min_gain = 1.2;
+  mapping::RotationRelocalizationOptions relocalization;
 
   // The rotation trajectory keeps one pose per this period at most, ns (> 0).
   int64_t trajectory_period_ns = 5'000'000;
@@ -171,6 +198,7 @@ struct MosaicBootstrapStats {
   bool gyro = false;              // rates from the gyro (else rotational contrast maximisation)
   int64_t t_end_ns = 0;           // tracking starts here (camera clock)
   int64_t cmax_windows = 0;       // contrast-maximisation windows (events only)
+  int64_t short_windows = 0;      // a last window under half the window's time and events: previous rate kept
   int64_t events = 0;             // events of the bootstrap
   double tracker_contrast = 0;    // the tracker's C, log units
   bool contrast_calibrated = false;  // tracker_contrast from the bootstrap mosaic (else as configured)
@@ -184,6 +212,11 @@ struct MosaicLostSegment {
   int64_t t_end_ns = 0;
   bool recovered = false;        // a window reached failure_recovered_contrast again
   int64_t relocalizations = 0;   // particle spreads while lost
+  int64_t global_searches = 0;   // searches of the whole mosaic while lost
+  int64_t global_jumps = 0;      // of which moved the particles to the view found
+  // The mosaic's state was rolled back to its checkpoint at this time (camera clock; INT64_MIN: no
+  // rollback, e.g. no checkpoint old enough).
+  int64_t map_rolled_back_to_ns = INT64_MIN;
 };
 
 struct MosaicStats {
