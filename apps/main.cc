@@ -1,11 +1,13 @@
 // The `evio` command-line tool. All flag parsing lives here (CLI11 is included in this file only);
 // each subcommand's work is in its own <name>_command.cc. Exit codes: 0 success, 1 bad input
 // (file, line and expected form on one line of stderr), 2 usage error, 3 internal error.
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <iostream>
 #include <string>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 
@@ -21,6 +23,22 @@
 #include "vio_command.h"
 
 namespace {
+
+// Levenshtein distance (insertions, deletions, substitutions), for subcommand suggestions.
+size_t edit_distance(const std::string& a, const std::string& b) {
+  std::vector<size_t> row(b.size() + 1);
+  for (size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (size_t i = 1; i <= a.size(); ++i) {
+    size_t diag = row[0];
+    row[0] = i;
+    for (size_t j = 1; j <= b.size(); ++j) {
+      const size_t up = row[j];
+      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diag + (a[i - 1] == b[j - 1] ? 0 : 1)});
+      diag = up;
+    }
+  }
+  return row[b.size()];
+}
 
 // Parses "WxH" into a sensor size.
 std::string parse_sensor(const std::string& s, evio::SensorSize* out) {
@@ -351,6 +369,27 @@ int main(int argc, char** argv) {
                        "instead of the mosaic's reconstructions; no map error (needs --gt)");
   add_dataset_options(mosaic_cmd, &mosaic.dataset_options, &mosaic_format, &mosaic_unit, &mosaic_bad);
 
+  // A mistyped subcommand: name it and list the real ones (CLI11 alone says "A subcommand is
+  // required", and with --help prints the main help and exits 0). The global options take no
+  // values, so the first argument not starting with '-' is the subcommand.
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (!a.empty() && a[0] == '-') continue;
+    std::vector<std::string> names;
+    for (const CLI::App* sub : app.get_subcommands([](CLI::App*) { return true; })) names.push_back(sub->get_name());
+    if (std::find(names.begin(), names.end(), a) != names.end()) break;
+    std::string closest;
+    size_t best = 3;  // suggest within 2 edits
+    for (const std::string& n : names) {
+      const size_t d = edit_distance(a, n);
+      if (d < best) best = d, closest = n;
+    }
+    std::cerr << "evio: unknown subcommand '" << a << "'" << (closest.empty() ? "" : " (did you mean '" + closest + "'?)")
+              << "; the subcommands are:";
+    for (const std::string& n : names) std::cerr << " " << n;
+    std::cerr << "\nRun 'evio --help' or 'evio SUBCOMMAND --help' for more information.\n";
+    return 2;
+  }
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -5,6 +5,7 @@
 #include <cstring>
 #include <vector>
 
+#include "byte_order.h"
 #include "evio/calib/error.h"
 #include "evio/calib/log.h"
 #include "text_common.h"
@@ -17,9 +18,7 @@ constexpr char kForm[] =
     "jAER AEDAT 2.0: '#' header lines starting with \"#!AER-DAT2.0\", then big-endian int32 address + int32 "
     "timestamp [us] pairs";
 
-inline uint32_t be32(const uint8_t* p) {
-  return (uint32_t{p[0]} << 24) | (uint32_t{p[1]} << 16) | (uint32_t{p[2]} << 8) | uint32_t{p[3]};
-}
+using detail::load_be;
 
 class Aedat2Reader final : public DatasetReader {
  public:
@@ -53,8 +52,8 @@ class Aedat2Reader final : public DatasetReader {
       const uint8_t* p = buf_.data() + pos_;
       const size_t records = std::min((end_ - pos_) / 8, max_events - n);
       for (size_t i = 0; i < records; ++i, p += 8) {
-        const uint32_t addr = be32(p);
-        const int64_t t_ns = unwrap(be32(p + 4)) * 1000;
+        const uint32_t addr = load_be<uint32_t>(p);
+        const int64_t t_ns = unwrap(load_be<uint32_t>(p + 4)) * 1000;
         const auto at = [&] { return offset_ - (end_ - pos_) + i * 8; };  // byte offset, for errors only
         if (addr & 0xffff0000u) {
           bad("malformed", at(), "address 0x" + hex(addr) + " has bits above 15 set (not a DVS128 address)");

@@ -19,6 +19,7 @@
 #include "evio/calib/error.h"
 #include "evio/calib/log.h"
 #include "binary_file.h"
+#include "byte_order.h"
 
 namespace evio {
 namespace {
@@ -60,30 +61,7 @@ const char kPacketForm[] =
     "packets of int32 stream id (listed in the header's infoNode), int32 size > 0 and `size` bytes, "
     "ending at the end of the file or at the file data table";
 
-template <typename T>
-inline T load_le(const uint8_t* p) {
-  T v;
-  std::memcpy(&v, p, sizeof(T));
-#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__
-  if constexpr (sizeof(T) == 2) {
-    uint16_t u;
-    std::memcpy(&u, &v, 2);
-    u = __builtin_bswap16(u);
-    std::memcpy(&v, &u, 2);
-  } else if constexpr (sizeof(T) == 4) {
-    uint32_t u;
-    std::memcpy(&u, &v, 4);
-    u = __builtin_bswap32(u);
-    std::memcpy(&v, &u, 4);
-  } else if constexpr (sizeof(T) == 8) {
-    uint64_t u;
-    std::memcpy(&u, &v, 8);
-    u = __builtin_bswap64(u);
-    std::memcpy(&v, &u, 8);
-  }
-#endif
-  return v;
-}
+using detail::load_le;
 
 std::string num(int64_t v) { return std::to_string(v); }
 

@@ -9,6 +9,7 @@
 #include <type_traits>
 #include <sys/stat.h>
 
+#include "byte_order.h"
 #include "evio/calib/error.h"
 #include "evio/calib/log.h"
 
@@ -26,10 +27,7 @@ constexpr size_t kEvt2BlockWords = 4096;  // at most 1 event each
 constexpr size_t kScratchEvents = 4096;
 static_assert(kEvt3BlockWords * 12 + 1 <= kScratchEvents && kEvt2BlockWords <= kScratchEvents, "scratch too small");
 
-inline uint32_t load_le16(const uint8_t* p) { return uint32_t{p[0]} | (uint32_t{p[1]} << 8); }
-inline uint32_t load_le32(const uint8_t* p) {
-  return uint32_t{p[0]} | (uint32_t{p[1]} << 8) | (uint32_t{p[2]} << 16) | (uint32_t{p[3]} << 24);
-}
+using detail::load_le;
 
 // us * 1000 + offset, in wrapping unsigned arithmetic (no signed overflow for any offset).
 inline uint64_t to_ns_bits(int64_t us, int64_t offset_ns) {
@@ -129,7 +127,7 @@ void Evt3Decoder::prelude_word(uint32_t w) {
 
 void Evt3Decoder::run(const uint8_t* p, size_t n, std::vector<Event>* events, std::vector<Trigger>* triggers) {
   size_t i = 0;
-  while (i < n && !has_time()) prelude_word(load_le16(p + 2 * i++));
+  while (i < n && !has_time()) prelude_word(load_le<uint16_t>(p + 2 * i++));
   if (i == n) return;
 
   uint32_t y = y_, base_x = base_x_, high = time_high_, low = time_low_;
@@ -145,7 +143,7 @@ void Evt3Decoder::run(const uint8_t* p, size_t n, std::vector<Event>* events, st
     const size_t end = std::min(n, i + kEvt3BlockWords);
     Event* o = scratch;
     for (; i < end; ++i) {
-      const uint32_t w = load_le16(p + 2 * i);
+      const uint32_t w = load_le<uint16_t>(p + 2 * i);
       const uint32_t type = w >> 12;
       // EVT_ADDR_X and EVT_ADDR_Y are ~80% of the words in real streams and come in data-dependent
       // order: they are handled without a branch (the event slot is written for every word and kept
@@ -256,7 +254,7 @@ int64_t Evt2Decoder::current_time_us() const {
 void Evt2Decoder::run(const uint8_t* p, size_t n, std::vector<Event>* events, std::vector<Trigger>* triggers) {
   size_t i = 0;
   for (; i < n && !has_time_high_; ++i) {
-    const uint32_t w = load_le32(p + 4 * i);
+    const uint32_t w = load_le<uint32_t>(p + 4 * i);
     const uint32_t type = w >> 28;
     if (type == 0x8) {
       time_high_ = w & 0x0FFFFFFF;
@@ -283,7 +281,7 @@ void Evt2Decoder::run(const uint8_t* p, size_t n, std::vector<Event>* events, st
     const size_t end = std::min(n, i + kEvt2BlockWords);
     Event* o = scratch;
     for (; i < end; ++i) {
-      const uint32_t w = load_le32(p + 4 * i);
+      const uint32_t w = load_le<uint32_t>(p + 4 * i);
       switch (w >> 28) {
         case 0x0:
         case 0x1:

@@ -15,6 +15,7 @@
 #include <utility>
 #include <vector>
 
+#include "byte_order.h"
 #include "evio/calib/error.h"
 #include "evio/calib/log.h"
 #include "evio/sensors/evt.h"
@@ -63,21 +64,7 @@ constexpr char kFormImage[] =
     "sensor_msgs/Image: std_msgs/Header header, uint32 height, uint32 width, string encoding, "
     "uint8 is_bigendian, uint32 step, uint8[] data";
 
-inline uint16_t le16(const uint8_t* p) {
-  uint16_t v;
-  std::memcpy(&v, p, 2);
-  return v;
-}
-inline uint32_t le32(const uint8_t* p) {
-  uint32_t v;
-  std::memcpy(&v, p, 4);
-  return v;
-}
-inline uint64_t le64(const uint8_t* p) {
-  uint64_t v;
-  std::memcpy(&v, p, 8);
-  return v;
-}
+using detail::load_le;
 inline int64_t ros_time_ns(uint32_t sec, uint32_t nsec) {
   return static_cast<int64_t>(sec) * 1000000000 + static_cast<int64_t>(nsec);
 }
@@ -145,7 +132,7 @@ class Header {
                              " bytes left) at " + where.at(off + i),
                          kBagForm);
       }
-      const uint32_t len = le32(p + i);
+      const uint32_t len = load_le<uint32_t>(p + i);
       if (len > size - i - 4) {
         throw InputError(path, 0,
                          "header field of " + std::to_string(len) + " bytes runs past the end of the " +
@@ -182,8 +169,8 @@ class Header {
     return *v;
   }
   uint8_t op() const { return static_cast<uint8_t>(bytes("op", 1)[0]); }
-  uint32_t u32(const char* name) const { return le32(reinterpret_cast<const uint8_t*>(bytes(name, 4).data())); }
-  uint64_t u64(const char* name) const { return le64(reinterpret_cast<const uint8_t*>(bytes(name, 8).data())); }
+  uint32_t u32(const char* name) const { return load_le<uint32_t>(reinterpret_cast<const uint8_t*>(bytes(name, 4).data())); }
+  uint64_t u64(const char* name) const { return load_le<uint64_t>(reinterpret_cast<const uint8_t*>(bytes(name, 8).data())); }
   // Packed ROS time (low 32 bits sec, high 32 bits nsec) -> ns.
   int64_t time_ns(const char* name) const {
     const uint64_t v = u64(name);
@@ -232,7 +219,7 @@ void read_record(const BagFile& file, uint64_t pos, FileRecord* r) {
   }
   uint8_t len4[4];
   file.read(pos, len4, 4, "record header length");
-  const uint32_t header_len = le32(len4);
+  const uint32_t header_len = load_le<uint32_t>(len4);
   if (header_len > kMaxHeaderBytes) {
     throw InputError(path, 0,
                      "record header length " + std::to_string(header_len) + " at byte offset " + std::to_string(pos) +
@@ -249,7 +236,7 @@ void read_record(const BagFile& file, uint64_t pos, FileRecord* r) {
   r->header_bytes.resize(header_len);
   file.read(pos + 4, r->header_bytes.data(), header_len, "record header");
   file.read(pos + 4 + header_len, len4, 4, "record data length");
-  r->data_len = le32(len4);
+  r->data_len = load_le<uint32_t>(len4);
   r->data_pos = pos + 8 + header_len;
   r->header.parse(path, reinterpret_cast<const uint8_t*>(r->header_bytes.data()), header_len, kFileWhere, pos + 4);
   r->op = r->header.op();
@@ -283,7 +270,7 @@ void parse_mem_record(const std::string& path, const uint8_t* buf, size_t size, 
                          " bytes left in the chunk, a record needs at least 8",
                      kBagForm);
   }
-  const uint32_t header_len = le32(buf + pos);
+  const uint32_t header_len = load_le<uint32_t>(buf + pos);
   if (header_len > left - 8) {
     throw InputError(path, 0,
                      "truncated record at " + where.at(pos) + ": header of " + std::to_string(header_len) +
@@ -293,7 +280,7 @@ void parse_mem_record(const std::string& path, const uint8_t* buf, size_t size, 
   r->header.parse(path, buf + pos + 4, header_len, where, pos + 4);
   r->op = r->header.op();
   r->data_off = pos + 8 + header_len;
-  r->data_len = le32(buf + pos + 4 + header_len);
+  r->data_len = load_le<uint32_t>(buf + pos + 4 + header_len);
   if (r->data_len > size - r->data_off) {
     throw InputError(path, 0,
                      "truncated record (op=" + hex_op(r->op) + ") at " + where.at(pos) + ": data of " +
@@ -581,8 +568,8 @@ void read_index(Bag* bag, uint64_t index_pos, uint32_t conn_count, uint32_t chun
     data.resize(r.data_len);
     file.read(r.data_pos, data.data(), r.data_len, "chunk info data");
     for (uint32_t k = 0; k < n; ++k) {
-      const uint32_t conn = le32(data.data() + 8 * k);
-      const uint32_t count = le32(data.data() + 8 * k + 4);
+      const uint32_t conn = load_le<uint32_t>(data.data() + 8 * k);
+      const uint32_t count = load_le<uint32_t>(data.data() + 8 * k + 4);
       if (bag->find(conn) == nullptr) {
         throw InputError(bag->path, 0,
                          "chunk info record at byte offset " + std::to_string(pos) + " names connection " +
@@ -829,13 +816,13 @@ class MsgReader {
   }
   uint32_t u32(const char* what) {
     need(4, what);
-    const uint32_t v = le32(p_);
+    const uint32_t v = load_le<uint32_t>(p_);
     p_ += 4;
     return v;
   }
   uint64_t u64(const char* what) {
     need(8, what);
-    const uint64_t v = le64(p_);
+    const uint64_t v = load_le<uint64_t>(p_);
     p_ += 8;
     return v;
   }
@@ -1081,8 +1068,8 @@ class EventStream {
     int64_t last = last_t_ns_;
     const uint32_t w = bounded_ ? width_ : 65536u, h = bounded_ ? height_ : 65536u;
     for (uint32_t i = 0; i < count; ++i, p += 13) {
-      const uint32_t x = le16(p), y = le16(p + 2);
-      const int64_t t = ros_time_ns(le32(p + 4), le32(p + 8));
+      const uint32_t x = load_le<uint16_t>(p), y = load_le<uint16_t>(p + 2);
+      const int64_t t = ros_time_ns(load_le<uint32_t>(p + 4), load_le<uint32_t>(p + 8));
       if (x >= w || y >= h || t < last) {
         last_t_ns_ = last;
         if (x >= w || y >= h) {
