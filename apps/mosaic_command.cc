@@ -358,7 +358,7 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
       const auto g0 = diag_gt->interpolate(t0);
       if (!g0) throw InputError(args.gt, 0, "--oracle-map: no ground-truth pose at the first event", "a trajectory covering the events");
       const Eigen::Matrix3d R_w_m = g0->rotation.toRotationMatrix() * R_m_b0.transpose();
-      const mapping::ImageF ref = mapping::panorama_log_reference(*tex, R_w_m, cfg.mosaic.width, cfg.mosaic.height);
+      const mapping::ImageF ref = simulator::panorama_log_reference(*tex, R_w_m, cfg.mosaic.width, cfg.mosaic.height);
       return std::vector<float>(ref.data(), ref.data() + ref.size());
     });
   }
@@ -500,7 +500,7 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
       const SimulationConfig sc = load_simulation_config(scene.string());
       if (sc.panorama) {
         const Eigen::Matrix3d R_w_m = A;  // mosaic frame -> simulator world
-        const mapping::ImageF ref = mapping::panorama_log_reference(*sc.panorama, R_w_m, cfg.mosaic.width, cfg.mosaic.height);
+        const mapping::ImageF ref = simulator::panorama_log_reference(*sc.panorama, R_w_m, cfg.mosaic.width, cfg.mosaic.height);
         const mapping::ImageQuality q = mapping::compare_images(rec.log_intensity, ref, &rec.seen);
         auto quality = [&](const mapping::ImageQuality& x) {
           return "{\"psnr_db\": " + num(x.psnr_db) + ", \"ssim\": " + num(x.ssim) + ", \"rmse_log\": " + num(x.rmse) +

@@ -25,8 +25,8 @@
 #include "evio/calib/log.h"
 #include "evio/sensors/ecd.h"
 #include "evio/sensors/h5.h"
-#include "evio/sensors/sim_imu.h"
-#include "evio/sensors/simulator.h"
+#include "evio/simulator/imu.h"
+#include "evio/simulator/simulator.h"
 #include "evio/sensors/time.h"
 #include "evio/sensors/trajectory.h"
 
@@ -93,7 +93,7 @@ cv::Mat display_image(const cv::Mat& linear) {
 }
 
 // Streams the simulator's outputs into the folder.
-class FolderSink final : public sim::SimulationSink {
+class FolderSink final : public simulator::SimulationSink {
  public:
   FolderSink(const SimulationConfig& c, const fs::path& dir, int64_t bin_ns)
       : c_(c),
@@ -151,7 +151,7 @@ class FolderSink final : public sim::SimulationSink {
     images_->print("%s %s\n", format_seconds(frame.t_ns).c_str(), name);
   }
 
-  void on_ground_truth(const sim::RenderedView& view, const sim::CameraState& camera) override {
+  void on_ground_truth(const simulator::RenderedView& view, const simulator::CameraState& camera) override {
     if (!maps_) return;
     char name[32];
     std::snprintf(name, sizeof(name), "%06zu", map_count_++);
@@ -206,7 +206,7 @@ size_t write_poses(const SimulationConfig& c, const fs::path& dir) {
   OutFile vel((dir / "velocities.txt").string());
   vel.print("# t[s] v_w[m/s](x y z) omega_b[rad/s](x y z) a_w[m/s^2](x y z, no gravity) alpha_b[rad/s^2](x y z)\n");
   for (int64_t t = t0; t <= t1; t += period) {
-    const sim::TrajectoryState s = c.trajectory->evaluate(t);
+    const simulator::TrajectoryState s = c.trajectory->evaluate(t);
     poses.push_back({t, s.T_w_b});
     vel.print("%s %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g\n", format_seconds(t).c_str(),
               s.v_w.x(), s.v_w.y(), s.v_w.z(), s.omega_b.x(), s.omega_b.y(), s.omega_b.z(), s.a_w.x(), s.a_w.y(),
@@ -218,13 +218,13 @@ size_t write_poses(const SimulationConfig& c, const fs::path& dir) {
 }
 
 size_t write_imu(const SimulationConfig& c, const fs::path& dir) {
-  std::vector<sim::ImuBiasSample> biases;
+  std::vector<simulator::ImuBiasSample> biases;
   const std::vector<ImuSample> imu =
-      sim::simulate_imu(*c.trajectory, c.simulator.t_begin_ns, c.simulator.t_end_ns, c.imu, &biases);
+      simulator::simulate_imu(*c.trajectory, c.simulator.t_begin_ns, c.simulator.t_end_ns, c.imu, &biases);
   write_ecd_imu((dir / "imu.txt").string(), imu);
   OutFile b((dir / "imu_biases.txt").string());
   b.print("# t[s] bias_gyro[rad/s](x y z) bias_accel[m/s^2](x y z)\n");
-  for (const sim::ImuBiasSample& s : biases) {
+  for (const simulator::ImuBiasSample& s : biases) {
     b.print("%s %.17g %.17g %.17g %.17g %.17g %.17g\n", format_seconds(s.t_ns).c_str(), s.gyro.x(), s.gyro.y(),
             s.gyro.z(), s.accel.x(), s.accel.y(), s.accel.z());
   }
@@ -265,9 +265,9 @@ int run_simulate(const SimulateArgs& args, std::ostream& out) {
   fs::create_directories(dir, ec);
   if (!fs::is_directory(dir, ec)) throw InputError(args.out, 0, "cannot create the output folder", kWritable);
 
-  std::unique_ptr<sim::Simulator> simulator;
+  std::unique_ptr<simulator::Simulator> sim;
   try {
-    simulator = std::make_unique<sim::Simulator>(c.scene, c.trajectory, c.simulator);
+    sim = std::make_unique<simulator::Simulator>(c.scene, c.trajectory, c.simulator);
   } catch (const std::invalid_argument& e) {
     throw InputError(args.scene, 0, std::string("the simulator rejected the configuration: ") + e.what(),
                      "a scene YAML as documented in datasets/README.md");
@@ -296,8 +296,8 @@ int run_simulate(const SimulateArgs& args, std::ostream& out) {
     std::fprintf(stderr, "evio simulate: %s, %dx%d, %.3f s (%s)\n", c.scene->describe().c_str(), intr.width,
                  intr.height, c.duration_s, c.trajectory->describe().c_str());
   }
-  const sim::SimulationStats stats =
-      simulator->run(&sink, [&progress](double f, uint64_t n) { progress.update(f, n); });
+  const simulator::SimulationStats stats =
+      sim->run(&sink, [&progress](double f, uint64_t n) { progress.update(f, n); });
   sink.close();
   const double total_wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
 
@@ -318,7 +318,7 @@ int run_simulate(const SimulateArgs& args, std::ostream& out) {
     << json_escape(c.trajectory->describe()) << "\"";
   if (!c.trajectory_file.empty()) j << ", \"file\": \"" << json_escape(c.trajectory_file) << "\"";
   if (c.fit_report) {
-    const sim::SplineFitReport& r = *c.fit_report;
+    const simulator::SplineFitReport& r = *c.fit_report;
     j << ", \"fit\": {\"samples\": " << r.samples << ", \"control_points\": " << r.control_points
       << ", \"iterations\": " << r.iterations << ", \"position_rms_m\": " << num(r.position_rms_m)
       << ", \"position_max_m\": " << num(r.position_max_m) << ", \"rotation_rms_deg\": " << num(r.rotation_rms_deg)

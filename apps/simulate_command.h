@@ -1,4 +1,4 @@
-// `evio simulate SCENE.yaml --out DIR`: runs the event camera simulator (sensors/simulator.h) on a
+// `evio simulate SCENE.yaml --out DIR`: runs the event camera simulator (simulator/simulator.h) on a
 // scene YAML (apps/simulate_config.h; schema in datasets/README.md) and writes an Event Camera
 // Dataset folder (events.txt, imu.txt, groundtruth.txt, calib.txt, images.txt + images/), events.h5,
 // a Kalibr calib.yaml and ground-truth extras (velocities, IMU biases, depth/flow/intensity/label

@@ -15,11 +15,11 @@
 
 #include "evio/calib/calibration_io.h"
 #include "evio/calib/camera.h"
-#include "evio/sensors/sim_imu.h"
-#include "evio/sensors/sim_scene.h"
-#include "evio/sensors/sim_texture.h"
-#include "evio/sensors/sim_trajectory.h"
-#include "evio/sensors/simulator.h"
+#include "evio/simulator/imu.h"
+#include "evio/simulator/scene.h"
+#include "evio/simulator/texture.h"
+#include "evio/simulator/trajectory.h"
+#include "evio/simulator/simulator.h"
 
 namespace evio::apps {
 
@@ -49,20 +49,20 @@ struct SimulationConfig {
   double duration_s = 0;   // simulated span, s
 
   std::string scene_type;                         // "panorama", "planes" or "sprites"
-  std::shared_ptr<const sim::Scene> scene;
-  std::shared_ptr<const sim::Texture> panorama;   // panorama texture (also under a sprite scene)
+  std::shared_ptr<const simulator::Scene> scene;
+  std::shared_ptr<const simulator::Texture> panorama;   // panorama texture (also under a sprite scene)
 
   std::string trajectory_type;                    // "sinusoid", "random_spline" or "file"
-  std::shared_ptr<const sim::ContinuousTrajectory> trajectory;
+  std::shared_ptr<const simulator::ContinuousTrajectory> trajectory;
   std::string trajectory_file;                    // file trajectories: absolute path
-  std::optional<sim::SplineFitReport> fit_report;  // file trajectories: residuals of the fit
+  std::optional<simulator::SplineFitReport> fit_report;  // file trajectories: residuals of the fit
 
   std::string camera_preset;                      // "" when given explicitly
   calib::CameraCalibration camera;                // cam0: intrinsics, T_c_b, time shift (for calib.yaml)
-  sim::SimulatorOptions simulator;                // camera, extrinsics, span, stepping, events, frames, GT times
+  simulator::SimulatorOptions simulator;                // camera, extrinsics, span, stepping, events, frames, GT times
 
   bool imu_enabled = true;
-  sim::ImuSimOptions imu;                         // imu.noise.update_rate_hz == imu.rate_hz
+  simulator::ImuSimOptions imu;                         // imu.noise.update_rate_hz == imu.rate_hz
 
   GroundTruthConfig ground_truth;
   bool write_h5 = true;                           // events.h5

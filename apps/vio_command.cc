@@ -357,7 +357,7 @@ int run_vio(const VioArgs& args, std::ostream& out) {
   // work to TBB worker threads, whose hand-offs and spinning cost CPU time for no gain here.
   cv::setNumThreads(1);
   // The oracle's scene first: its errors come before reading a dataset.
-  std::shared_ptr<const sim::PlanarScene> oracle_planes;
+  std::shared_ptr<const simulator::PlanarScene> oracle_planes;
   if (args.oracle_frame_plane && !args.oracle_frame_motion)
     throw InputError(args.dataset, 0, "--oracle-frame-plane needs --oracle-frame-motion", "--oracle-frame-motion --oracle-frame-plane");
   if (args.oracle_frame_motion && args.oracle_scene.empty())
@@ -365,7 +365,7 @@ int run_vio(const VioArgs& args, std::ostream& out) {
   if (!args.oracle_scene.empty()) {
     if (args.gt.empty()) throw InputError(args.oracle_scene, 0, "--oracle-tracks needs the true trajectory", "--gt GT.tum");
     const SimulationConfig sc = load_simulation_config(args.oracle_scene);
-    oracle_planes = std::dynamic_pointer_cast<const sim::PlanarScene>(sc.scene);
+    oracle_planes = std::dynamic_pointer_cast<const simulator::PlanarScene>(sc.scene);
     if (!oracle_planes)
       throw InputError(args.oracle_scene, 0, "--oracle-tracks needs a planes scene (got " + sc.scene_type + ")", "scene: planes");
   }

@@ -16,7 +16,7 @@
 #include <vector>
 
 #include "bench_reporter.h"
-#include "evio/sensors/sim_events.h"
+#include "evio/simulator/events.h"
 
 namespace {
 
@@ -68,8 +68,8 @@ std::vector<cv::Mat> moving_frames(double speed_px_s, double scale) {
   return f;
 }
 
-evio::sim::EventSimOptions realistic_noise() {
-  evio::sim::EventSimOptions o;
+evio::simulator::EventSimOptions realistic_noise() {
+  evio::simulator::EventSimOptions o;
   o.threshold_mismatch_std = 0.03;
   o.refractory_ns = 100'000;
   o.shot_noise_rate_hz = 1.0;
@@ -80,9 +80,9 @@ evio::sim::EventSimOptions realistic_noise() {
   return o;
 }
 
-void run_steps(benchmark::State& state, const std::vector<cv::Mat>& frames, const evio::sim::EventSimOptions& o) {
+void run_steps(benchmark::State& state, const std::vector<cv::Mat>& frames, const evio::simulator::EventSimOptions& o) {
   const int w = static_cast<int>(g_width), h = static_cast<int>(g_height);
-  evio::sim::EventGenerator gen(w, h, o);
+  evio::simulator::EventGenerator gen(w, h, o);
   const int64_t t_begin = 1'700'000'000'000'000'000LL;  // absolute stamps as in recordings
   gen.reset(frames[0], t_begin);
   std::vector<evio::Event> events;
@@ -107,7 +107,7 @@ void run_steps(benchmark::State& state, const std::vector<cv::Mat>& frames, cons
 
 std::vector<cv::Mat> g_static, g_handheld, g_fast;
 
-void static_no_events(benchmark::State& state) { run_steps(state, g_static, evio::sim::EventSimOptions()); }
+void static_no_events(benchmark::State& state) { run_steps(state, g_static, evio::simulator::EventSimOptions()); }
 void static_noise(benchmark::State& state) { run_steps(state, g_static, realistic_noise()); }
 void handheld_motion(benchmark::State& state) { run_steps(state, g_handheld, realistic_noise()); }
 void fast_motion_many_events(benchmark::State& state) { run_steps(state, g_fast, realistic_noise()); }

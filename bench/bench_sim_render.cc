@@ -14,15 +14,15 @@
 
 #include "bench_reporter.h"
 #include "evio/calib/geometry.h"
-#include "evio/sensors/sim_scene.h"
+#include "evio/simulator/scene.h"
 
 namespace {
 
-using evio::sim::CameraState;
-using evio::sim::PixelRays;
-using evio::sim::RenderedView;
-using evio::sim::RenderRequest;
-using evio::sim::Scene;
+using evio::simulator::CameraState;
+using evio::simulator::PixelRays;
+using evio::simulator::RenderedView;
+using evio::simulator::RenderRequest;
+using evio::simulator::Scene;
 
 constexpr int kWidth = 240, kHeight = 180;
 
@@ -60,9 +60,9 @@ std::vector<CameraState> camera_path(int n) {
   return path;
 }
 
-std::shared_ptr<const evio::sim::Texture> procedural(evio::sim::ProceduralKind kind, int w, int h, uint64_t seed,
-                                                     evio::sim::TextureWrap wrap_u) {
-  evio::sim::ProceduralTextureOptions o;
+std::shared_ptr<const evio::simulator::Texture> procedural(evio::simulator::ProceduralKind kind, int w, int h, uint64_t seed,
+                                                     evio::simulator::TextureWrap wrap_u) {
+  evio::simulator::ProceduralTextureOptions o;
   o.kind = kind;
   o.width = w;
   o.height = h;
@@ -70,8 +70,8 @@ std::shared_ptr<const evio::sim::Texture> procedural(evio::sim::ProceduralKind k
   o.noise_scale_px = w / 16.0;
   o.octaves = 5;
   o.num_shapes = 60;
-  return std::make_shared<const evio::sim::Texture>(
-      evio::sim::make_procedural_texture(o, wrap_u, evio::sim::TextureWrap::kClamp));
+  return std::make_shared<const evio::simulator::Texture>(
+      evio::simulator::make_procedural_texture(o, wrap_u, evio::simulator::TextureWrap::kClamp));
 }
 
 struct Fixture {
@@ -83,20 +83,20 @@ struct Fixture {
     const auto cam = davis_camera();
     rays1 = std::make_unique<PixelRays>(cam, 1);
     rays2 = std::make_unique<PixelRays>(cam, 2);
-    using evio::sim::ProceduralKind;
-    using evio::sim::TextureWrap;
-    panorama = std::make_shared<evio::sim::PanoramaScene>(
+    using evio::simulator::ProceduralKind;
+    using evio::simulator::TextureWrap;
+    panorama = std::make_shared<evio::simulator::PanoramaScene>(
         procedural(ProceduralKind::kNoise, 4096, 2048, 1, TextureWrap::kRepeat));
     // The same kind of texture at 512 x 256: fits the caches, isolates the arithmetic.
-    panorama_small = std::make_shared<evio::sim::PanoramaScene>(
+    panorama_small = std::make_shared<evio::simulator::PanoramaScene>(
         procedural(ProceduralKind::kNoise, 512, 256, 1, TextureWrap::kRepeat));
     // A 6 x 6 x 3 m room around the camera: floor, ceiling, four walls and a box face.
     auto wall_tex = procedural(ProceduralKind::kShapes, 1024, 512, 2, TextureWrap::kClamp);
     auto floor_tex = procedural(ProceduralKind::kNoise, 1024, 1024, 3, TextureWrap::kClamp);
-    std::vector<evio::sim::TexturedPlane> planes;
+    std::vector<evio::simulator::TexturedPlane> planes;
     auto add = [&](Eigen::Vector3d c, Eigen::Vector3d u, Eigen::Vector3d v, double w, double h,
-                   std::shared_ptr<const evio::sim::Texture> tex) {
-      evio::sim::TexturedPlane p;
+                   std::shared_ptr<const evio::simulator::Texture> tex) {
+      evio::simulator::TexturedPlane p;
       p.center_w = c;
       p.axis_u_w = u;
       p.axis_v_w = v;
@@ -113,11 +113,11 @@ struct Fixture {
     add({0, 3, 1.5}, X, Z, 6, 3, wall_tex);
     add({0, -3, 1.5}, -X, Z, 6, 3, wall_tex);
     add({1.8, 0.3, 1.2}, -Y, Z, 0.8, 0.6, floor_tex);
-    planar = std::make_shared<evio::sim::PlanarScene>(planes, 0.1);
-    std::vector<evio::sim::Sprite> sp(3);
+    planar = std::make_shared<evio::simulator::PlanarScene>(planes, 0.1);
+    std::vector<evio::simulator::Sprite> sp(3);
     for (int i = 0; i < 3; ++i) {
       sp[i].texture = wall_tex;
-      sp[i].shape = i == 1 ? evio::sim::SpriteShape::kEllipse : evio::sim::SpriteShape::kRectangle;
+      sp[i].shape = i == 1 ? evio::simulator::SpriteShape::kEllipse : evio::simulator::SpriteShape::kRectangle;
       sp[i].width_px = 50 + 10 * i;
       sp[i].height_px = 40;
       sp[i].motion.centre_px = Eigen::Vector2d(60 + 60 * i, 90);
@@ -126,7 +126,7 @@ struct Fixture {
       sp[i].motion.frequency_hz = Eigen::Vector2d(0.5, 0.7);
       sp[i].motion.angular_rate_radps = 0.5;
     }
-    sprites = std::make_shared<evio::sim::SpriteScene>(planar, sp);
+    sprites = std::make_shared<evio::simulator::SpriteScene>(planar, sp);
   }
 };
 
@@ -147,8 +147,8 @@ void render_bench(benchmark::State& state, const Scene* scene, int supersample, 
 
 // Baseline: a direct double-precision panorama renderer with the same footprint model.
 void reference_panorama(benchmark::State& state) {
-  const auto& pano = static_cast<const evio::sim::PanoramaScene&>(*g_fixture->panorama);
-  const evio::sim::Texture& tex = pano.texture();
+  const auto& pano = static_cast<const evio::simulator::PanoramaScene&>(*g_fixture->panorama);
+  const evio::simulator::Texture& tex = pano.texture();
   const PixelRays& rays = *g_fixture->rays1;
   cv::Mat out(kHeight, kWidth, CV_32F);
   size_t i = 0;

@@ -13,7 +13,7 @@
 #include <cstring>
 #include <string>
 
-#include "evio/sensors/simulator.h"
+#include "evio/simulator/simulator.h"
 #include "simulate_config.h"
 
 int main(int argc, char** argv) {
@@ -39,8 +39,8 @@ int main(int argc, char** argv) {
     evio::apps::SimulationConfig cfg = evio::apps::load_simulation_config(config, overrides);
     if (max_flow_px >= 0) cfg.simulator.stepping.max_flow_px = max_flow_px;
     cfg.simulator.threads = threads;
-    evio::sim::Simulator sim(cfg.scene, cfg.trajectory, cfg.simulator);
-    const evio::sim::SimulationStats s = sim.run(nullptr);
+    evio::simulator::Simulator sim(cfg.scene, cfg.trajectory, cfg.simulator);
+    const evio::simulator::SimulationStats s = sim.run(nullptr);
     const double sim_s = s.simulated_ns * 1e-9;
     std::printf("%s: %.2f s simulated at %dx%d, %llu events (%.2f Mev/s of sequence), %llu steps, wall %.2f s "
                 "(render %.2f s, events %.2f s)\n  generated %.2f Mev/s of wall time, real-time factor %.2f\n",

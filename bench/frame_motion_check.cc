@@ -22,7 +22,7 @@
 #include "evio/evaluation/track_oracle.h"
 #include "evio/frontend/event_frame.h"
 #include "evio/sensors/dataset.h"
-#include "evio/sensors/sim_scene.h"
+#include "evio/simulator/scene.h"
 #include "dataset_calibration.h"
 #include "eval_command.h"
 #include "simulate_config.h"
@@ -30,7 +30,7 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/video/tracking.hpp>
 #include "evio/calib/geometry.h"
-#include "evio/sensors/simulator.h"
+#include "evio/simulator/simulator.h"
 #include "evio/frontend/event_filters.h"
 #include "evio/frontend/feature_tracker.h"
 #include "evio/pipeline/vio_pipeline.h"
@@ -41,9 +41,9 @@ using namespace evio;
 // |grad log I . flow| the simulator renders at t_ref (camera clock), along and across the local
 // flow; patches with too few events, a weak correlation or shifts over 5 px are skipped.
 struct Shift { double along = 0, across = 0, flow = 0; int n = 0; };
-Shift edge_shift(const calib::CameraCalibration& cal, const sim::Simulator& sim, const cv::Mat& acc, int64_t t_ref) {
+Shift edge_shift(const calib::CameraCalibration& cal, const simulator::Simulator& sim, const cv::Mat& acc, int64_t t_ref) {
   const calib::CameraIntrinsics& in = cal.camera.intrinsics();
-  const sim::RenderedView rv = sim.render(t_ref + cal.time_shift_ns, true);
+  const simulator::RenderedView rv = sim.render(t_ref + cal.time_shift_ns, true);
   cv::Mat dd(rv.intensity.size(), CV_32F, cv::Scalar(0));
   for (int y = 1; y + 1 < dd.rows; ++y)
     for (int x = 1; x + 1 < dd.cols; ++x) {
@@ -101,9 +101,9 @@ int main(int argc, char** argv) {
   }
   const auto gt = apps::load_trajectory(seq + "/groundtruth.txt");
   const auto sc = apps::load_simulation_config(scene);
-  auto planes = std::dynamic_pointer_cast<const sim::PlanarScene>(sc.scene);
+  auto planes = std::dynamic_pointer_cast<const simulator::PlanarScene>(sc.scene);
   evaluation::RayCaster cast = [planes](const Eigen::Vector3d& o, const Eigen::Vector3d& d) { return planes->intersect(o, d); };
-  sim::Simulator sim(sc.scene, sc.trajectory, sc.simulator);
+  simulator::Simulator sim(sc.scene, sc.trajectory, sc.simulator);
   frontend::EventFrameOptions o;
   o.use_depth = true;
   frontend::EventFrameBuilder b(cal, o);

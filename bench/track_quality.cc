@@ -18,7 +18,7 @@
 
 #include "evio/calib/calibration_io.h"
 #include "evio/evaluation/track_evaluation.h"
-#include "evio/sensors/sim_scene.h"
+#include "evio/simulator/scene.h"
 #include "evio/sensors/trajectory.h"
 #include "simulate_config.h"
 
@@ -96,7 +96,7 @@ int main(int argc, char** argv) {
       }
     }
     const apps::SimulationConfig cfg = apps::load_simulation_config(scene_yaml, ov);
-    const auto* planes = dynamic_cast<const sim::PlanarScene*>(cfg.scene.get());
+    const auto* planes = dynamic_cast<const simulator::PlanarScene*>(cfg.scene.get());
     if (!planes) throw std::runtime_error(scene_yaml + ": track_quality needs a planes scene (got " + cfg.scene_type + ")");
     const auto cams = calib::load_kalibr_camchain(seq + "/calib.yaml");
     if (cams.empty()) throw std::runtime_error(seq + "/calib.yaml: no camera");

@@ -14,7 +14,6 @@
 
 #include "evio/calib/equirectangular.h"
 #include "evio/calib/error.h"
-#include "evio/sensors/sim_texture.h"
 
 namespace evio::mapping {
 namespace {
@@ -230,24 +229,6 @@ ImageQuality compare_images(const ImageF& est, const ImageF& ref, const MaskU8* 
     }
   q.ssim = ssum / n;
   return q;
-}
-
-ImageF panorama_log_reference(const sim::Texture& texture, const Eigen::Matrix3d& R_w_m, int width, int height,
-                              double min_intensity) {
-  if (texture.empty()) throw std::invalid_argument("panorama_log_reference: empty texture");
-  if (width < 2 || height < 2) throw std::invalid_argument("panorama_log_reference: size below 2 x 2");
-  if (!(min_intensity > 0)) throw std::invalid_argument("panorama_log_reference: min_intensity must be > 0");
-  const calib::Equirectangular mosaic(width, height);
-  const calib::Equirectangular tex(texture.width(), texture.height());
-  const double footprint = static_cast<double>(texture.height()) / height;
-  ImageF ref(height, width);
-  for (int v = 0; v < height; ++v)
-    for (int u = 0; u < width; ++u) {
-      const Eigen::Vector2d t = tex.project(R_w_m * mosaic.pixel_direction(u, v));
-      ref(v, u) = static_cast<float>(
-          std::log(std::max(min_intensity, static_cast<double>(texture.sample(t.x(), t.y(), footprint)))));
-    }
-  return ref;
 }
 
 }  // namespace evio::mapping

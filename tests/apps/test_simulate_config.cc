@@ -78,7 +78,7 @@ TEST(SimulateConfig, MinimalPanoramaSceneBuildsEveryObject) {
   ASSERT_TRUE(c.panorama);
   EXPECT_EQ(c.panorama->width(), 128);
   EXPECT_EQ(c.panorama->height(), 64);
-  EXPECT_EQ(c.panorama->wrap_u(), sim::TextureWrap::kRepeat);  // panoramas wrap around in u
+  EXPECT_EQ(c.panorama->wrap_u(), simulator::TextureWrap::kRepeat);  // panoramas wrap around in u
   EXPECT_EQ(c.trajectory_type, "sinusoid");
   ASSERT_TRUE(c.trajectory);
   EXPECT_EQ(c.simulator.t_begin_ns, 0);
@@ -100,7 +100,7 @@ TEST(SimulateConfig, MinimalPanoramaSceneBuildsEveryObject) {
   EXPECT_TRUE(c.simulator.ground_truth_times_ns.empty());
   EXPECT_DOUBLE_EQ(c.simulator.frames.rate_hz, 0.0);
   // The initial body orientation: body z (optical axis) along world +x, body y (down) along -z.
-  const sim::TrajectoryState s = c.trajectory->evaluate(0);
+  const simulator::TrajectoryState s = c.trajectory->evaluate(0);
   const Eigen::Matrix3d R = s.T_w_b.rotation.toRotationMatrix();
   EXPECT_NEAR((R.col(2) - Eigen::Vector3d::UnitX()).norm(), 0, 1e-12);
   EXPECT_NEAR((R.col(1) + Eigen::Vector3d::UnitZ()).norm(), 0, 1e-12);
@@ -214,7 +214,7 @@ trajectory: {type: sinusoid, rpy_deg: [-90, 0, -90], amplitude_m: [0, 0.1, 0], f
 )";
   const SimulationConfig c = parse(text);
   EXPECT_EQ(c.scene_type, "planes");
-  const auto* planes = dynamic_cast<const sim::PlanarScene*>(c.scene.get());
+  const auto* planes = dynamic_cast<const simulator::PlanarScene*>(c.scene.get());
   ASSERT_NE(planes, nullptr);
   ASSERT_EQ(planes->planes().size(), 7u);  // 1 plane + 6 box faces
   EXPECT_NEAR((planes->planes()[0].axis_u_w - Eigen::Vector3d(0, -1, 0)).norm(), 0, 1e-15);  // normalised
@@ -223,7 +223,7 @@ trajectory: {type: sinusoid, rpy_deg: [-90, 0, -90], amplitude_m: [0, 0.1, 0], f
   EXPECT_FALSE(c.panorama);
   // Box faces: each centre at half the box size from the box centre, orthonormal axes.
   for (size_t i = 1; i < 7; ++i) {
-    const sim::TexturedPlane& f = planes->planes()[i];
+    const simulator::TexturedPlane& f = planes->planes()[i];
     EXPECT_NEAR(f.axis_u_w.dot(f.axis_v_w), 0, 1e-12);
     EXPECT_NEAR(f.axis_u_w.norm(), 1, 1e-12);
   }
@@ -253,7 +253,7 @@ ground_truth: {period_s: 0.1, times_s: [0.05, 0.1], depth: false}
 )";
   const SimulationConfig c = parse(text);
   EXPECT_EQ(c.scene_type, "sprites");
-  EXPECT_NE(dynamic_cast<const sim::SpriteScene*>(c.scene.get()), nullptr);
+  EXPECT_NE(dynamic_cast<const simulator::SpriteScene*>(c.scene.get()), nullptr);
   ASSERT_TRUE(c.panorama);  // the background panorama is still written out
   EXPECT_TRUE(c.ground_truth.event_labels);
   EXPECT_TRUE(c.simulator.event_labels);
@@ -282,7 +282,7 @@ trajectory:
 )";
   const SimulationConfig c = parse(text);
   EXPECT_EQ(c.trajectory_type, "random_spline");
-  const auto* spline = dynamic_cast<const sim::SplineTrajectory*>(c.trajectory.get());
+  const auto* spline = dynamic_cast<const simulator::SplineTrajectory*>(c.trajectory.get());
   ASSERT_NE(spline, nullptr);
   EXPECT_EQ(spline->order(), 5);
   EXPECT_EQ(spline->knot_spacing_ns(), 250'000'000);
@@ -407,7 +407,7 @@ output: {events_h5: false, panorama: false}
   EXPECT_FALSE(c.imu.enable_noise);
   EXPECT_DOUBLE_EQ(c.imu.initial_bias_gyro_radps.x(), 0.01);
   EXPECT_DOUBLE_EQ(c.imu.gravity_w.z(), -9.8);
-  const sim::EventSimOptions& e = c.simulator.events;
+  const simulator::EventSimOptions& e = c.simulator.events;
   EXPECT_DOUBLE_EQ(e.contrast_threshold_pos, 0.15);
   EXPECT_DOUBLE_EQ(e.contrast_threshold_neg, 0.25);
   EXPECT_DOUBLE_EQ(e.threshold_mismatch_std, 0.02);

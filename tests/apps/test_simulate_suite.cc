@@ -14,7 +14,7 @@
 
 #include "evio/calib/error.h"
 #include "evio/calib/log.h"
-#include "evio/sensors/simulator.h"
+#include "evio/simulator/simulator.h"
 #include "evio_test/real_data.h"
 #include "simulate_config.h"
 
@@ -75,9 +75,9 @@ TEST(SimulateSuite, EveryConfigParsesAndBuildsItsObjects) {
         EXPECT_LT(c.fit_report->position_rms_m, 1e-3);
         EXPECT_LT(c.fit_report->rotation_rms_deg, 0.2);
       }
-      const sim::Simulator simulator(c.scene, c.trajectory, c.simulator);
+      const simulator::Simulator simulator(c.scene, c.trajectory, c.simulator);
       // The first view renders: finite, positive intensities.
-      const sim::RenderedView view = simulator.render(c.simulator.t_begin_ns, false);
+      const simulator::RenderedView view = simulator.render(c.simulator.t_begin_ns, false);
       double lo = 0, hi = 0;
       cv::minMaxLoc(view.intensity, &lo, &hi);
       EXPECT_GE(lo, 0.0);

@@ -8,8 +8,8 @@
 #include <Eigen/Geometry>
 
 #include "evio/calib/calibration_io.h"
-#include "evio/sensors/sim_imu.h"
-#include "evio/sensors/sim_trajectory.h"
+#include "evio/simulator/imu.h"
+#include "evio/simulator/trajectory.h"
 
 namespace evio::backend::test_scenario {
 
@@ -26,9 +26,9 @@ inline calib::ImuNoise test_noise() {
 }
 
 // `phased`: the preintegration tests' variant with position and angle phases.
-inline sim::SinusoidTrajectory make_trajectory(int64_t t_begin_ns, double duration_s, bool phased) {
+inline simulator::SinusoidTrajectory make_trajectory(int64_t t_begin_ns, double duration_s, bool phased) {
   using Eigen::Vector3d;
-  sim::SinusoidTrajectoryOptions o;
+  simulator::SinusoidTrajectoryOptions o;
   o.t_begin_ns = t_begin_ns;
   o.duration_s = duration_s;
   o.position_m = Vector3d(1, -2, 0.5);
@@ -43,16 +43,16 @@ inline sim::SinusoidTrajectory make_trajectory(int64_t t_begin_ns, double durati
     o.phase_rad = Vector3d(0.1, 1.0, 2.0);
     o.angle_phase_rad = Vector3d(0.5, 0.0, 1.0);
   }
-  return sim::SinusoidTrajectory(o);
+  return simulator::SinusoidTrajectory(o);
 }
 
 // Ideal IMU samples every period_ns over [t0, t1], plus constant biases.
-inline std::vector<ImuSample> ideal_samples(const sim::ContinuousTrajectory& traj, int64_t t0, int64_t t1, int64_t period_ns,
+inline std::vector<ImuSample> ideal_samples(const simulator::ContinuousTrajectory& traj, int64_t t0, int64_t t1, int64_t period_ns,
                                             const Eigen::Vector3d& bg = Eigen::Vector3d::Zero(),
                                             const Eigen::Vector3d& ba = Eigen::Vector3d::Zero()) {
   std::vector<ImuSample> out;
   for (int64_t t = t0; t <= t1; t += period_ns) {
-    ImuSample s = sim::ideal_imu(traj.evaluate(t), kGravity);
+    ImuSample s = simulator::ideal_imu(traj.evaluate(t), kGravity);
     s.gyro += bg;
     s.accel += ba;
     out.push_back(s);

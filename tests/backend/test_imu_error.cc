@@ -16,8 +16,8 @@
 #include "evio/backend/imu_preintegration.h"
 #include "evio/backend/pose_manifold.h"
 #include "evio/calib/geometry.h"
-#include "evio/sensors/sim_imu.h"
-#include "evio/sensors/sim_trajectory.h"
+#include "evio/simulator/imu.h"
+#include "evio/simulator/trajectory.h"
 #include "imu_test_scenario.h"
 
 namespace evio::backend {
@@ -26,7 +26,7 @@ namespace {
 using test_scenario::ideal_samples;
 using test_scenario::kGravity;
 using test_scenario::test_noise;
-sim::SinusoidTrajectory make_trajectory(int64_t t_begin_ns) {
+simulator::SinusoidTrajectory make_trajectory(int64_t t_begin_ns) {
   return test_scenario::make_trajectory(t_begin_ns, 3.0, false);
 }
 
@@ -95,7 +95,7 @@ TEST(PoseManifold, PlusFollowsTheDocumentedConvention) {
 
 // Preintegration over [0.5 s, 1.3 s] from a noise-free 10 kHz IMU with constant biases.
 struct Scenario {
-  sim::SinusoidTrajectory traj = make_trajectory(0);
+  simulator::SinusoidTrajectory traj = make_trajectory(0);
   Vector3d bg_true = Vector3d(0.01, -0.02, 0.005);
   Vector3d ba_true = Vector3d(0.05, 0.1, -0.08);
   int64_t t_i = 500'000'123, t_j = 1'300'000'456;
@@ -104,7 +104,7 @@ struct Scenario {
 
 TEST(ImuError, ResidualIsZeroAtTrueStates) {
   const Scenario sc;
-  const sim::TrajectoryState si = sc.traj.evaluate(sc.t_i), sj = sc.traj.evaluate(sc.t_j);
+  const simulator::TrajectoryState si = sc.traj.evaluate(sc.t_i), sj = sc.traj.evaluate(sc.t_j);
   Vec7 pi = pose_block(si.T_w_b), pj = pose_block(sj.T_w_b);
   Vec9 sbi = speed_bias_block(si.v_w, sc.bg_true, sc.ba_true);
   Vec9 sbj = speed_bias_block(sj.v_w, sc.bg_true, sc.ba_true);
@@ -254,7 +254,7 @@ TEST(ImuError, AmbientJacobianTimesPlusJacobianIsTangentJacobian) {
 TEST(ImuError, CeresRecoversStateJ) {
   const Scenario sc;
   const auto pre = ImuPreintegration::between(sc.samples, sc.t_i, sc.t_j, sc.bg_true, sc.ba_true, test_noise());
-  const sim::TrajectoryState si = sc.traj.evaluate(sc.t_i), sj = sc.traj.evaluate(sc.t_j);
+  const simulator::TrajectoryState si = sc.traj.evaluate(sc.t_i), sj = sc.traj.evaluate(sc.t_j);
   Vec7 pi = pose_block(si.T_w_b);
   Vec9 sbi = speed_bias_block(si.v_w, sc.bg_true, sc.ba_true);
   // State j perturbed: 0.2 rad, 0.5 m, 0.3 m/s, biases off.
@@ -311,7 +311,7 @@ TEST(ImuError, LargeTimestampsGiveTheSameResidual) {
     const int64_t ti = t0 + 400'000'321, tj = t0 + 900'000'654;
     const auto pre = ImuPreintegration::between(samples, ti, tj, Vector3d::Zero(), Vector3d::Zero(), test_noise());
     const ImuError err(pre, kGravity);
-    const sim::TrajectoryState si = traj.evaluate(ti), sj = traj.evaluate(tj);
+    const simulator::TrajectoryState si = traj.evaluate(ti), sj = traj.evaluate(tj);
     Vec7 pi = pose_block(si.T_w_b), pj = pose_block(sj.T_w_b);
     Vec9 sbi = speed_bias_block(si.v_w + Vector3d(0.01, 0, 0), Vector3d::Zero(), Vector3d::Zero());
     Vec9 sbj = speed_bias_block(sj.v_w, Vector3d::Zero(), Vector3d::Zero());

@@ -11,8 +11,8 @@
 
 #include "evio/backend/imu_preintegration.h"
 #include "evio/calib/geometry.h"
-#include "evio/sensors/sim_imu.h"
-#include "evio/sensors/sim_trajectory.h"
+#include "evio/simulator/imu.h"
+#include "evio/simulator/trajectory.h"
 #include "imu_test_scenario.h"
 
 namespace evio::backend {
@@ -21,7 +21,7 @@ namespace {
 using test_scenario::ideal_samples;
 using test_scenario::kGravity;
 using test_scenario::test_noise;
-sim::SinusoidTrajectory make_trajectory(int64_t t_begin_ns) {
+simulator::SinusoidTrajectory make_trajectory(int64_t t_begin_ns) {
   return test_scenario::make_trajectory(t_begin_ns, 4.0, true);
 }
 
@@ -33,9 +33,9 @@ struct DeltaErrors {
   double rot_rad, vel_mps, pos_m;
 };
 
-DeltaErrors errors_vs_truth(const ImuPreintegration& pre, const sim::ContinuousTrajectory& traj) {
-  const sim::TrajectoryState si = traj.evaluate(pre.t_i_ns());
-  const sim::TrajectoryState sj = traj.evaluate(pre.t_j_ns());
+DeltaErrors errors_vs_truth(const ImuPreintegration& pre, const simulator::ContinuousTrajectory& traj) {
+  const simulator::TrajectoryState si = traj.evaluate(pre.t_i_ns());
+  const simulator::TrajectoryState sj = traj.evaluate(pre.t_j_ns());
   const double dt = static_cast<double>(pre.t_j_ns() - pre.t_i_ns()) * 1e-9;
   const Matrix3d Ri = si.T_w_b.rotation_matrix();
   const Matrix3d dR_true = Ri.transpose() * sj.T_w_b.rotation_matrix();
@@ -179,11 +179,11 @@ TEST(ImuPreintegration, CovarianceMatchesMonteCarlo) {
   noise.update_rate_hz = 200;
   const int64_t t_i = 500'002'000, t_j = 1'000'001'000;  // ~0.5 s, off the 200 Hz grid
   const Vector3d zero = Vector3d::Zero();
-  sim::ImuSimOptions o;
+  simulator::ImuSimOptions o;
   o.rate_hz = 200;
   o.noise = noise;
   o.enable_noise = false;
-  const auto nominal_samples = sim::simulate_imu(traj, 0, 1'500'000'000, o);
+  const auto nominal_samples = simulator::simulate_imu(traj, 0, 1'500'000'000, o);
   const auto nominal = ImuPreintegration::between(nominal_samples, t_i, t_j, zero, zero, noise);
   const Eigen::Matrix<double, 9, 9> P = nominal.covariance();
   const Eigen::Matrix<double, 9, 9> P_inv = P.inverse();
@@ -194,7 +194,7 @@ TEST(ImuPreintegration, CovarianceMatchesMonteCarlo) {
   o.enable_noise = true;
   for (int r = 0; r < runs; ++r) {
     o.seed = 1000 + r;
-    const auto samples = sim::simulate_imu(traj, 0, 1'500'000'000, o);
+    const auto samples = simulator::simulate_imu(traj, 0, 1'500'000'000, o);
     const auto pre = ImuPreintegration::between(samples, t_i, t_j, zero, zero, noise);
     Eigen::Matrix<double, 9, 1> e;
     e << so3_log(nominal.delta_q().conjugate() * pre.delta_q()), pre.delta_v() - nominal.delta_v(),

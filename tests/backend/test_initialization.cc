@@ -5,8 +5,8 @@
 #include <gtest/gtest.h>
 
 #include "evio/backend/initialization.h"
-#include "evio/sensors/sim_imu.h"
-#include "evio/sensors/sim_trajectory.h"
+#include "evio/simulator/imu.h"
+#include "evio/simulator/trajectory.h"
 
 namespace evio::backend {
 namespace {
@@ -21,18 +21,18 @@ calib::ImuNoise davis_imu() {
   return n;
 }
 
-std::vector<ImuSample> imu_of(const sim::SinusoidTrajectoryOptions& t, uint64_t seed) {
-  const sim::SinusoidTrajectory traj(t);
-  sim::ImuSimOptions o;
+std::vector<ImuSample> imu_of(const simulator::SinusoidTrajectoryOptions& t, uint64_t seed) {
+  const simulator::SinusoidTrajectory traj(t);
+  simulator::ImuSimOptions o;
   o.noise = davis_imu();
   o.initial_bias_gyro_radps = Eigen::Vector3d(0.01, -0.02, 0.005);
   o.initial_bias_accel_mps2 = Eigen::Vector3d(0.05, 0.02, -0.03);
   o.seed = seed;
-  return sim::simulate_imu(traj, traj.t_begin_ns(), traj.t_end_ns(), o);
+  return simulator::simulate_imu(traj, traj.t_begin_ns(), traj.t_end_ns(), o);
 }
 
 TEST(StaticInitialization, RecoversRollPitchAndGyroBias) {
-  sim::SinusoidTrajectoryOptions t;
+  simulator::SinusoidTrajectoryOptions t;
   t.t_begin_ns = 1'700'000'000'000'000'000;  // large stamps
   t.duration_s = 1.5;
   t.q_w_b0 = Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitX()) * Eigen::AngleAxisd(-0.2, Eigen::Vector3d::UnitY()) *
@@ -54,7 +54,7 @@ TEST(StaticInitialization, RecoversRollPitchAndGyroBias) {
 }
 
 TEST(StaticInitialization, RejectsAMovingStartAcceptsRotationInPlace) {
-  sim::SinusoidTrajectoryOptions t;
+  simulator::SinusoidTrajectoryOptions t;
   t.duration_s = 1.5;
   t.amplitude_m = Eigen::Vector3d(0.1, 0, 0);
   t.frequency_hz = Eigen::Vector3d(1.0, 0, 0);
@@ -70,7 +70,7 @@ TEST(StaticInitialization, RejectsAMovingStartAcceptsRotationInPlace) {
   const auto rot_imu = imu_of(t, 5);
   const auto s = static_initialization(rot_imu, 0, davis_imu(), StaticInitOptions{}, &why);
   ASSERT_TRUE(s.has_value()) << why;
-  const sim::SinusoidTrajectory traj(t);
+  const simulator::SinusoidTrajectory traj(t);
   const Eigen::Vector3d up_true = traj.evaluate(s->t_ns).T_w_b.rotation.conjugate() * Eigen::Vector3d::UnitZ();
   const Eigen::Vector3d up_est = s->T_w_b.rotation.conjugate() * Eigen::Vector3d::UnitZ();
   const double tilt_err_deg = std::acos(std::clamp(up_true.dot(up_est), -1.0, 1.0)) * 180 / M_PI;
@@ -87,7 +87,7 @@ TEST(StaticInitialization, RejectsAMovingStartAcceptsRotationInPlace) {
 // The gyro bias comes with its standard error (white noise over sqrt(samples)), and a window the
 // IMU covers only in part is refused: a still start seen for 0.3 s is no 1 s static window.
 TEST(StaticInitialization, GyroBiasStandardErrorAndWindowCoverage) {
-  sim::SinusoidTrajectoryOptions t;
+  simulator::SinusoidTrajectoryOptions t;
   t.duration_s = 1.5;
   const auto imu = imu_of(t, 6);
   std::string why;

@@ -7,20 +7,20 @@
 #include <stdexcept>
 #include <unordered_map>
 
-#include "evio/sensors/sim_scene.h"
+#include "evio/simulator/scene.h"
 #include "simulate_config.h"
 
 namespace evio::test {
 
 VioState VioSimulation::true_state(int64_t t_ns) const {
-  const sim::TrajectoryState s = trajectory->evaluate(t_ns);
+  const simulator::TrajectoryState s = trajectory->evaluate(t_ns);
   VioState v;
   v.t_ns = t_ns;
   v.T_w_b = s.T_w_b;
   v.v_w = s.v_w;
   // Nearest IMU sample's true bias.
   auto it = std::lower_bound(biases.begin(), biases.end(), t_ns,
-                             [](const sim::ImuBiasSample& b, int64_t t) { return b.t_ns < t; });
+                             [](const simulator::ImuBiasSample& b, int64_t t) { return b.t_ns < t; });
   if (it == biases.end()) it = biases.end() - 1;
   v.bias_gyro = it->gyro;
   v.bias_accel = it->accel;
@@ -46,8 +46,8 @@ VioSimulation make_vio_simulation(const VioSimOptions& o) {
   if (o.scene_duration_s > 0) ov.duration_s = o.scene_duration_s;
   if (!o.trajectory_file.empty()) ov.set.push_back("trajectory.path=" + o.trajectory_file);
   apps::SimulationConfig cfg = apps::load_simulation_config(o.scene_yaml, ov);
-  const auto* planes = dynamic_cast<const sim::PlanarScene*>(cfg.scene.get());
-  if (planes == nullptr && dynamic_cast<const sim::PanoramaScene*>(cfg.scene.get()) == nullptr) {
+  const auto* planes = dynamic_cast<const simulator::PlanarScene*>(cfg.scene.get());
+  if (planes == nullptr && dynamic_cast<const simulator::PanoramaScene*>(cfg.scene.get()) == nullptr) {
     throw std::invalid_argument(o.scene_yaml + ": neither a planes nor a panorama scene");
   }
 
@@ -60,12 +60,12 @@ VioSimulation make_vio_simulation(const VioSimOptions& o) {
   v.t_end_ns = std::min(cfg.trajectory->t_end_ns(), v.t_begin_ns + static_cast<int64_t>(std::llround(o.duration_s * 1e9)));
   if (v.t_end_ns <= v.t_begin_ns) throw std::invalid_argument("VIO simulation: empty time span");
 
-  sim::ImuSimOptions imu = cfg.imu;
+  simulator::ImuSimOptions imu = cfg.imu;
   imu.enable_noise = o.imu_noise;
   imu.initial_bias_gyro_radps = o.bias_gyro;
   imu.initial_bias_accel_mps2 = o.bias_accel;
   imu.seed = o.seed;
-  v.imu = sim::simulate_imu(*cfg.trajectory, v.t_begin_ns, v.t_end_ns, imu, &v.biases);
+  v.imu = simulator::simulate_imu(*cfg.trajectory, v.t_begin_ns, v.t_end_ns, imu, &v.biases);
 
   std::mt19937_64 rng(o.seed);
   std::uniform_real_distribution<double> u01(0.0, 1.0);

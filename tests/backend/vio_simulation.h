@@ -14,8 +14,8 @@
 
 #include "evio/calib/calibration_io.h"
 #include "evio/sensors/measurements.h"
-#include "evio/sensors/sim_imu.h"
-#include "evio/sensors/sim_trajectory.h"
+#include "evio/simulator/imu.h"
+#include "evio/simulator/trajectory.h"
 #include "evio/sensors/trajectory.h"
 #include "evio/sensors/vio_types.h"
 
@@ -43,9 +43,9 @@ struct VioSimulation {
   calib::CameraCalibration camera;              // intrinsics and T_c_b
   calib::ImuNoise imu_noise;                    // the simulator's densities
   Eigen::Vector3d gravity_w = Eigen::Vector3d(0, 0, -9.81);
-  std::shared_ptr<const sim::ContinuousTrajectory> trajectory;  // ground truth T_w_b(t)
+  std::shared_ptr<const simulator::ContinuousTrajectory> trajectory;  // ground truth T_w_b(t)
   std::vector<ImuSample> imu;                   // body clock
-  std::vector<sim::ImuBiasSample> biases;       // true biases at every IMU sample
+  std::vector<simulator::ImuBiasSample> biases;       // true biases at every IMU sample
   std::vector<FeatureObservations> frames;      // camera clock (= body clock: no time shift)
   std::vector<Eigen::Vector3d> landmarks_w;
   int64_t outliers = 0;                         // observations replaced by outliers

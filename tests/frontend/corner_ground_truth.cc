@@ -6,9 +6,9 @@
 #include <sstream>
 #include <stdexcept>
 
-#include "evio/sensors/sim_scene.h"
-#include "evio/sensors/sim_texture.h"
-#include "evio/sensors/sim_trajectory.h"
+#include "evio/simulator/scene.h"
+#include "evio/simulator/texture.h"
+#include "evio/simulator/trajectory.h"
 
 namespace evio::test {
 namespace {
@@ -18,7 +18,7 @@ namespace {
 constexpr int kCellTexels = 64;
 
 // Collects the simulator's event packets.
-struct EventCollector final : sim::SimulationSink {
+struct EventCollector final : simulator::SimulationSink {
   std::vector<Event>* out = nullptr;
   void on_events(const std::vector<Event>& events, const std::vector<uint16_t>*) override {
     out->insert(out->end(), events.begin(), events.end());
@@ -66,24 +66,24 @@ CornerGroundTruthSequence::CornerGroundTruthSequence(const CornerSceneOptions& o
 
   // Board: a plane facing the camera at rest (camera z forward, x right, y down = world axes),
   // texture u along world +x, texture rows growing downwards (axis_v = world -y, "up").
-  sim::ProceduralTextureOptions t;
-  t.kind = sim::ProceduralKind::kCheckerboard;
+  simulator::ProceduralTextureOptions t;
+  t.kind = simulator::ProceduralKind::kCheckerboard;
   t.cell_px = kCellTexels;
   t.width = o.squares_x * kCellTexels;
   t.height = o.squares_y * kCellTexels;
   t.min_intensity = o.dark_intensity;
   t.max_intensity = o.bright_intensity;
-  sim::TexturedPlane board;
+  simulator::TexturedPlane board;
   board.center_w = Eigen::Vector3d(0, 0, o.distance_m);
   board.axis_u_w = Eigen::Vector3d::UnitX();
   board.axis_v_w = -Eigen::Vector3d::UnitY();
   board.width_m = o.squares_x * o.square_m;
   board.height_m = o.squares_y * o.square_m;
-  board.texture = std::make_shared<sim::Texture>(sim::make_procedural_texture(t));
-  auto scene = std::make_shared<sim::PlanarScene>(std::vector<sim::TexturedPlane>{board}, o.background_intensity);
+  board.texture = std::make_shared<simulator::Texture>(simulator::make_procedural_texture(t));
+  auto scene = std::make_shared<simulator::PlanarScene>(std::vector<simulator::TexturedPlane>{board}, o.background_intensity);
 
   // Texel (u, v) of the plane is the point center + a axis_u + b axis_v with
-  // a = u / texels_per_m - width / 2 and b = height / 2 - v / texels_per_m (sim_scene.h).
+  // a = u / texels_per_m - width / 2 and b = height / 2 - v / texels_per_m (simulator/scene.h).
   for (int j = 0; j <= o.squares_y; ++j)
     for (int i = 0; i <= o.squares_x; ++i) {
       const double a = i * o.square_m - 0.5 * board.width_m;
@@ -94,7 +94,7 @@ CornerGroundTruthSequence::CornerGroundTruthSequence(const CornerSceneOptions& o
   // Smooth 6-DoF motion: translation sinusoids (x, y in the image plane, z towards the board) and
   // tilt (about x), pan (about y) and in-plane rotation (about the optical axis z), with
   // different frequencies and phases so the image never stops moving as a whole.
-  sim::SinusoidTrajectoryOptions m;
+  simulator::SinusoidTrajectoryOptions m;
   m.t_begin_ns = 0;
   m.duration_s = o.duration_s;
   const double k = o.motion_scale;
@@ -104,9 +104,9 @@ CornerGroundTruthSequence::CornerGroundTruthSequence(const CornerSceneOptions& o
   m.angle_amplitude_rad = Eigen::Vector3d(0.075, 0.105, 0.375) * k;
   m.angle_frequency_hz = Eigen::Vector3d(0.9, 0.7, 0.5);
   m.angle_phase_rad = Eigen::Vector3d(0.5, 2.5, 0.0);
-  auto trajectory = std::make_shared<sim::SinusoidTrajectory>(m);
+  auto trajectory = std::make_shared<simulator::SinusoidTrajectory>(m);
 
-  sim::SimulatorOptions so;
+  simulator::SimulatorOptions so;
   so.camera = camera_;
   so.T_c_b = calib::SE3();  // body = camera
   so.supersample = o.supersample;
@@ -123,7 +123,7 @@ CornerGroundTruthSequence::CornerGroundTruthSequence(const CornerSceneOptions& o
   so.events.timestamp_jitter_ns = 0;
   so.events.seed = o.seed;
   so.ground_truth_flow = false;
-  simulator_ = std::make_unique<sim::Simulator>(scene, trajectory, so);
+  simulator_ = std::make_unique<simulator::Simulator>(scene, trajectory, so);
   t_begin_ns_ = simulator_->t_begin_ns();
   t_end_ns_ = simulator_->t_end_ns();
 

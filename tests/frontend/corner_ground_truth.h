@@ -16,7 +16,7 @@
 #include "evio/calib/camera.h"
 #include "evio/calib/geometry.h"
 #include "evio/sensors/measurements.h"
-#include "evio/sensors/simulator.h"
+#include "evio/simulator/simulator.h"
 
 namespace evio::test {
 
@@ -59,7 +59,7 @@ class CornerGroundTruthSequence {
   int height() const { return camera_.height(); }
   // Simulated events, sorted by time.
   const std::vector<Event>& events() const { return events_; }
-  const sim::SimulationStats& stats() const { return stats_; }
+  const simulator::SimulationStats& stats() const { return stats_; }
   int64_t t_begin_ns() const { return t_begin_ns_; }
   int64_t t_end_ns() const { return t_end_ns_; }
 
@@ -95,9 +95,9 @@ class CornerGroundTruthSequence {
   CornerSceneOptions options_;
   calib::PinholeCamera camera_;
   std::vector<Eigen::Vector3d> corners_w_;
-  std::unique_ptr<sim::Simulator> simulator_;
+  std::unique_ptr<simulator::Simulator> simulator_;
   std::vector<Event> events_;
-  sim::SimulationStats stats_;
+  simulator::SimulationStats stats_;
   int64_t t_begin_ns_ = 0, t_end_ns_ = 0;
 };
 

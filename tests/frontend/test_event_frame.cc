@@ -12,11 +12,11 @@
 
 #include "evio/calib/geometry.h"
 #include "evio/frontend/event_frame.h"
-#include "evio/sensors/sim_imu.h"
-#include "evio/sensors/sim_scene.h"
-#include "evio/sensors/sim_texture.h"
-#include "evio/sensors/sim_trajectory.h"
-#include "evio/sensors/simulator.h"
+#include "evio/simulator/imu.h"
+#include "evio/simulator/scene.h"
+#include "evio/simulator/texture.h"
+#include "evio/simulator/trajectory.h"
+#include "evio/simulator/simulator.h"
 
 namespace evio::frontend {
 namespace {
@@ -563,7 +563,7 @@ TEST(EventFrame, OptionsValidation) {
 // ---------------------------------------------------------------------------------------------
 // Simulated fast rotation in front of a panorama.
 
-struct Collector final : sim::SimulationSink {
+struct Collector final : simulator::SimulationSink {
   std::vector<Event>* out = nullptr;
   void on_events(const std::vector<Event>& events, const std::vector<uint16_t>*) override {
     out->insert(out->end(), events.begin(), events.end());
@@ -572,7 +572,7 @@ struct Collector final : sim::SimulationSink {
 
 struct RotationSequence {
   CameraCalibration cam;
-  std::unique_ptr<sim::Simulator> sim;
+  std::unique_ptr<simulator::Simulator> sim;
   std::vector<Event> events;
   std::vector<ImuSample> imu;
   double mean_rate_degps = 0;
@@ -595,41 +595,41 @@ const RotationSequence& rotation_sequence() {
     s->cam.has_T_c_b = true;
     s->cam.time_shift_ns = 2'500'000;
 
-    sim::ProceduralTextureOptions t;
-    t.kind = sim::ProceduralKind::kShapes;
+    simulator::ProceduralTextureOptions t;
+    t.kind = simulator::ProceduralKind::kShapes;
     t.width = 2048;
     t.height = 1024;
     t.num_shapes = 300;
     t.seed = 5;
-    auto tex = std::make_shared<sim::Texture>(
-        sim::make_procedural_texture(t, sim::TextureWrap::kRepeat, sim::TextureWrap::kClamp));
-    auto scene = std::make_shared<sim::PanoramaScene>(tex);
+    auto tex = std::make_shared<simulator::Texture>(
+        simulator::make_procedural_texture(t, simulator::TextureWrap::kRepeat, simulator::TextureWrap::kClamp));
+    auto scene = std::make_shared<simulator::PanoramaScene>(tex);
 
     // Pan (yaw about world z) at ~170 deg/s plus tilt and roll oscillations: the rate changes
     // within a frame.
-    sim::SinusoidTrajectoryOptions m;
+    simulator::SinusoidTrajectoryOptions m;
     m.duration_s = 0.4;
     m.angle_rate_radps = Eigen::Vector3d(0.0, 0.0, 3.0);
     m.angle_amplitude_rad = Eigen::Vector3d(0.08, 0.06, 0.05);
     m.angle_frequency_hz = Eigen::Vector3d(3.0, 4.0, 5.0);
     m.angle_phase_rad = Eigen::Vector3d(0.3, 1.0, 0.0);
-    auto traj = std::make_shared<sim::SinusoidTrajectory>(m);
+    auto traj = std::make_shared<simulator::SinusoidTrajectory>(m);
 
-    sim::SimulatorOptions so;
+    simulator::SimulatorOptions so;
     so.camera = s->cam.camera;
     so.T_c_b = s->cam.T_c_b;
     so.time_shift_ns = s->cam.time_shift_ns;
     so.ground_truth_flow = false;
     so.events.seed = 3;
-    s->sim = std::make_unique<sim::Simulator>(scene, traj, so);
+    s->sim = std::make_unique<simulator::Simulator>(scene, traj, so);
     Collector c;
     c.out = &s->events;
     s->sim->run(&c);
 
-    sim::ImuSimOptions io;
+    simulator::ImuSimOptions io;
     io.rate_hz = 1000;
     io.enable_noise = false;
-    s->imu = sim::simulate_imu(*traj, traj->t_begin_ns(), traj->t_end_ns(), io);
+    s->imu = simulator::simulate_imu(*traj, traj->t_begin_ns(), traj->t_end_ns(), io);
     double sum = 0;
     for (const ImuSample& x : s->imu) sum += x.gyro.norm();
     s->mean_rate_degps = sum / s->imu.size() * 180.0 / M_PI;
@@ -779,7 +779,7 @@ TEST(EventFrameSimulated, AlignsWithPredictedEdgesInPinholeImage) {
   const std::vector<EventFrame> b = run_builder(s, off);
   const calib::CameraIntrinsics& in = s.cam.camera.intrinsics();
   auto predicted = [&](int64_t t_cam) {
-    const sim::RenderedView v = s.sim->render(t_cam + s.cam.time_shift_ns, true);
+    const simulator::RenderedView v = s.sim->render(t_cam + s.cam.time_shift_ns, true);
     // Density in the distorted image.
     cv::Mat d(v.intensity.size(), CV_32F, cv::Scalar(0));
     for (int y = 1; y + 1 < d.rows; ++y)

@@ -10,7 +10,6 @@
 
 #include "evio/calib/error.h"
 #include "evio/mapping/mosaic_image.h"
-#include "evio/sensors/sim_texture.h"
 #include "evio_test/temp_dir.h"
 
 namespace {
@@ -223,31 +222,6 @@ TEST(MosaicImage, QualityNoiseMatchesPsnrFormulaAndMaskIsRespected) {
   EXPECT_LT(compare_images(est, ref, nullptr).ssim, 0.95);
   EXPECT_THROW(compare_images(ImageF::Zero(H, W), ref, nullptr), std::invalid_argument);
   EXPECT_THROW(compare_images(ref, ImageF::Zero(H, W + 1), nullptr), std::invalid_argument);
-}
-
-// The true panorama's log intensity on the mosaic grid: with R_w_m = I the mosaic and the texture
-// share the equirectangular convention, so texel (i, j) of a W x H mosaic samples the texture at
-// ((i + 0.5) Wt / W, (j + 0.5) Ht / H); a 90 deg turn about z shifts longitude by a quarter turn.
-TEST(MosaicImage, PanoramaReferenceSamplesTheTextureAlongEachTexelsDirection) {
-  const int Wt = 256, Ht = 128, W = 64, H = 32;
-  cv::Mat img(Ht, Wt, CV_32F);
-  for (int j = 0; j < Ht; ++j)
-    for (int i = 0; i < Wt; ++i) img.at<float>(j, i) = 0.1f + 0.8f * static_cast<float>(i) / Wt;  // ramp in longitude
-  const evio::sim::Texture tex(img, evio::sim::TextureWrap::kRepeat, evio::sim::TextureWrap::kClamp);
-  const ImageF ref = evio::mapping::panorama_log_reference(tex, Eigen::Matrix3d::Identity(), W, H);
-  ASSERT_EQ(ref.rows(), H);
-  ASSERT_EQ(ref.cols(), W);
-  // Away from the seam (where the repeat wrap blends both ends), the ramp's mean over the footprint.
-  for (int i = 4; i < W - 4; i += 7) {
-    const double u_tex = (i + 0.5) * Wt / W;
-    EXPECT_NEAR(ref(H / 2, i), std::log(0.1 + 0.8 * (u_tex - 0.5) / Wt), 0.01) << i;
-  }
-  Eigen::Matrix3d Rz;  // +90 deg about z: mosaic longitude l looks along texture longitude l + 90 deg
-  Rz << 0, -1, 0, 1, 0, 0, 0, 0, 1;
-  const ImageF turned = evio::mapping::panorama_log_reference(tex, Rz, W, H);
-  EXPECT_NEAR(turned(H / 2, 10), ref(H / 2, 10 + W / 4), 1e-4);
-  EXPECT_THROW(evio::mapping::panorama_log_reference(evio::sim::Texture(), Rz, W, H), std::invalid_argument);
-  EXPECT_THROW(evio::mapping::panorama_log_reference(tex, Rz, 1, H), std::invalid_argument);
 }
 
 }  // namespace

@@ -19,8 +19,8 @@
 
 #include "evio/calib/geometry.h"
 #include "evio/mapping/mosaic_image.h"
-#include "evio/sensors/sim_imu.h"
-#include "evio/sensors/simulator.h"
+#include "evio/simulator/imu.h"
+#include "evio/simulator/simulator.h"
 #include "pipeline_test_support.h"
 #include "simulate_config.h"
 
@@ -116,10 +116,10 @@ struct Sequence {
   std::vector<Event> events;
   std::vector<ImuSample> imu;
   Trajectory groundtruth;
-  std::shared_ptr<const sim::Texture> panorama;  // the scene's true panorama
+  std::shared_ptr<const simulator::Texture> panorama;  // the scene's true panorama
 };
 
-class CollectEvents final : public sim::SimulationSink {
+class CollectEvents final : public simulator::SimulationSink {
  public:
   explicit CollectEvents(std::vector<Event>* out) : out_(out) {}
   void on_events(const std::vector<Event>& events, const std::vector<uint16_t>*) override {
@@ -139,10 +139,10 @@ const Sequence& rotation_sequence() {
     Sequence s;
     s.camera = c.camera;
     s.panorama = c.panorama;
-    sim::Simulator simulator(c.scene, c.trajectory, c.simulator);
+    simulator::Simulator sim(c.scene, c.trajectory, c.simulator);
     CollectEvents sink(&s.events);
-    simulator.run(&sink);
-    s.imu = sim::simulate_imu(*c.trajectory, c.simulator.t_begin_ns, c.simulator.t_end_ns, c.imu);
+    sim.run(&sink);
+    s.imu = simulator::simulate_imu(*c.trajectory, c.simulator.t_begin_ns, c.simulator.t_end_ns, c.imu);
     std::vector<StampedPose> gt;
     for (int64_t t = c.simulator.t_begin_ns; t <= c.simulator.t_end_ns; t += 1'000'000) {
       gt.push_back({t, c.trajectory->evaluate(t).T_w_b});
@@ -376,7 +376,7 @@ TEST(MosaicPipelineSimulated, OracleMapAndTrueMappingSplitTheError) {
     const auto g0 = s.groundtruth.interpolate(t0);
     EXPECT_TRUE(g0.has_value());
     const Eigen::Matrix3d R_w_m = g0->rotation.toRotationMatrix() * R_m_b0.transpose();
-    const mapping::ImageF ref = mapping::panorama_log_reference(*s.panorama, R_w_m, o.mosaic.width, o.mosaic.height);
+    const mapping::ImageF ref = simulator::panorama_log_reference(*s.panorama, R_w_m, o.mosaic.width, o.mosaic.height);
     return std::vector<float>(ref.data(), ref.data() + ref.size());
   });
   const MosaicResult a = feed(&oracle);
@@ -495,7 +495,7 @@ TEST(MosaicPipelineSimulated, WeightedPoissonRaisesMosaicPsnr) {
   const auto g0 = s.groundtruth.interpolate(p0.t_ns);
   ASSERT_TRUE(g0.has_value());
   const Eigen::Matrix3d R_w_m = g0->rotation.toRotationMatrix() * p0.T_w_b.rotation.toRotationMatrix().transpose();
-  const mapping::ImageF ref = mapping::panorama_log_reference(*s.panorama, R_w_m, o.mosaic.width, o.mosaic.height);
+  const mapping::ImageF ref = simulator::panorama_log_reference(*s.panorama, R_w_m, o.mosaic.width, o.mosaic.height);
   const mapping::ImageQuality weighted = mapping::compare_images(rec.log_intensity, ref, &rec.seen);
   const mapping::ImageQuality unweighted = mapping::compare_images(rec.unweighted_log_intensity, ref, &rec.seen);
   std::printf("mosaic vs true panorama over %lld seen texels: unweighted PSNR %.3f dB SSIM %.4f, weighted PSNR %.3f dB "

@@ -14,8 +14,8 @@
 #include <gtest/gtest.h>
 
 #include "evio/evaluation/trajectory_evaluation.h"
-#include "evio/sensors/sim_imu.h"
-#include "evio/sensors/simulator.h"
+#include "evio/simulator/imu.h"
+#include "evio/simulator/simulator.h"
 #include "pipeline_test_support.h"
 #include "simulate_config.h"
 
@@ -175,7 +175,7 @@ struct Sequence {
   Trajectory groundtruth;
 };
 
-class CollectEvents final : public sim::SimulationSink {
+class CollectEvents final : public simulator::SimulationSink {
  public:
   CollectEvents(std::vector<Event>* out, std::vector<Frame>* frames) : out_(out), frames_(frames) {}
   void on_events(const std::vector<Event>& events, const std::vector<uint16_t>*) override {
@@ -197,10 +197,10 @@ const Sequence& poster_sequence() {
     Sequence s;
     s.camera = c.camera;
     s.noise = c.imu.noise;
-    sim::Simulator simulator(c.scene, c.trajectory, c.simulator);
+    simulator::Simulator sim(c.scene, c.trajectory, c.simulator);
     CollectEvents sink(&s.events, &s.frames);
-    simulator.run(&sink);
-    s.imu = sim::simulate_imu(*c.trajectory, c.simulator.t_begin_ns, c.simulator.t_end_ns, c.imu);
+    sim.run(&sink);
+    s.imu = simulator::simulate_imu(*c.trajectory, c.simulator.t_begin_ns, c.simulator.t_end_ns, c.imu);
     std::vector<StampedPose> gt;
     for (int64_t t = c.simulator.t_begin_ns; t <= c.simulator.t_end_ns; t += 5'000'000) {
       gt.push_back({t, c.trajectory->evaluate(t).T_w_b});

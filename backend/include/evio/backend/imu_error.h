@@ -8,7 +8,7 @@
 //   r_v  = R_i^T (v_j - v_i - g_w dt) - (dv + J_v_bg db_g + J_v_ba db_a)
 //   r_p  = R_i^T (p_j - p_i - v_i dt - 0.5 g_w dt^2) - (dp + J_p_bg db_g + J_p_ba db_a)
 //   r_bg = b_g_j - b_g_i,   r_ba = b_a_j - b_a_i
-// g_w is gravity in the world frame (the simulator's convention, evio::sim::ImuSimOptions:
+// g_w is gravity in the world frame (the simulator's convention, evio::simulator::ImuSimOptions:
 // g_w = (0, 0, -9.81) m/s^2 and accel = R_w_b^T (a_w - g_w), so a body at rest measures +9.81 on z).
 // S is the upper Cholesky factor of the information (S^T S = Sigma^-1) of the 15x15 covariance
 // Sigma = blockdiag(preintegration covariance (9x9), sigma_bgw^2 dt I, sigma_baw^2 dt I) with the

@@ -4,7 +4,7 @@
 //
 // Model and conventions
 // - Measurements: gyro_meas = omega_b + b_g + n_g, accel_meas = R_w_b^T (a_w - g_w) + b_a + n_a
-//   (evio::sim::ideal_imu, Kalibr noise model). Body = IMU frame, SI units.
+//   (evio::simulator::ideal_imu, Kalibr noise model). Body = IMU frame, SI units.
 // - Between consecutive knots the measurements are LINEAR in time (linear interpolation of the
 //   samples). Knots are t_i, every sample strictly inside (t_i, t_j), and t_j; the measurement at
 //   t_i and t_j is linearly interpolated between the samples that bracket it (a sample exactly at

@@ -7,7 +7,7 @@
 //
 // The landmark of a track (Reference):
 //  - kAnchored: the ray of the track's FIRST observation cast into the true scene (a caller-supplied
-//    ray caster, e.g. sim::PlanarScene::intersect). The error at age k is then the drift accumulated
+//    ray caster, e.g. simulator::PlanarScene::intersect). The error at age k is then the drift accumulated
 //    since the track started (plus the first observation's own error, which is 0 by construction):
 //    a drift-free tracker has an error that does not grow with age.
 //  - kTriangulated: the least-squares point of every observation with the true poses (no scene

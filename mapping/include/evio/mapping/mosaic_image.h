@@ -14,10 +14,6 @@
 
 #include "evio/mapping/image.h"
 
-namespace evio::sim {
-class Texture;
-}  // namespace evio::sim
-
 namespace evio::mapping {
 
 // Display mapping of a log-intensity image L: x = L (or exp(L - max) with linear_intensity) is
@@ -85,16 +81,5 @@ struct ImageQuality {
 // constant estimate with fit_scale (the fit is undefined).
 ImageQuality compare_images(const ImageF& estimate, const ImageF& reference, const MaskU8* mask,
                             const ImageQualityOptions& options = {});
-
-// The true log intensity of an equirectangular mosaic (width x height texels, calib/equirectangular.h)
-// of a panorama texture at infinity (the simulator's PanoramaScene, sensors/sim_scene.h): texel
-// (i, j) looks along d_m = pixel_direction(i, j) in the mosaic frame, R_w_m d_m in the texture's
-// world frame; its value is log(max(min_intensity, texture sampled there)) with the mosaic
-// texel's footprint (texture height / mosaic height texels). The reference compare_images takes
-// for a mosaic built from a simulated sequence (R_w_m from aligning the first pose, as
-// `evio mosaic --gt` does). Throws std::invalid_argument for an empty texture, a size below
-// 2 x 2 or min_intensity <= 0.
-ImageF panorama_log_reference(const sim::Texture& texture, const Eigen::Matrix3d& R_w_m, int width, int height,
-                              double min_intensity = 1e-4);
 
 }  // namespace evio::mapping

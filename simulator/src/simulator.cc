@@ -1,6 +1,6 @@
 // Simulator driver: adaptive stepping over the body trajectory, event generation per render,
 // APS frames and ground-truth views. See simulator.h for the model.
-#include "evio/sensors/simulator.h"
+#include "evio/simulator/simulator.h"
 
 #include <algorithm>
 #include <chrono>
@@ -13,9 +13,9 @@
 
 #include <opencv2/core.hpp>
 
-#include "sim_random.h"
+#include "random.h"
 
-namespace evio::sim {
+namespace evio::simulator {
 namespace {
 
 bool fail(std::string* why, const std::string& msg) {
@@ -279,4 +279,4 @@ SimulationStats Simulator::run(SimulationSink* sink, const std::function<void(do
   return stats;
 }
 
-}  // namespace evio::sim
+}  // namespace evio::simulator

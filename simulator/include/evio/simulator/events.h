@@ -16,7 +16,7 @@
 
 #include "evio/sensors/measurements.h"
 
-namespace evio::sim {
+namespace evio::simulator {
 
 struct EventSimOptions {
   double contrast_threshold_pos = 0.2;   // mean ON threshold C+, log-intensity units, > 0
@@ -114,4 +114,4 @@ class EventGenerator {
   double spare_normal_ = 0;
 };
 
-}  // namespace evio::sim
+}  // namespace evio::simulator

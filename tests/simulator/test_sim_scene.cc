@@ -1,4 +1,4 @@
-#include "evio/sensors/sim_scene.h"
+#include "evio/simulator/scene.h"
 
 #include <cmath>
 #include <cstring>
@@ -9,7 +9,7 @@
 #include <gtest/gtest.h>
 #include <opencv2/core.hpp>
 
-namespace evio::sim {
+namespace evio::simulator {
 namespace {
 
 using calib::CameraIntrinsics;
@@ -650,4 +650,4 @@ TEST(Scenes, RenderIsDeterministicAndDescribed) {
 }
 
 }  // namespace
-}  // namespace evio::sim
+}  // namespace evio::simulator

@@ -1,7 +1,9 @@
 // Textures for the event simulator: mipmap pyramid (2x2 box with the wrap mode), bilinear and
 // trilinear sampling in level-0 texel coordinates, image loading and seeded procedural generators.
-// See sim_texture.h for the conventions.
-#include "evio/sensors/sim_texture.h"
+// See texture.h for the conventions.
+#include "evio/simulator/texture.h"
+
+#include "evio/calib/equirectangular.h"
 
 #include <algorithm>
 #include <array>
@@ -14,7 +16,7 @@
 
 #include "evio/calib/error.h"
 
-namespace evio::sim {
+namespace evio::simulator {
 namespace {
 
 inline int wrap_index(int i, int n, TextureWrap wrap) {
@@ -364,4 +366,22 @@ bool procedural_kind_from_name(const std::string& name, ProceduralKind* kind) {
   return false;
 }
 
-}  // namespace evio::sim
+Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> panorama_log_reference(
+    const Texture& texture, const Eigen::Matrix3d& R_w_m, int width, int height, double min_intensity) {
+  if (texture.empty()) throw std::invalid_argument("panorama_log_reference: empty texture");
+  if (width < 2 || height < 2) throw std::invalid_argument("panorama_log_reference: size below 2 x 2");
+  if (!(min_intensity > 0)) throw std::invalid_argument("panorama_log_reference: min_intensity must be > 0");
+  const calib::Equirectangular mosaic(width, height);
+  const calib::Equirectangular tex(texture.width(), texture.height());
+  const double footprint = static_cast<double>(texture.height()) / height;
+  Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> ref(height, width);
+  for (int v = 0; v < height; ++v)
+    for (int u = 0; u < width; ++u) {
+      const Eigen::Vector2d t = tex.project(R_w_m * mosaic.pixel_direction(u, v));
+      ref(v, u) = static_cast<float>(
+          std::log(std::max(min_intensity, static_cast<double>(texture.sample(t.x(), t.y(), footprint)))));
+    }
+  return ref;
+}
+
+}  // namespace evio::simulator

@@ -3,15 +3,15 @@
 //   measurement_k = ideal_k + b_k + (sigma / sqrt(dt)) n_k,     b_{k+1} = b_k + sigma_b sqrt(dt) m_k
 // with n_k, m_k independent N(0, I3) draws from one seeded generator, drawn per sample in the
 // order gyro white, accel white, gyro bias step, accel bias step.
-#include "evio/sensors/sim_imu.h"
+#include "evio/simulator/imu.h"
 
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
-#include "sim_random.h"
+#include "random.h"
 
-namespace evio::sim {
+namespace evio::simulator {
 namespace {
 
 bool fail(std::string* why, const std::string& message) {
@@ -90,4 +90,4 @@ std::vector<ImuSample> simulate_imu(const ContinuousTrajectory& trajectory, int6
   return out;
 }
 
-}  // namespace evio::sim
+}  // namespace evio::simulator

@@ -16,9 +16,9 @@
 
 #include "evio/calib/camera.h"
 #include "evio/calib/geometry.h"
-#include "evio/sensors/sim_texture.h"
+#include "evio/simulator/texture.h"
 
-namespace evio::sim {
+namespace evio::simulator {
 
 // Camera pose and velocity at one instant. v_c and omega_c are the camera's linear and angular
 // velocity expressed in the camera frame (R_w_c' = R_w_c hat(omega_c), p_w' = R_w_c v_c).
@@ -217,4 +217,4 @@ class SpriteScene final : public Scene {
 Eigen::Vector2d static_point_flow(const calib::PinholeCamera& camera, const Eigen::Vector3d& bearing, double depth,
                                   const CameraState& state);
 
-}  // namespace evio::sim
+}  // namespace evio::simulator

@@ -1,7 +1,7 @@
 // Simulator driver: camera kinematics, zero motion, convergence of event counts with the step
 // bound, whole-pipeline physics (events integrate the rendered log-intensity change), time shift,
 // determinism and APS frames.
-#include "evio/sensors/simulator.h"
+#include "evio/simulator/simulator.h"
 
 #include <cmath>
 #include <memory>
@@ -9,7 +9,7 @@
 
 #include <gtest/gtest.h>
 
-namespace evio::sim {
+namespace evio::simulator {
 namespace {
 
 calib::PinholeCamera small_camera(int w = 64, int h = 48) {
@@ -276,4 +276,4 @@ TEST(Simulator, FramesBlurWithLongerExposureAndGroundTruthViewsArrive) {
 }
 
 }  // namespace
-}  // namespace evio::sim
+}  // namespace evio::simulator

@@ -12,7 +12,7 @@
 //   w_1 = 0,  w_{j+1} = A_j^T w_j + B~_j' d_j,                                A_j = Exp(B~_j d_j)
 //   w'_{j+1} = A_j^T w'_j + B~_j'' d_j + B~_j' (A_j^T w_j) x d_j
 // and are divided by dt and dt^2 for rad/s and rad/s^2.
-#include "evio/sensors/sim_trajectory.h"
+#include "evio/simulator/trajectory.h"
 
 #include <algorithm>
 #include <cmath>
@@ -23,9 +23,9 @@
 #include <Eigen/Sparse>
 #include <Eigen/SparseCholesky>
 
-#include "sim_random.h"
+#include "random.h"
 
-namespace evio::sim {
+namespace evio::simulator {
 namespace {
 
 using calib::Mat3;
@@ -659,4 +659,4 @@ Trajectory sample_trajectory(const ContinuousTrajectory& trajectory, int64_t per
   return Trajectory(std::move(poses));
 }
 
-}  // namespace evio::sim
+}  // namespace evio::simulator

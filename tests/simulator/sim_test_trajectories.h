@@ -5,9 +5,9 @@
 
 #include <Eigen/Geometry>
 
-#include "evio/sensors/sim_trajectory.h"
+#include "evio/simulator/trajectory.h"
 
-namespace evio::sim::test {
+namespace evio::simulator::test {
 
 constexpr int64_t kLargeT0 = 1700000000000000000LL;  // 2023 in ns since the epoch
 
@@ -31,4 +31,4 @@ inline SinusoidTrajectoryOptions lively_sinusoid(int64_t t0) {
   return o;
 }
 
-}  // namespace evio::sim::test
+}  // namespace evio::simulator::test

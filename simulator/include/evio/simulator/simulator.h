@@ -14,11 +14,11 @@
 #include "evio/calib/camera.h"
 #include "evio/calib/geometry.h"
 #include "evio/sensors/measurements.h"
-#include "evio/sensors/sim_events.h"
-#include "evio/sensors/sim_scene.h"
-#include "evio/sensors/sim_trajectory.h"
+#include "evio/simulator/events.h"
+#include "evio/simulator/scene.h"
+#include "evio/simulator/trajectory.h"
 
-namespace evio::sim {
+namespace evio::simulator {
 
 // Adaptive time stepping. The next step is the smallest of
 //   max_flow_px / (largest |flow| over the image)       (image motion bound, flow in px/s)
@@ -121,4 +121,4 @@ class Simulator {
   int64_t t_begin_ = 0, t_end_ = 0;
 };
 
-}  // namespace evio::sim
+}  // namespace evio::simulator

@@ -1,8 +1,8 @@
 // Per-pixel renderer of the simulator's scenes (panorama at infinity, textured planes, image-space
 // sprites) with mip-mapped texture sampling, z-depth, labels and analytic optical flow. See
-// sim_scene.h for the model. The inner loops work in float on precomputed per-pixel data
+// scene.h for the model. The inner loops work in float on precomputed per-pixel data
 // (PixelRays) and make no allocations or virtual calls per pixel.
-#include "evio/sensors/sim_scene.h"
+#include "evio/simulator/scene.h"
 
 #include <algorithm>
 #include <cmath>
@@ -12,7 +12,7 @@
 #include <stdexcept>
 #include <utility>
 
-namespace evio::sim {
+namespace evio::simulator {
 namespace {
 
 constexpr float kPiF = 3.14159265358979323846f;
@@ -681,4 +681,4 @@ void SpriteScene::render(const CameraState& camera, const PixelRays& rays, const
   }
 }
 
-}  // namespace evio::sim
+}  // namespace evio::simulator

@@ -11,9 +11,10 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/Core>
 #include <opencv2/core.hpp>
 
-namespace evio::sim {
+namespace evio::simulator {
 
 enum class TextureWrap { kClamp, kRepeat };
 
@@ -189,5 +190,15 @@ EVIO_SIM_ALWAYS_INLINE float Texture::sample_impl(T u, T v, T lod) const {
   return a + f * (b - a);
 }
 
+// The true log intensity of an equirectangular mosaic (width x height texels, calib/equirectangular.h)
+// of a panorama texture at infinity (PanoramaScene, scene.h): texel (i, j) looks along
+// d_m = pixel_direction(i, j) in the mosaic frame, R_w_m d_m in the texture's world frame; its value
+// is log(max(min_intensity, texture sampled there)) with the mosaic texel's footprint (texture height
+// / mosaic height texels). The reference mapping::compare_images takes for a mosaic built from a
+// simulated sequence (R_w_m from aligning the first pose, as `evio mosaic --gt` does). H x W,
+// row-major (mapping::ImageF). Throws std::invalid_argument for an empty texture, a size below
+// 2 x 2 or min_intensity <= 0.
+Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> panorama_log_reference(
+    const Texture& texture, const Eigen::Matrix3d& R_w_m, int width, int height, double min_intensity = 1e-4);
 
-}  // namespace evio::sim
+}  // namespace evio::simulator

@@ -12,9 +12,9 @@
 
 #include "evio/calib/calibration_io.h"
 #include "evio/sensors/measurements.h"
-#include "evio/sensors/sim_trajectory.h"
+#include "evio/simulator/trajectory.h"
 
-namespace evio::sim {
+namespace evio::simulator {
 
 struct ImuSimOptions {
   double rate_hz = 1000.0;                                          // sample rate, Hz, > 0
@@ -43,4 +43,4 @@ ImuSample ideal_imu(const TrajectoryState& state, const Eigen::Vector3d& gravity
 std::vector<ImuSample> simulate_imu(const ContinuousTrajectory& trajectory, int64_t t0_ns, int64_t t1_ns,
                                     const ImuSimOptions& options, std::vector<ImuBiasSample>* biases = nullptr);
 
-}  // namespace evio::sim
+}  // namespace evio::simulator

@@ -56,7 +56,7 @@
 // so pass 2 visits only the flagged pixels (in pixel order, keeping the random draws
 // deterministic). The step's events are radix-sorted on a 64-bit (time offset, pixel, polarity)
 // key. Allocations happen only when the output or an internal scratch vector has to grow.
-#include "evio/sensors/sim_events.h"
+#include "evio/simulator/events.h"
 
 #include <algorithm>
 #include <array>
@@ -69,7 +69,7 @@
 #include <stdexcept>
 #include <utility>
 
-namespace evio::sim {
+namespace evio::simulator {
 namespace {
 
 constexpr int64_t kNever = std::numeric_limits<int64_t>::min();
@@ -546,4 +546,4 @@ void EventGenerator::step(const cv::Mat& intensity, int64_t t_ns, std::vector<Ev
   }
 }
 
-}  // namespace evio::sim
+}  // namespace evio::simulator

@@ -1,4 +1,4 @@
-#include "evio/sensors/sim_trajectory.h"
+#include "evio/simulator/trajectory.h"
 
 #include <algorithm>
 #include <chrono>
@@ -13,7 +13,7 @@
 
 #include "evio_test/real_data.h"
 
-namespace evio::sim {
+namespace evio::simulator {
 namespace {
 
 using calib::Quat;
@@ -535,4 +535,4 @@ TEST(SplineFit, MotionCaptureTrajectory) {
 }
 
 }  // namespace
-}  // namespace evio::sim
+}  // namespace evio::simulator

@@ -2,7 +2,7 @@
 // crossings per interval with asymmetric thresholds, the one-threshold tracking bound under
 // mismatch and jumps, refractory rule, noise statistics (shot, leak, hot pixels), jitter,
 // ordering, determinism and 1.7e18 ns timestamps.
-#include "evio/sensors/sim_events.h"
+#include "evio/simulator/events.h"
 
 #include <gtest/gtest.h>
 
@@ -15,7 +15,7 @@
 #include <stdexcept>
 #include <vector>
 
-namespace evio::sim {
+namespace evio::simulator {
 namespace {
 
 constexpr double kEps = 1e-3;
@@ -608,4 +608,4 @@ TEST(SimEvents, ResetRestartsTheSameRealisation) {
 }
 
 }  // namespace
-}  // namespace evio::sim
+}  // namespace evio::simulator

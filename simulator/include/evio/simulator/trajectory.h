@@ -17,7 +17,7 @@
 #include "evio/calib/geometry.h"
 #include "evio/sensors/trajectory.h"
 
-namespace evio::sim {
+namespace evio::simulator {
 
 // The body (IMU) state at one instant. Conventions: p_w = T_w_b * p_b; R_w_b' = R_w_b * hat(omega_b).
 struct TrajectoryState {
@@ -157,4 +157,4 @@ class SplineTrajectory final : public ContinuousTrajectory {
 // Samples a continuous trajectory every period_ns over its valid range (both ends included).
 Trajectory sample_trajectory(const ContinuousTrajectory& trajectory, int64_t period_ns);
 
-}  // namespace evio::sim
+}  // namespace evio::simulator

@@ -1,4 +1,4 @@
-#include "evio/sensors/sim_imu.h"
+#include "evio/simulator/imu.h"
 
 #include <algorithm>
 #include <cmath>
@@ -7,7 +7,7 @@
 
 #include "sim_test_trajectories.h"
 
-namespace evio::sim {
+namespace evio::simulator {
 namespace {
 
 using calib::Quat;
@@ -288,4 +288,4 @@ TEST(SimulateImu, LargeTimestampsGiveTheShiftedSamples) {
 }
 
 }  // namespace
-}  // namespace evio::sim
+}  // namespace evio::simulator

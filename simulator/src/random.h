@@ -9,7 +9,7 @@
 
 #include <Eigen/Core>
 
-namespace evio::sim::internal {
+namespace evio::simulator::internal {
 
 class NormalSampler {
  public:
@@ -44,4 +44,4 @@ class NormalSampler {
   bool has_spare_ = false;
 };
 
-}  // namespace evio::sim::internal
+}  // namespace evio::simulator::internal
