@@ -20,7 +20,7 @@
 #include "evio/sensors/time.h"
 #include "json_util.h"
 #include "progress.h"
-#include "yaml_config.h"
+#include "evio/sensors/yaml_config.h"
 
 namespace evio::apps {
 namespace {

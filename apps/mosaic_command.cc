@@ -28,8 +28,8 @@ std::string num(double v) { return json_number(v, 9); }
 std::string json_string(const std::string& s) { return "\"" + json_escape(s) + "\""; }
 }  // namespace
 }  // namespace evio::apps
-#include "simulate_config.h"
-#include "yaml_config.h"
+#include "evio/simulator/scene_config.h"
+#include "evio/sensors/yaml_config.h"
 
 namespace evio::apps {
 
@@ -352,7 +352,7 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
     const fs::path scene = fs::path(args.dataset) / "scene_resolved.yaml";
     if (!fs::exists(scene))
       throw InputError(scene.string(), 0, "--oracle-map: no scene file", "a dataset written by evio simulate with a panorama scene");
-    const SimulationConfig sc = load_simulation_config(scene.string());
+    const simulator::SimulationConfig sc = simulator::load_simulation_config(scene.string());
     if (!sc.panorama) throw InputError(scene.string(), 0, "--oracle-map: the scene is not a panorama", "scene type panorama");
     mosaic.set_tracker_map_reference([&diag_gt, tex = sc.panorama, &cfg, &args](const Eigen::Matrix3d& R_m_b0, int64_t t0) {
       const auto g0 = diag_gt->interpolate(t0);
@@ -497,7 +497,7 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
     std::string quality_json;
     const fs::path scene = fs::path(args.dataset) / "scene_resolved.yaml";
     if (fs::exists(scene)) {
-      const SimulationConfig sc = load_simulation_config(scene.string());
+      const simulator::SimulationConfig sc = simulator::load_simulation_config(scene.string());
       if (sc.panorama) {
         const Eigen::Matrix3d R_w_m = A;  // mosaic frame -> simulator world
         const mapping::ImageF ref = simulator::panorama_log_reference(*sc.panorama, R_w_m, cfg.mosaic.width, cfg.mosaic.height);

@@ -1,4 +1,4 @@
-// `evio simulate`: the scene config is parsed (simulate_config.cc), the fast deterministic outputs
+// `evio simulate`: the scene config is parsed (simulator::load_simulation_config), the fast deterministic outputs
 // (calibration, resolved config, poses, velocities, IMU) are written first, then the simulator
 // streams events, frames and ground-truth views into the folder through one SimulationSink.
 // Wall-clock figures go to simulation.json only, so every other file is byte-identical for the
@@ -95,7 +95,7 @@ cv::Mat display_image(const cv::Mat& linear) {
 // Streams the simulator's outputs into the folder.
 class FolderSink final : public simulator::SimulationSink {
  public:
-  FolderSink(const SimulationConfig& c, const fs::path& dir, int64_t bin_ns)
+  FolderSink(const simulator::SimulationConfig& c, const fs::path& dir, int64_t bin_ns)
       : c_(c),
         dir_(dir),
         events_((dir / "events.txt").string(), PolarityConvention::kZeroOne),
@@ -111,7 +111,7 @@ class FolderSink final : public simulator::SimulationSink {
       fs::create_directories(dir / "images");
       images_ = std::make_unique<OutFile>((dir / "images.txt").string());
     }
-    const GroundTruthConfig& g = c.ground_truth;
+    const simulator::GroundTruthConfig& g = c.ground_truth;
     if (!c.simulator.ground_truth_times_ns.empty()) {
       maps_ = std::make_unique<OutFile>((dir / "ground_truth_maps.txt").string());
       maps_->print("# index t_body[s] t_cam[s] T_w_c: tx ty tz qx qy qz qw (maps are <kind>/<index>.npy|png)\n");
@@ -155,7 +155,7 @@ class FolderSink final : public simulator::SimulationSink {
     if (!maps_) return;
     char name[32];
     std::snprintf(name, sizeof(name), "%06zu", map_count_++);
-    const GroundTruthConfig& g = c_.ground_truth;
+    const simulator::GroundTruthConfig& g = c_.ground_truth;
     if (g.depth && !view.depth.empty()) write_npy_float32((dir_ / "depth" / (std::string(name) + ".npy")).string(), view.depth);
     if (g.flow && !view.flow.empty()) write_npy_float32((dir_ / "flow" / (std::string(name) + ".npy")).string(), view.flow);
     if (g.intensity && !view.intensity.empty()) {
@@ -187,7 +187,7 @@ class FolderSink final : public simulator::SimulationSink {
   const std::vector<uint64_t>& bins() const { return bins_; }
 
  private:
-  const SimulationConfig& c_;
+  const simulator::SimulationConfig& c_;
   fs::path dir_;
   EcdEventWriter events_;
   std::unique_ptr<H5EventWriter> h5_;
@@ -199,7 +199,7 @@ class FolderSink final : public simulator::SimulationSink {
 };
 
 // groundtruth.txt (TUM, body pose in world) and velocities.txt at the pose rate.
-size_t write_poses(const SimulationConfig& c, const fs::path& dir) {
+size_t write_poses(const simulator::SimulationConfig& c, const fs::path& dir) {
   const int64_t t0 = c.simulator.t_begin_ns, t1 = c.simulator.t_end_ns;
   const int64_t period = std::max<int64_t>(1, std::llround(1e9 / c.ground_truth.pose_rate_hz));
   Trajectory poses;
@@ -217,7 +217,7 @@ size_t write_poses(const SimulationConfig& c, const fs::path& dir) {
   return poses.size();
 }
 
-size_t write_imu(const SimulationConfig& c, const fs::path& dir) {
+size_t write_imu(const simulator::SimulationConfig& c, const fs::path& dir) {
   std::vector<simulator::ImuBiasSample> biases;
   const std::vector<ImuSample> imu =
       simulator::simulate_imu(*c.trajectory, c.simulator.t_begin_ns, c.simulator.t_end_ns, c.imu, &biases);
@@ -258,7 +258,7 @@ void write_npy_float32(const std::string& path, const cv::Mat& image) {
 
 int run_simulate(const SimulateArgs& args, std::ostream& out) {
   const auto wall_start = std::chrono::steady_clock::now();
-  SimulationConfig c = load_simulation_config(args.scene, args.overrides);
+  simulator::SimulationConfig c = simulator::load_simulation_config(args.scene, args.overrides);
   c.simulator.threads = args.threads;
   const fs::path dir(args.out);
   std::error_code ec;

@@ -1,5 +1,5 @@
 // `evio simulate SCENE.yaml --out DIR`: runs the event camera simulator (simulator/simulator.h) on a
-// scene YAML (apps/simulate_config.h; schema in datasets/README.md) and writes an Event Camera
+// scene YAML (simulator/scene_config.h; schema in datasets/README.md) and writes an Event Camera
 // Dataset folder (events.txt, imu.txt, groundtruth.txt, calib.txt, images.txt + images/), events.h5,
 // a Kalibr calib.yaml and ground-truth extras (velocities, IMU biases, depth/flow/intensity/label
 // maps, per-event labels, the panorama), plus scene_resolved.yaml and simulation.json.
@@ -11,14 +11,14 @@
 
 #include <opencv2/core.hpp>
 
-#include "simulate_config.h"
+#include "evio/simulator/scene_config.h"
 
 namespace evio::apps {
 
 struct SimulateArgs {
   std::string scene;             // scene YAML
   std::string out;               // output folder (created)
-  SimulateOverrides overrides;   // --seed, --duration, --set
+  simulator::SimulateOverrides overrides;   // --seed, --duration, --set
   bool progress = true;          // progress lines on stderr (fraction, events, ETA)
   int threads = 1;               // render threads, 1..64 (outputs do not depend on it)
 };

@@ -25,8 +25,8 @@
 #include "json_util.h"
 #include "dataset_calibration.h"
 #include "progress.h"
-#include "simulate_config.h"
-#include "yaml_config.h"
+#include "evio/simulator/scene_config.h"
+#include "evio/sensors/yaml_config.h"
 
 namespace evio::apps {
 namespace {
@@ -364,7 +364,7 @@ int run_vio(const VioArgs& args, std::ostream& out) {
     throw InputError(args.dataset, 0, "--oracle-frame-motion needs the scene", "--oracle-tracks SCENE.yaml and --gt GT.tum");
   if (!args.oracle_scene.empty()) {
     if (args.gt.empty()) throw InputError(args.oracle_scene, 0, "--oracle-tracks needs the true trajectory", "--gt GT.tum");
-    const SimulationConfig sc = load_simulation_config(args.oracle_scene);
+    const simulator::SimulationConfig sc = simulator::load_simulation_config(args.oracle_scene);
     oracle_planes = std::dynamic_pointer_cast<const simulator::PlanarScene>(sc.scene);
     if (!oracle_planes)
       throw InputError(args.oracle_scene, 0, "--oracle-tracks needs a planes scene (got " + sc.scene_type + ")", "scene: planes");

@@ -14,11 +14,11 @@
 #include <string>
 
 #include "evio/simulator/simulator.h"
-#include "simulate_config.h"
+#include "evio/simulator/scene_config.h"
 
 int main(int argc, char** argv) {
   std::string config = std::string(EVIO_SOURCE_DIR) + "/datasets/poster_6dof_mocap.yaml";
-  evio::apps::SimulateOverrides overrides;
+  evio::simulator::SimulateOverrides overrides;
   double max_flow_px = -1;
   int threads = 1;
   for (int i = 1; i + 1 < argc; i += 2) {
@@ -36,7 +36,7 @@ int main(int argc, char** argv) {
     }
   }
   try {
-    evio::apps::SimulationConfig cfg = evio::apps::load_simulation_config(config, overrides);
+    evio::simulator::SimulationConfig cfg = evio::simulator::load_simulation_config(config, overrides);
     if (max_flow_px >= 0) cfg.simulator.stepping.max_flow_px = max_flow_px;
     cfg.simulator.threads = threads;
     evio::simulator::Simulator sim(cfg.scene, cfg.trajectory, cfg.simulator);

@@ -25,7 +25,7 @@
 #include "evio/simulator/scene.h"
 #include "dataset_calibration.h"
 #include "eval_command.h"
-#include "simulate_config.h"
+#include "evio/simulator/scene_config.h"
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/video/tracking.hpp>
@@ -100,7 +100,7 @@ int main(int argc, char** argv) {
     ev.swap(kept);
   }
   const auto gt = apps::load_trajectory(seq + "/groundtruth.txt");
-  const auto sc = apps::load_simulation_config(scene);
+  const auto sc = simulator::load_simulation_config(scene);
   auto planes = std::dynamic_pointer_cast<const simulator::PlanarScene>(sc.scene);
   evaluation::RayCaster cast = [planes](const Eigen::Vector3d& o, const Eigen::Vector3d& d) { return planes->intersect(o, d); };
   simulator::Simulator sim(sc.scene, sc.trajectory, sc.simulator);

@@ -20,7 +20,7 @@
 #include "evio/evaluation/track_evaluation.h"
 #include "evio/simulator/scene.h"
 #include "evio/sensors/trajectory.h"
-#include "simulate_config.h"
+#include "evio/simulator/scene_config.h"
 
 namespace {
 
@@ -80,7 +80,7 @@ int main(int argc, char** argv) {
     std::string json;
     bool lag_scan = false;
     std::string residuals;
-    apps::SimulateOverrides ov;
+    simulator::SimulateOverrides ov;
     for (int i = 4; i < argc; ++i) {
       const std::string a = argv[i];
       if (a == "--json" && i + 1 < argc) {
@@ -95,7 +95,7 @@ int main(int argc, char** argv) {
         throw std::runtime_error("unknown argument '" + a + "'");
       }
     }
-    const apps::SimulationConfig cfg = apps::load_simulation_config(scene_yaml, ov);
+    const simulator::SimulationConfig cfg = simulator::load_simulation_config(scene_yaml, ov);
     const auto* planes = dynamic_cast<const simulator::PlanarScene*>(cfg.scene.get());
     if (!planes) throw std::runtime_error(scene_yaml + ": track_quality needs a planes scene (got " + cfg.scene_type + ")");
     const auto cams = calib::load_kalibr_camchain(seq + "/calib.yaml");

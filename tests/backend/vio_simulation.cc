@@ -8,7 +8,7 @@
 #include <unordered_map>
 
 #include "evio/simulator/scene.h"
-#include "simulate_config.h"
+#include "evio/simulator/scene_config.h"
 
 namespace evio::test {
 
@@ -34,7 +34,7 @@ Trajectory VioSimulation::groundtruth_at_frames() const {
 }
 
 VioSimulation make_vio_simulation(const VioSimOptions& o) {
-  apps::SimulateOverrides ov;
+  simulator::SimulateOverrides ov;
   // The texture is irrelevant here: keep it tiny so loading is fast.
   {
     std::ifstream f(o.scene_yaml);
@@ -45,7 +45,7 @@ VioSimulation make_vio_simulation(const VioSimOptions& o) {
   }
   if (o.scene_duration_s > 0) ov.duration_s = o.scene_duration_s;
   if (!o.trajectory_file.empty()) ov.set.push_back("trajectory.path=" + o.trajectory_file);
-  apps::SimulationConfig cfg = apps::load_simulation_config(o.scene_yaml, ov);
+  simulator::SimulationConfig cfg = simulator::load_simulation_config(o.scene_yaml, ov);
   const auto* planes = dynamic_cast<const simulator::PlanarScene*>(cfg.scene.get());
   if (planes == nullptr && dynamic_cast<const simulator::PanoramaScene*>(cfg.scene.get()) == nullptr) {
     throw std::invalid_argument(o.scene_yaml + ": neither a planes nor a panorama scene");

@@ -22,7 +22,7 @@
 #include "evio/simulator/imu.h"
 #include "evio/simulator/simulator.h"
 #include "pipeline_test_support.h"
-#include "simulate_config.h"
+#include "evio/simulator/scene_config.h"
 
 namespace evio::pipeline {
 namespace {
@@ -132,9 +132,9 @@ class CollectEvents final : public simulator::SimulationSink {
 
 const Sequence& rotation_sequence() {
   static const Sequence seq = [] {
-    apps::SimulateOverrides ov;
+    simulator::SimulateOverrides ov;
     ov.duration_s = 1.5;
-    apps::SimulationConfig c = apps::load_simulation_config(std::string(EVIO_SOURCE_DIR) + "/datasets/poster_rotation.yaml", ov);
+    simulator::SimulationConfig c = simulator::load_simulation_config(std::string(EVIO_SOURCE_DIR) + "/datasets/poster_rotation.yaml", ov);
     c.simulator.threads = 2;  // identical output for any thread count
     Sequence s;
     s.camera = c.camera;

@@ -17,7 +17,7 @@
 #include "evio/simulator/imu.h"
 #include "evio/simulator/simulator.h"
 #include "pipeline_test_support.h"
-#include "simulate_config.h"
+#include "evio/simulator/scene_config.h"
 
 namespace evio::pipeline {
 namespace {
@@ -190,9 +190,9 @@ class CollectEvents final : public simulator::SimulationSink {
 
 const Sequence& poster_sequence() {
   static const Sequence seq = [] {
-    apps::SimulateOverrides ov;
+    simulator::SimulateOverrides ov;
     ov.duration_s = 4.0;
-    apps::SimulationConfig c = apps::load_simulation_config(std::string(EVIO_SOURCE_DIR) + "/datasets/poster_6dof.yaml", ov);
+    simulator::SimulationConfig c = simulator::load_simulation_config(std::string(EVIO_SOURCE_DIR) + "/datasets/poster_6dof.yaml", ov);
     c.simulator.threads = 2;  // identical output for any thread count
     Sequence s;
     s.camera = c.camera;

@@ -1,11 +1,9 @@
-// The scene YAML of `evio simulate` (schema in datasets/README.md): parsed here, in apps/, into
-// the simulator's library objects (scene with textures, continuous trajectory, camera, IMU,
+// The scene YAML of `evio simulate` (schema in datasets/README.md): parsed into the simulator's
+// library objects (scene with textures, continuous trajectory, camera, IMU,
 // event, stepping, frame and ground-truth options). Every error is an evio::InputError naming the
 // YAML file, the 1-based line and the expected form; unknown keys are errors. `--set key=value`
 // overrides edit the YAML tree before parsing; one top-level seed derives every component seed.
 #pragma once
-
-#include "yaml_config.h"
 
 #include <cstdint>
 #include <memory>
@@ -21,7 +19,7 @@
 #include "evio/simulator/trajectory.h"
 #include "evio/simulator/simulator.h"
 
-namespace evio::apps {
+namespace evio::simulator {
 
 // Command-line changes applied to the YAML before parsing.
 struct SimulateOverrides {
@@ -49,20 +47,20 @@ struct SimulationConfig {
   double duration_s = 0;   // simulated span, s
 
   std::string scene_type;                         // "panorama", "planes" or "sprites"
-  std::shared_ptr<const simulator::Scene> scene;
-  std::shared_ptr<const simulator::Texture> panorama;   // panorama texture (also under a sprite scene)
+  std::shared_ptr<const Scene> scene;
+  std::shared_ptr<const Texture> panorama;   // panorama texture (also under a sprite scene)
 
   std::string trajectory_type;                    // "sinusoid", "random_spline" or "file"
-  std::shared_ptr<const simulator::ContinuousTrajectory> trajectory;
+  std::shared_ptr<const ContinuousTrajectory> trajectory;
   std::string trajectory_file;                    // file trajectories: absolute path
-  std::optional<simulator::SplineFitReport> fit_report;  // file trajectories: residuals of the fit
+  std::optional<SplineFitReport> fit_report;  // file trajectories: residuals of the fit
 
   std::string camera_preset;                      // "" when given explicitly
   calib::CameraCalibration camera;                // cam0: intrinsics, T_c_b, time shift (for calib.yaml)
-  simulator::SimulatorOptions simulator;                // camera, extrinsics, span, stepping, events, frames, GT times
+  SimulatorOptions simulator;                // camera, extrinsics, span, stepping, events, frames, GT times
 
   bool imu_enabled = true;
-  simulator::ImuSimOptions imu;                         // imu.noise.update_rate_hz == imu.rate_hz
+  ImuSimOptions imu;                         // imu.noise.update_rate_hz == imu.rate_hz
 
   GroundTruthConfig ground_truth;
   bool write_h5 = true;                           // events.h5
@@ -80,11 +78,11 @@ SimulationConfig load_simulation_config(const std::string& path, const SimulateO
 SimulationConfig parse_simulation_config(const std::string& yaml_text, const std::string& path,
                                          const SimulateOverrides& overrides = {});
 
-// derive_seed(): see yaml_config.h.
+// Component seeds: yaml_config::derive_seed (evio/sensors/yaml_config.h).
 
 // Camera presets: "davis240c", "davis346", "prophesee" (Gen3 VGA) and "prophesee_hd" (Gen4 HD).
 std::vector<std::string> camera_preset_names();
 // Throws std::invalid_argument for an unknown name.
 calib::CameraIntrinsics camera_preset(const std::string& name);
 
-}  // namespace evio::apps
+}  // namespace evio::simulator

@@ -1,5 +1,5 @@
-// YAML configuration machinery shared by the subcommands that read config files (`evio
-// simulate`, `evio corners`, ...): command-line overrides (`--set key.sub=value`), and a
+// YAML configuration machinery shared by the simulator's scene parser and the subcommands that
+// read config files (`evio corners`, `evio vio`, `evio mosaic`): command-line overrides (`--set key.sub=value`), and a
 // Section that knows its dotted key path and YAML node, rejects unknown keys (typos are errors),
 // reads typed values with ranges and units, and turns every problem into an evio::InputError at
 // the node's line -- or, for values set on the command line, against that option.
@@ -21,13 +21,7 @@
 #include "evio/calib/error.h"
 #include "evio/sensors/time.h"
 
-namespace evio::apps {
-
-// Seed of one component ("events", "imu", "scene.planes.0.texture", ...) from the top-level
-// seed: SplitMix64 over the seed and an FNV-1a hash of the name. Stable across versions.
-uint64_t derive_seed(uint64_t seed, const std::string& component);
-
-namespace yaml_config {
+namespace evio::yaml_config {
 using Eigen::Vector2d;
 using Eigen::Vector3d;
 
@@ -61,6 +55,12 @@ inline uint64_t fnv1a(const std::string& s) {
     h *= 0x100000001B3ull;
   }
   return h;
+}
+
+// Seed of one component ("events", "imu", "scene.planes.0.texture", ...) from the top-level
+// seed: SplitMix64 over the seed and an FNV-1a hash of the name. Stable across versions.
+inline uint64_t derive_seed(uint64_t seed, const std::string& component) {
+  return splitmix64(seed ^ splitmix64(fnv1a(component)));
 }
 
 // ---- overrides --------------------------------------------------------------------------------------
@@ -408,5 +408,4 @@ inline std::vector<Section> list_of_maps(const Section& s, const std::string& ke
   return out;
 }
 
-}  // namespace yaml_config
-}  // namespace evio::apps
+}  // namespace evio::yaml_config

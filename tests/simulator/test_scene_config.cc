@@ -2,7 +2,7 @@
 // derived from one top-level seed, `--set`/`--seed`/`--duration` overrides, errors naming the
 // file and line (or the command-line option) and the expected form, unknown keys as errors, the
 // resolved YAML reproducing the configuration, and the .npy writer.
-#include "simulate_config.h"
+#include "evio/simulator/scene_config.h"
 
 #include <cmath>
 #include <cstring>
@@ -16,10 +16,10 @@
 #include "evio/calib/error.h"
 #include "evio/calib/log.h"
 #include "evio/sensors/time.h"
+#include "evio/sensors/yaml_config.h"
 #include "evio_test/temp_dir.h"
-#include "simulate_command.h"
 
-namespace evio::apps {
+namespace evio::simulator {
 namespace {
 
 class QuietLog {
@@ -109,18 +109,18 @@ TEST(SimulateConfig, MinimalPanoramaSceneBuildsEveryObject) {
 
 TEST(SimulateConfig, SeedsDeriveFromTheTopLevelSeedUnlessPinned) {
   const SimulationConfig c = parse(kPanorama);
-  EXPECT_EQ(c.simulator.events.seed, derive_seed(5, "events.seed"));
-  EXPECT_EQ(c.imu.seed, derive_seed(5, "imu.seed"));
-  EXPECT_EQ(c.simulator.frames.seed, derive_seed(5, "frames.seed"));
+  EXPECT_EQ(c.simulator.events.seed, yaml_config::derive_seed(5, "events.seed"));
+  EXPECT_EQ(c.imu.seed, yaml_config::derive_seed(5, "imu.seed"));
+  EXPECT_EQ(c.simulator.frames.seed, yaml_config::derive_seed(5, "frames.seed"));
   EXPECT_NE(c.simulator.events.seed, c.imu.seed);
-  EXPECT_EQ(derive_seed(5, "events.seed"), derive_seed(5, "events.seed"));
-  EXPECT_NE(derive_seed(5, "events.seed"), derive_seed(6, "events.seed"));
+  EXPECT_EQ(yaml_config::derive_seed(5, "events.seed"), yaml_config::derive_seed(5, "events.seed"));
+  EXPECT_NE(yaml_config::derive_seed(5, "events.seed"), yaml_config::derive_seed(6, "events.seed"));
 
   SimulateOverrides o;
   o.seed = 6;
   const SimulationConfig d = parse(kPanorama, o);
   EXPECT_EQ(d.seed, 6u);
-  EXPECT_EQ(d.simulator.events.seed, derive_seed(6, "events.seed"));
+  EXPECT_EQ(d.simulator.events.seed, yaml_config::derive_seed(6, "events.seed"));
 
   const SimulationConfig pinned = parse(std::string(kPanorama) + "events: {seed: 77}\n", o);
   EXPECT_EQ(pinned.simulator.events.seed, 77u);
@@ -521,37 +521,5 @@ TEST(SimulateConfig, TextureFromAnImageFile) {
   EXPECT_NEAR(c.panorama->level(0).at<float>(0, 0), 0.1, 1e-6);
 }
 
-TEST(SimulateConfig, NpyWriterLayout) {
-  evio_test::TempDir dir;
-  cv::Mat a(3, 5, CV_32F);
-  for (int i = 0; i < 15; ++i) a.at<float>(i / 5, i % 5) = static_cast<float>(i) * 0.5f;
-  write_npy_float32(dir.file("a.npy"), a);
-  cv::Mat b(2, 3, CV_32FC2, cv::Scalar(1.5f, -2.0f));
-  write_npy_float32(dir.file("b.npy"), b);
-  for (const auto& [name, shape, count] :
-       std::vector<std::tuple<std::string, std::string, size_t>>{{"a.npy", "(3, 5)", 15}, {"b.npy", "(2, 3, 2)", 12}}) {
-    std::ifstream in(dir.file(name), std::ios::binary);
-    std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    ASSERT_GE(bytes.size(), 10u);
-    EXPECT_EQ(bytes.substr(0, 6), "\x93NUMPY");
-    const size_t header_len = static_cast<unsigned char>(bytes[8]) | (static_cast<unsigned char>(bytes[9]) << 8);
-    EXPECT_EQ((10 + header_len) % 64, 0u);
-    const std::string header = bytes.substr(10, header_len);
-    EXPECT_NE(header.find("'descr': '<f4'"), std::string::npos) << header;
-    EXPECT_NE(header.find("'shape': " + shape), std::string::npos) << header;
-    EXPECT_EQ(header.back(), '\n');
-    EXPECT_EQ(bytes.size(), 10 + header_len + count * 4);
-    float v[2];
-    std::memcpy(v, bytes.data() + 10 + header_len + 4, 8);
-    if (name == "a.npy") {
-      EXPECT_EQ(v[0], 0.5f);
-      EXPECT_EQ(v[1], 1.0f);
-    } else {
-      EXPECT_EQ(v[0], -2.0f);  // second float: channel 1 of pixel (0, 0)
-      EXPECT_EQ(v[1], 1.5f);
-    }
-  }
-}
-
 }  // namespace
-}  // namespace evio::apps
+}  // namespace evio::simulator

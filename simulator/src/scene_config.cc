@@ -3,8 +3,9 @@
 // the allowed set (typos are errors) and turns every problem into an evio::InputError at the
 // node's line; values that came from `--set`/`--seed`/`--duration` are reported against that
 // command-line option instead of a line of the file.
-#include "simulate_config.h"
-#include "yaml_config.h"
+#include "evio/simulator/scene_config.h"
+
+#include "evio/sensors/yaml_config.h"
 
 #include <algorithm>
 #include <cerrno>
@@ -24,7 +25,7 @@
 #include "evio/sensors/time.h"
 #include "evio/sensors/trajectory.h"
 
-namespace evio::apps {
+namespace evio::simulator {
 namespace {
 using namespace yaml_config;  // NOLINT: Section, Parser, Range, ...
 namespace fs = std::filesystem;
@@ -112,7 +113,7 @@ class ConfigBuilder {
     c_->write_h5 = output.boolean("events_h5", true);
     c_->write_panorama = output.boolean("panorama", true);
 
-    simulator::SimulatorOptions& o = c_->simulator;
+    SimulatorOptions& o = c_->simulator;
     o.camera = c_->camera.camera;
     o.T_c_b = c_->camera.T_c_b;
     o.time_shift_ns = c_->camera.time_shift_ns;
@@ -197,7 +198,7 @@ class ConfigBuilder {
     if (type == "sinusoid") {
       s.allow({"type", "position_m", "rpy_deg", "quaternion", "velocity_mps", "amplitude_m", "frequency_hz",
                "phase_deg", "angle_rate_dps", "angle_amplitude_deg", "angle_frequency_hz", "angle_phase_deg"});
-      simulator::SinusoidTrajectoryOptions o;
+      SinusoidTrajectoryOptions o;
       o.t_begin_ns = 0;
       o.duration_s = duration;
       o.position_m = s.vec3("position_m", o.position_m, Range::kAny, "m");
@@ -213,12 +214,12 @@ class ConfigBuilder {
       o.angle_phase_rad = s.vec3("angle_phase_deg", Vector3d::Zero(), Range::kAny, "deg") * kDegToRad;
       std::string why;
       if (!o.Validate(&why)) s.fail("invalid sinusoid: " + why, "see datasets/README.md, trajectory");
-      c_->trajectory = std::make_shared<simulator::SinusoidTrajectory>(o);
+      c_->trajectory = std::make_shared<SinusoidTrajectory>(o);
       set_span(0, duration);
     } else if (type == "random_spline") {
       s.allow({"type", "order", "knot_spacing_s", "position_m", "rpy_deg", "quaternion", "position_std_m",
                "rotation_std_deg", "seed"});
-      simulator::RandomSplineOptions o;
+      RandomSplineOptions o;
       o.t_begin_ns = 0;
       o.duration_s = duration;
       o.order = s.integer("order", o.order, 4, 6);
@@ -232,7 +233,7 @@ class ConfigBuilder {
       std::string why;
       if (!o.Validate(&why)) s.fail("invalid random spline: " + why, "see datasets/README.md, trajectory");
       try {
-        c_->trajectory = std::make_shared<simulator::SplineTrajectory>(simulator::SplineTrajectory::random(o));
+        c_->trajectory = std::make_shared<SplineTrajectory>(SplineTrajectory::random(o));
       } catch (const std::invalid_argument& e) {
         s.fail(std::string("random spline rejected: ") + e.what(), "see datasets/README.md, trajectory");
       }
@@ -267,7 +268,7 @@ class ConfigBuilder {
 
     Section fit = s.child("fit", false, "fit: {order, knot_spacing_s, max_iterations, smoothing}");
     fit.allow({"order", "knot_spacing_s", "max_iterations", "smoothing"});
-    simulator::SplineFitOptions fo;
+    SplineFitOptions fo;
     fo.order = fit.integer("order", fo.order, 4, 6);
     fo.knot_spacing_s = fit.number("knot_spacing_s", fo.knot_spacing_s, Range::kPositive, "s");
     fo.max_iterations = fit.integer("max_iterations", fo.max_iterations, 1, 1000);
@@ -303,10 +304,10 @@ class ConfigBuilder {
     if (window.size() < 2 || window.front().t_ns > t0 || window.back().t_ns < t1) {
       s.fail("the trajectory file does not cover the simulated span", "poses covering [start_s, start_s + duration]");
     }
-    simulator::SplineFitReport report;
+    SplineFitReport report;
     try {
-      c_->trajectory = std::make_shared<simulator::SplineTrajectory>(
-          simulator::SplineTrajectory::fit(Trajectory(std::move(window)), fo, &report));
+      c_->trajectory = std::make_shared<SplineTrajectory>(
+          SplineTrajectory::fit(Trajectory(std::move(window)), fo, &report));
     } catch (const std::invalid_argument& e) {
       s.fail(std::string("spline fit failed: ") + e.what(),
              "a denser trajectory file or a larger fit.knot_spacing_s");
@@ -318,14 +319,14 @@ class ConfigBuilder {
   }
 
   // ---- textures and scenes ----
-  std::shared_ptr<const simulator::Texture> read_texture(const Section& parent, const std::string& key,
-                                                   simulator::TextureWrap default_wrap_u) {
+  std::shared_ptr<const Texture> read_texture(const Section& parent, const std::string& key,
+                                                   TextureWrap default_wrap_u) {
     const std::string expected =
         "texture: {procedural: checkerboard | shapes | noise | constant, size: [w, h], seed, ...} or {file: path}";
     Section s = parent.child(key, true, expected);
     const bool is_file = s.has("file");
     if (is_file == s.has("procedural")) s.fail("give exactly one of 'procedural' and 'file'", expected);
-    simulator::TextureWrap wu = default_wrap_u, wv = simulator::TextureWrap::kClamp;
+    TextureWrap wu = default_wrap_u, wv = TextureWrap::kClamp;
     if (s.has("wrap")) {
       const YAML::Node w = s.get("wrap");
       const std::string wexp = "wrap: [clamp | repeat, clamp | repeat] (u, v)";
@@ -333,8 +334,8 @@ class ConfigBuilder {
         p_->fail(w, s.key_path("wrap"), "is not a list of 2 names", wexp);
       }
       auto mode = [&](const YAML::Node& n) {
-        if (n.Scalar() == "clamp") return simulator::TextureWrap::kClamp;
-        if (n.Scalar() == "repeat") return simulator::TextureWrap::kRepeat;
+        if (n.Scalar() == "clamp") return TextureWrap::kClamp;
+        if (n.Scalar() == "repeat") return TextureWrap::kRepeat;
         p_->fail(n, s.key_path("wrap"), "unknown wrap mode '" + n.Scalar() + "'", wexp);
       };
       wu = mode(w[0]);
@@ -349,7 +350,7 @@ class ConfigBuilder {
       if (hi <= lo) s.fail_at("max_intensity", "must exceed min_intensity", "max_intensity > min_intensity");
       const std::string abs = fs::absolute(file).lexically_normal().string();
       try {
-        auto texture = std::make_shared<simulator::Texture>(simulator::Texture::load(abs, lo, hi, wu, wv));
+        auto texture = std::make_shared<Texture>(Texture::load(abs, lo, hi, wu, wv));
         s.set("file", YAML::Node(abs));  // the resolved YAML names the file absolutely
         return texture;
       } catch (const InputError& e) {
@@ -362,9 +363,9 @@ class ConfigBuilder {
     }
     s.allow({"procedural", "size", "cell_px", "num_shapes", "noise_scale_px", "octaves", "min_intensity",
              "max_intensity", "seed", "wrap"});
-    simulator::ProceduralTextureOptions o;
+    ProceduralTextureOptions o;
     const std::string kind = s.string("procedural", "", {"checkerboard", "shapes", "noise", "constant"});
-    simulator::procedural_kind_from_name(kind, &o.kind);
+    procedural_kind_from_name(kind, &o.kind);
     if (s.has("size")) {
       const std::vector<double> sz = s.numbers("size", 2, Range::kPositive, "texels");
       if (sz[0] != std::floor(sz[0]) || sz[1] != std::floor(sz[1]) || sz[0] > 16384 || sz[1] > 16384) {
@@ -383,13 +384,13 @@ class ConfigBuilder {
     std::string why;
     if (!o.Validate(&why)) s.fail("invalid procedural texture: " + why, expected);
     try {
-      return std::make_shared<simulator::Texture>(simulator::make_procedural_texture(o, wu, wv));
+      return std::make_shared<Texture>(make_procedural_texture(o, wu, wv));
     } catch (const std::invalid_argument& e) {
       s.fail(std::string("procedural texture rejected: ") + e.what(), expected);
     }
   }
 
-  std::shared_ptr<const simulator::Scene> read_scene(Section s, bool top) {
+  std::shared_ptr<const Scene> read_scene(Section s, bool top) {
     const std::vector<std::string> types =
         top ? std::vector<std::string>{"panorama", "planes", "sprites"} : std::vector<std::string>{"panorama", "planes"};
     const std::string type = s.string("type", "", types);
@@ -397,9 +398,9 @@ class ConfigBuilder {
     try {
       if (type == "panorama") {
         s.allow({"type", "texture", "gain"});
-        auto tex = read_texture(s, "texture", simulator::TextureWrap::kRepeat);
+        auto tex = read_texture(s, "texture", TextureWrap::kRepeat);
         c_->panorama = tex;
-        return std::make_shared<simulator::PanoramaScene>(tex, s.number("gain", 1.0, Range::kPositive, "intensity factor"));
+        return std::make_shared<PanoramaScene>(tex, s.number("gain", 1.0, Range::kPositive, "intensity factor"));
       }
       if (type == "planes") return read_planes(s);
       return read_sprites(s);
@@ -408,13 +409,13 @@ class ConfigBuilder {
     }
   }
 
-  std::shared_ptr<const simulator::Scene> read_planes(Section& s) {
+  std::shared_ptr<const Scene> read_planes(Section& s) {
     s.allow({"type", "background_intensity", "planes", "boxes"});
-    std::vector<simulator::TexturedPlane> planes;
+    std::vector<TexturedPlane> planes;
     const std::string plane_expected = "planes: a list of {center_m, axis_u, axis_v, size_m, texture, gain}";
     for (Section& ps : list_of_maps(s, "planes", plane_expected)) {
       ps.allow({"center_m", "axis_u", "axis_v", "size_m", "texture", "gain"});
-      simulator::TexturedPlane pl;
+      TexturedPlane pl;
       pl.center_w = ps.vec3("center_m", pl.center_w, Range::kAny, "m, world frame");
       const Vector3d u = ps.vec3("axis_u", pl.axis_u_w, Range::kAny, "direction in the world frame");
       const Vector3d v = ps.vec3("axis_v", pl.axis_v_w, Range::kAny, "direction in the world frame");
@@ -428,7 +429,7 @@ class ConfigBuilder {
       const Vector2d size = ps.vec2("size_m", Vector2d::Ones(), Range::kPositive, "m");
       pl.width_m = size.x();
       pl.height_m = size.y();
-      pl.texture = read_texture(ps, "texture", simulator::TextureWrap::kClamp);
+      pl.texture = read_texture(ps, "texture", TextureWrap::kClamp);
       pl.gain = ps.number("gain", 1.0, Range::kPositive, "intensity factor");
       planes.push_back(pl);
     }
@@ -439,7 +440,7 @@ class ConfigBuilder {
       if (!bs.has("size_m")) bs.fail("missing key 'size_m'", "size_m: [sx, sy, sz] in m");
       const Vector3d sz = bs.vec3("size_m", Vector3d::Ones(), Range::kPositive, "m");
       const double yaw = bs.number("yaw_deg", 0.0, Range::kAny, "deg about world z") * kDegToRad;
-      const auto tex = read_texture(bs, "texture", simulator::TextureWrap::kClamp);
+      const auto tex = read_texture(bs, "texture", TextureWrap::kClamp);
       const double gain = bs.number("gain", 1.0, Range::kPositive, "intensity factor");
       const Eigen::Matrix3d R = Eigen::AngleAxisd(yaw, Vector3d::UnitZ()).toRotationMatrix();
       const Vector3d ex = R.col(0), ey = R.col(1), ez = R.col(2);
@@ -453,7 +454,7 @@ class ConfigBuilder {
           {ez * sz.z() / 2, ex, ey, sz.x(), sz.y()},   {-ez * sz.z() / 2, ex, -ey, sz.x(), sz.y()},
       };
       for (const auto& f : faces) {
-        simulator::TexturedPlane pl;
+        TexturedPlane pl;
         pl.center_w = c + f.offset;
         pl.axis_u_w = f.u;
         pl.axis_v_w = f.v;
@@ -466,21 +467,21 @@ class ConfigBuilder {
     }
     if (planes.empty()) s.fail("a planes scene needs at least one entry in planes or boxes", plane_expected);
     const double bg = s.number("background_intensity", 0.1, Range::kNonNegative, "intensity units");
-    return std::make_shared<simulator::PlanarScene>(std::move(planes), bg);
+    return std::make_shared<PlanarScene>(std::move(planes), bg);
   }
 
-  std::shared_ptr<const simulator::Scene> read_sprites(Section& s) {
+  std::shared_ptr<const Scene> read_sprites(Section& s) {
     s.allow({"type", "background", "sprites"});
     auto background =
         read_scene(s.child("background", true, "background: a panorama or planes scene"), false);
-    std::vector<simulator::Sprite> sprites;
+    std::vector<Sprite> sprites;
     const std::string expected = "sprites: a list of {texture, shape, size_px, gain, motion}";
     for (Section& ss : list_of_maps(s, "sprites", expected)) {
       ss.allow({"texture", "shape", "size_px", "gain", "motion"});
-      simulator::Sprite sp;
-      sp.texture = read_texture(ss, "texture", simulator::TextureWrap::kClamp);
-      sp.shape = ss.string("shape", "rectangle", {"rectangle", "ellipse"}) == "ellipse" ? simulator::SpriteShape::kEllipse
-                                                                                        : simulator::SpriteShape::kRectangle;
+      Sprite sp;
+      sp.texture = read_texture(ss, "texture", TextureWrap::kClamp);
+      sp.shape = ss.string("shape", "rectangle", {"rectangle", "ellipse"}) == "ellipse" ? SpriteShape::kEllipse
+                                                                                        : SpriteShape::kRectangle;
       const Vector2d size = ss.vec2("size_px", Vector2d(sp.width_px, sp.height_px), Range::kPositive, "px");
       sp.width_px = size.x();
       sp.height_px = size.y();
@@ -488,7 +489,7 @@ class ConfigBuilder {
       Section m = ss.child("motion", false, "motion: {centre_px, velocity_pxps, ...}");
       m.allow({"centre_px", "velocity_pxps", "amplitude_px", "frequency_hz", "phase_deg", "angle_deg",
                "angular_rate_dps", "scale", "scale_rate_per_s"});
-      simulator::SpriteMotion& mo = sp.motion;
+      SpriteMotion& mo = sp.motion;
       mo.centre_px = m.vec2("centre_px", mo.centre_px, Range::kAny, "px");
       mo.velocity_pxps = m.vec2("velocity_pxps", mo.velocity_pxps, Range::kAny, "px/s");
       mo.amplitude_px = m.vec2("amplitude_px", mo.amplitude_px, Range::kAny, "px");
@@ -501,7 +502,7 @@ class ConfigBuilder {
       sprites.push_back(sp);
     }
     if (sprites.empty()) s.fail("a sprites scene needs at least one sprite", expected);
-    return std::make_shared<simulator::SpriteScene>(background, std::move(sprites), c_->simulator.t_begin_ns);
+    return std::make_shared<SpriteScene>(background, std::move(sprites), c_->simulator.t_begin_ns);
   }
 
   // ---- sensors ----
@@ -509,7 +510,7 @@ class ConfigBuilder {
     s.allow({"enable", "rate_hz", "accelerometer_noise_density", "accelerometer_random_walk",
              "gyroscope_noise_density", "gyroscope_random_walk", "enable_noise", "gravity_mps2",
              "initial_bias_gyro_radps", "initial_bias_accel_mps2", "seed"});
-    simulator::ImuSimOptions& o = c_->imu;
+    ImuSimOptions& o = c_->imu;
     c_->imu_enabled = s.boolean("enable", true);
     o.rate_hz = s.number("rate_hz", 1000.0, Range::kPositive, "Hz");
     // Defaults: a MEMS IMU like the DAVIS's InvenSense MPU-6150 (datasheet densities, inflated 2x
@@ -533,7 +534,7 @@ class ConfigBuilder {
     s.allow({"contrast_threshold_pos", "contrast_threshold_neg", "threshold_mismatch_std", "threshold_min", "log_eps",
              "refractory_s", "shot_noise_rate_hz", "leak_rate_hz", "hot_pixel_fraction", "hot_pixel_rate_hz",
              "timestamp_jitter_s", "seed"});
-    simulator::EventSimOptions& o = c_->simulator.events;
+    EventSimOptions& o = c_->simulator.events;
     o.contrast_threshold_pos = s.number("contrast_threshold_pos", o.contrast_threshold_pos, Range::kPositive, "log intensity");
     o.contrast_threshold_neg = s.number("contrast_threshold_neg", o.contrast_threshold_neg, Range::kPositive, "log intensity");
     o.threshold_mismatch_std = s.number("threshold_mismatch_std", o.threshold_mismatch_std, Range::kNonNegative, "log intensity");
@@ -552,7 +553,7 @@ class ConfigBuilder {
 
   void read_stepping(Section s) {
     s.allow({"max_flow_px", "max_log_change", "min_step_s", "max_step_s"});
-    simulator::SteppingOptions& o = c_->simulator.stepping;
+    SteppingOptions& o = c_->simulator.stepping;
     o.max_flow_px = s.number("max_flow_px", o.max_flow_px, Range::kNonNegative, "px per step");
     o.max_log_change = s.number("max_log_change", o.max_log_change, Range::kNonNegative, "log intensity per step");
     o.min_step_ns = s.time_ns("min_step_s", o.min_step_ns, Range::kPositive);
@@ -563,7 +564,7 @@ class ConfigBuilder {
 
   void read_frames(Section s) {
     s.allow({"rate_hz", "exposure_s", "exposure_samples", "gain", "gamma", "read_noise_std", "seed"});
-    simulator::ApsOptions& o = c_->simulator.frames;
+    ApsOptions& o = c_->simulator.frames;
     o.rate_hz = s.number("rate_hz", 0.0, Range::kNonNegative, "Hz, 0 = no frames");
     o.exposure_s = s.number("exposure_s", o.exposure_s, Range::kPositive, "s");
     o.exposure_samples = s.integer("exposure_samples", o.exposure_samples, 1, 1000);
@@ -614,9 +615,6 @@ class ConfigBuilder {
 
 }  // namespace
 
-uint64_t derive_seed(uint64_t seed, const std::string& component) {
-  return yaml_config::splitmix64(seed ^ yaml_config::splitmix64(yaml_config::fnv1a(component)));
-}
 
 std::vector<std::string> camera_preset_names() { return {"davis240c", "davis346", "prophesee", "prophesee_hd"}; }
 
@@ -724,4 +722,4 @@ SimulationConfig load_simulation_config(const std::string& path, const SimulateO
   return parse_simulation_config(text.str(), path, overrides);
 }
 
-}  // namespace evio::apps
+}  // namespace evio::simulator

@@ -16,9 +16,9 @@
 #include "evio/calib/log.h"
 #include "evio/simulator/simulator.h"
 #include "evio_test/real_data.h"
-#include "simulate_config.h"
+#include "evio/simulator/scene_config.h"
 
-namespace evio::apps {
+namespace evio::simulator {
 namespace {
 namespace fs = std::filesystem;
 
@@ -75,7 +75,7 @@ TEST(SimulateSuite, EveryConfigParsesAndBuildsItsObjects) {
         EXPECT_LT(c.fit_report->position_rms_m, 1e-3);
         EXPECT_LT(c.fit_report->rotation_rms_deg, 0.2);
       }
-      const simulator::Simulator simulator(c.scene, c.trajectory, c.simulator);
+      const Simulator simulator(c.scene, c.trajectory, c.simulator);
       // The first view renders: finite, positive intensities.
       const simulator::RenderedView view = simulator.render(c.simulator.t_begin_ns, false);
       double lo = 0, hi = 0;
@@ -92,4 +92,4 @@ TEST(SimulateSuite, EveryConfigParsesAndBuildsItsObjects) {
 }
 
 }  // namespace
-}  // namespace evio::apps
+}  // namespace evio::simulator
