@@ -200,6 +200,33 @@ TEST(MosaicConfig, ErrorsNameFileLineAndKey) {
     std::ofstream(p) << bad;
     EXPECT_THROW(load_mosaic_config(p), InputError) << bad;
   }
+  // Recovery keys (this session's) and map_viewed_texels: read, resolved, read back; bad values rejected.
+  std::ofstream(p) << "mosaic: {map_viewed_texels: true}\nfailure: {rollback: true, checkpoint_ms: 100, checkpoints: 2, "
+                      "global_relocalize: true, global_period_ms: 300, global_min_gain: 1.5, global_axis_spacing_deg: 4, "
+                      "global_roll_step_deg: 15}\n";
+  std::string resolved_r;
+  const MosaicConfig r = load_mosaic_config(p, &resolved_r);
+  EXPECT_TRUE(r.mosaic.map_viewed_texels);
+  EXPECT_TRUE(r.failure_rollback);
+  EXPECT_EQ(r.failure_checkpoint_period_ns, 100'000'000);
+  EXPECT_EQ(r.failure_checkpoints, 2);
+  EXPECT_TRUE(r.failure_global_relocalize);
+  EXPECT_EQ(r.failure_global_period_ns, 300'000'000);
+  EXPECT_DOUBLE_EQ(r.failure_global_min_gain, 1.5);
+  EXPECT_DOUBLE_EQ(r.relocalization.axis_spacing_deg, 4.0);
+  EXPECT_DOUBLE_EQ(r.relocalization.roll_step_deg, 15.0);
+  std::ofstream(p) << resolved_r;
+  const MosaicConfig r2 = load_mosaic_config(p);
+  EXPECT_TRUE(r2.mosaic.map_viewed_texels);
+  EXPECT_EQ(r2.failure_checkpoints, 2);
+  EXPECT_DOUBLE_EQ(r2.failure_global_min_gain, 1.5);
+  EXPECT_DOUBLE_EQ(r2.relocalization.roll_step_deg, 15.0);
+  for (const char* bad : {"failure: {checkpoints: 0}\n", "failure: {checkpoint_ms: 0}\n", "failure: {global_min_gain: 0.5}\n",
+                          "failure: {global_roll_step_deg: 0}\n", "failure: {rollback: sometimes}\n",
+                          "mosaic: {map_viewed_texels: 2}\n"}) {
+    std::ofstream(p) << bad;
+    EXPECT_THROW(load_mosaic_config(p), InputError) << bad;
+  }
   std::ofstream(p) << "tracker: {velocity_noise_rad_s_per_sqrt_s: -1}\n";
   EXPECT_THROW(load_mosaic_config(p), InputError);
   std::ofstream(p) << "mosaic: {threads: 3}\n";

@@ -92,6 +92,21 @@ TEST(MosaicPipelineOptions, DefaultsAreValidAndBadValuesAreRejectedWithAReason) 
   o.tracker.probe_offset_rad = 0.05;  // beyond the tracker's linearisation spread
   rejected(o, "tracker: probe_offset_rad");
   o = {};
+  o.failure_checkpoint_period_ns = 0;
+  rejected(o, "failure_checkpoint_period_ns");
+  o = {};
+  o.failure_checkpoints = 0;
+  rejected(o, "failure_checkpoints");
+  o = {};
+  o.failure_global_period_ns = -1;
+  rejected(o, "failure_global_period_ns");
+  o = {};
+  o.failure_global_min_gain = 0.5;
+  rejected(o, "failure_global_min_gain");
+  o = {};
+  o.relocalization.roll_step_deg = 0;
+  rejected(o, "relocalization: roll_step_deg");
+  o = {};
   o.mosaic.width = 0;
   rejected(o, "mosaic: ");
   EXPECT_THROW(MosaicPipeline(o, test_camera()), std::invalid_argument);
