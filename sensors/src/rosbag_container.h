@@ -495,6 +495,20 @@ void add_connection(Bag* bag, const Header& h, const uint8_t* data, size_t size,
   bag->connections.push_back(std::move(c));
 }
 
+// A connection record found in the file (index or linear scan): its data read (at most 16 MiB)
+// and the connection added.
+inline void read_connection(Bag* bag, const FileRecord& r, std::vector<uint8_t>* data) {
+  if (r.data_len > kMaxConnectionBytes) {
+    throw InputError(bag->path, 0,
+                     "connection record data of " + std::to_string(r.data_len) + " bytes at byte offset " +
+                         std::to_string(r.data_pos) + " exceeds the 16 MiB limit",
+                     kBagForm);
+  }
+  data->resize(r.data_len);
+  bag->file.read(r.data_pos, data->data(), r.data_len, "connection data");
+  add_connection(bag, r.header, data->data(), data->size(), kFileWhere, r.data_pos);
+}
+
 inline void read_index(Bag* bag, uint64_t index_pos, uint32_t conn_count, uint32_t chunk_count, uint64_t chunks_begin) {
   const BagFile& file = bag->file;
   FileRecord r;
@@ -508,15 +522,7 @@ inline void read_index(Bag* bag, uint64_t index_pos, uint32_t conn_count, uint32
                            " (op=0x07) at byte offset " + std::to_string(pos) + ", found op=" + hex_op(r.op),
                        "the index at index_pos: conn_count connection records, then chunk_count chunk info records");
     }
-    if (r.data_len > kMaxConnectionBytes) {
-      throw InputError(bag->path, 0,
-                       "connection record data of " + std::to_string(r.data_len) + " bytes at byte offset " +
-                           std::to_string(r.data_pos) + " exceeds the 16 MiB limit",
-                       kBagForm);
-    }
-    data.resize(r.data_len);
-    file.read(r.data_pos, data.data(), r.data_len, "connection data");
-    add_connection(bag, r.header, data.data(), data.size(), kFileWhere, r.data_pos);
+    read_connection(bag, r, &data);
     pos = r.end();
   }
   for (uint32_t i = 0; i < chunk_count; ++i) {
@@ -611,15 +617,7 @@ inline void scan_linearly(Bag* bag, uint64_t pos) {
         break;
       }
       case kOpConnection:
-        if (r.data_len > kMaxConnectionBytes) {
-          throw InputError(bag->path, 0,
-                           "connection record data of " + std::to_string(r.data_len) + " bytes at byte offset " +
-                               std::to_string(r.data_pos) + " exceeds the 16 MiB limit",
-                           kBagForm);
-        }
-        data.resize(r.data_len);
-        file.read(r.data_pos, data.data(), r.data_len, "connection data");
-        add_connection(bag, r.header, data.data(), data.size(), kFileWhere, r.data_pos);
+        read_connection(bag, r, &data);
         break;
       case kOpIndexData:
       case kOpChunkInfo:
