@@ -112,7 +112,12 @@ std::string find_plot_script(const std::string& given) {
   if (std::string(EVIO_SCRIPTS_DIR).size() > 0) candidates.push_back(fs::path(EVIO_SCRIPTS_DIR) / "plot_trajectory.py");
   std::error_code ec;
   const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
-  if (!ec) candidates.push_back(exe.parent_path().parent_path() / "share" / "evio" / "scripts" / "plot_trajectory.py");
+  // Installed: <prefix>/libexec/evio/evio-eval (or a program in <prefix>/bin) -> <prefix>/share/evio/scripts.
+  if (!ec) {
+    for (const fs::path& prefix : {exe.parent_path().parent_path().parent_path(), exe.parent_path().parent_path()}) {
+      candidates.push_back(prefix / "share" / "evio" / "scripts" / "plot_trajectory.py");
+    }
+  }
   for (const fs::path& c : candidates) {
     if (fs::exists(c, ec)) return c.string();
   }

@@ -1,5 +1,6 @@
 # Installs evio (the build tree BUILD) into a fresh prefix under WORK, then configures, builds and
-# runs the consumer project SRC against it with find_package(evio); fails on any step, printing it.
+# runs the consumer project SRC against it with find_package(evio), and runs the installed `evio`
+# (the dispatcher and one subcommand program); fails on any step, printing it.
 foreach(v BUILD SRC WORK)
   if(NOT DEFINED ${v})
     message(FATAL_ERROR "find_package.cmake: -D${v}=... is required")
@@ -19,5 +20,14 @@ step(${CMAKE_COMMAND} --build "${WORK}/build" -j 2)
 step("${WORK}/build/evio_consumer")
 if(NOT step_out MATCHES "evio consumer ok")
   message(FATAL_ERROR "the consumer ran but printed: ${step_out}")
+endif()
+# The installed command line: bin/evio dispatches to <prefix>/libexec/evio/evio-<name>.
+step("${WORK}/prefix/bin/evio" --version)
+if(NOT step_out MATCHES "^evio [0-9]")
+  message(FATAL_ERROR "installed evio --version printed: ${step_out}")
+endif()
+step("${WORK}/prefix/bin/evio" info --help)
+if(NOT step_out MATCHES "Usage: evio info")
+  message(FATAL_ERROR "installed evio info --help printed: ${step_out}")
 endif()
 message(STATUS "find_package(evio) from ${WORK}/prefix: ${step_out}")
