@@ -32,6 +32,18 @@ CommandLine::CommandLine(const char* name)
   app_.add_flag("-v,--verbose", verbose_, "Also print debug messages on stderr");
 }
 
+void CommandLine::add_print_config(bool* flag, const std::vector<CLI::Option*>& needed) {
+  app_.add_flag("--print-config", *flag,
+                "Print the resolved config (defaults, then --config, then --set: every key with its value, unit and "
+                "range, as written to the output folder) and exit");
+  app_.parse_complete_callback([flag, needed] {
+    if (*flag) return;
+    for (const CLI::Option* o : needed) {
+      if (o->count() == 0) throw CLI::RequiredError(o->get_name());
+    }
+  });
+}
+
 int CommandLine::run(int argc, char** argv, const std::function<int()>& body) {
   try {
     app_.parse(argc, argv);

@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <functional>
 #include <string>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 
@@ -23,6 +24,10 @@ class CommandLine {
   CLI::App& app() { return app_; }
   CLI::App* operator->() { return &app_; }
   bool quiet() const { return quiet_; }
+
+  // --print-config: print the resolved config (the defaults with --config and --set applied, every
+  // key with its unit and range) and exit; the options in `needed` are required only without it.
+  void add_print_config(bool* flag, const std::vector<CLI::Option*>& needed);
 
   // Parses argv (the dispatcher passes everything after `evio` except the subcommand's name) and
   // runs body; returns the process exit code.

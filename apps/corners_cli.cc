@@ -8,8 +8,8 @@
 int main(int argc, char** argv) {
   evio::apps::CommandLine cli("corners");
   evio::apps::CornersArgs corners;
-  cli->add_option("DATASET", corners.dataset, "Dataset (any format evio reads)")->required();
-  cli->add_option("-o,--out", corners.out, "Output folder (created)")->required();
+  CLI::Option* dataset_opt = cli->add_option("DATASET", corners.dataset, "Dataset (any format evio reads)");
+  CLI::Option* out_opt = cli->add_option("-o,--out", corners.out, "Output folder (created)");
   cli->add_option("--config", corners.config,
                   "YAML with refractory, background_activity, efast, tracker and frames sections (README.md)");
   cli->add_option("--calib", corners.calib,
@@ -24,8 +24,20 @@ int main(int argc, char** argv) {
          "Write a PNG overlay (events, corners, tracks) every N ms of sensor time to DIR/frames/; 0: none "
          "(default: the config's frames.every_ms, else none), ms")
       ->check(CLI::NonNegativeNumber);
+  cli->add_option("--set", corners.set,
+                  "Change one config value: key.sub=value (dotted key of the --config YAML, value in YAML "
+                  "syntax), applied after --config, e.g. --set efast.filter_sae=true; repeatable. The "
+                  "output folder's resolved config lists every key")
+      ->expected(1)
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
   evio::apps::add_dataset_options(&cli.app(), &corners.dataset_options);
+  bool print_config = false;
+  cli.add_print_config(&print_config, {dataset_opt, out_opt});
   return cli.run(argc, argv, [&] {
+    if (print_config) {
+      std::cout << evio::apps::corners_config_text(evio::apps::load_corners_config(corners.config, corners.set));
+      return 0;
+    }
     corners.progress = !cli.quiet();
     return evio::apps::run_corners(corners, std::cout);
   });

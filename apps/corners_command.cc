@@ -20,14 +20,12 @@
 #include "evio/sensors/time.h"
 #include "json_util.h"
 #include "progress.h"
-#include "evio/sensors/yaml_config.h"
+#include "evio/sensors/config_table.h"
+#include "option_tables.h"
 
 namespace evio::apps {
 namespace {
 namespace fs = std::filesystem;
-using namespace yaml_config;  // NOLINT
-
-int64_t ms_to_ns(double ms) { return static_cast<int64_t>(std::llround(ms * 1e6)); }
 
 // Writes with a check at close: a full disk is an error naming the file, not a short file.
 class TextOut {
@@ -79,88 +77,50 @@ TrackLengths summarise(const std::vector<frontend::CornerTrack>& tracks) {
 
 }  // namespace
 
-CornersConfig load_corners_config(const std::string& path) {
-  const std::string expected = "a corners config YAML (see README.md, `evio corners`)";
-  CornersConfig c;
-  const YAML::Node root = load_yaml_file(path, expected);
-  if (root.IsNull()) return c;
-  const Parser parser(path, {});
-  if (!root.IsMap()) parser.fail(root, "", "is not a map", expected);
-  try {
-    const Section top(&parser, root, "");
-    top.allow({"refractory", "background_activity", "efast", "tracker", "dart", "frames"});
-    if (top.has("refractory")) {
-      const Section s = top.child("refractory", false, "a map");
-      s.allow({"enabled", "period_ms", "per_polarity"});
-      c.refractory_enabled = s.boolean("enabled", true);
-      c.refractory.period_ns = ms_to_ns(s.number("period_ms", c.refractory.period_ns * 1e-6, Range::kNonNegative, "ms"));
-      c.refractory.per_polarity = s.boolean("per_polarity", c.refractory.per_polarity);
-    }
-    if (top.has("background_activity")) {
-      const Section s = top.child("background_activity", false, "a map");
-      s.allow({"enabled", "window_ms", "radius", "min_support"});
-      c.background_activity_enabled = s.boolean("enabled", true);
-      c.background_activity.window_ns =
-          ms_to_ns(s.number("window_ms", c.background_activity.window_ns * 1e-6, Range::kPositive, "ms"));
-      c.background_activity.radius = s.integer("radius", c.background_activity.radius, 1, 3);
-      const int r = c.background_activity.radius;
-      c.background_activity.min_support =
-          s.integer("min_support", c.background_activity.min_support, 1, (2 * r + 1) * (2 * r + 1) - 1);
-    }
-    if (top.has("efast")) {
-      const Section s = top.child("efast", false, "a map");
-      s.allow({"filter_sae", "filter_window_ms"});
-      c.efast.filter_sae = s.boolean("filter_sae", c.efast.filter_sae);
-      c.efast.filter_window_ns = ms_to_ns(s.number("filter_window_ms", c.efast.filter_window_ns * 1e-6, Range::kNonNegative, "ms"));
-    }
-    if (top.has("tracker")) {
-      const Section s = top.child("tracker", false, "a map");
-      s.allow({"enabled", "max_distance_px", "max_gap_ms", "position_gain", "velocity_window_ms",
-               "min_velocity_span_ms", "min_length", "descriptors", "descriptor_ratio", "max_descriptor_distance"});
-      auto& t = c.tracker;
-      c.tracks = s.boolean("enabled", true);
-      t.max_distance_px = s.number("max_distance_px", t.max_distance_px, Range::kPositive, "px");
-      t.max_gap_ns = ms_to_ns(s.number("max_gap_ms", t.max_gap_ns * 1e-6, Range::kPositive, "ms"));
-      t.position_gain = s.number("position_gain", t.position_gain, Range::kUnit, "");
-      t.velocity_window_ns = ms_to_ns(s.number("velocity_window_ms", t.velocity_window_ns * 1e-6, Range::kPositive, "ms"));
-      t.min_velocity_span_ns =
-          ms_to_ns(s.number("min_velocity_span_ms", t.min_velocity_span_ns * 1e-6, Range::kPositive, "ms"));
-      t.min_length = static_cast<size_t>(s.integer("min_length", static_cast<int>(t.min_length), 1, 1000000));
-      c.descriptors = s.boolean("descriptors", c.descriptors);
-      t.descriptor_ratio = s.number("descriptor_ratio", t.descriptor_ratio, Range::kUnit, "");
-      if (s.has("max_descriptor_distance")) {
-        t.max_descriptor_distance = s.number("max_descriptor_distance", 0.0, Range::kNonNegative, "DART distance, 0..1.414");
-      }
-      std::string why;
-      if (!t.Validate(&why)) s.fail("invalid tracker settings: " + why, "consistent tracker settings");
-    }
-    if (top.has("dart")) {
-      const Section s = top.child("dart", false, "a map");
-      s.allow({"window_ms", "rings", "wedges", "inner_radius_px", "outer_radius_px", "polarity"});
-      auto& d = c.dart;
-      d.window_ns = ms_to_ns(s.number("window_ms", d.window_ns * 1e-6, Range::kNonNegative, "ms"));
-      d.rings = s.integer("rings", d.rings, 1, frontend::kDartMaxRings);
-      d.wedges = s.integer("wedges", d.wedges, 1, frontend::kDartMaxWedges);
-      d.inner_radius_px = s.number("inner_radius_px", d.inner_radius_px, Range::kPositive, "px");
-      d.outer_radius_px = s.number("outer_radius_px", d.outer_radius_px, Range::kPositive, "px");
-      d.polarity = s.string("polarity", "both", {"both", "same"}) == "same" ? frontend::DartPolarity::kSame
-                                                                          : frontend::DartPolarity::kBoth;
-      std::string why;
-      if (!d.Validate(&why)) s.fail("invalid DART settings: " + why, "consistent DART settings");
-    }
-    if (top.has("frames")) {
-      const Section s = top.child("frames", false, "a map");
-      s.allow({"every_ms", "window_ms", "scale", "track_history_ms"});
-      c.frames_every_ns = ms_to_ns(s.number("every_ms", 0.0, Range::kNonNegative, "ms"));
-      c.frame_window_ns = ms_to_ns(s.number("window_ms", c.frame_window_ns * 1e-6, Range::kPositive, "ms"));
-      c.frame_scale = s.integer("scale", c.frame_scale, 1, 8);
-      c.frame_track_history_ns =
-          ms_to_ns(s.number("track_history_ms", c.frame_track_history_ns * 1e-6, Range::kNonNegative, "ms"));
-    }
-  } catch (const YAML::Exception& e) {
-    throw InputError(path, static_cast<int64_t>(e.mark.line) + 1, "YAML error: " + e.msg, expected);
-  }
-  return c;
+namespace {
+
+using C = CornersConfig;
+
+// The table of `--config` and `--set` (one declaration per key: reading, validation, the resolved
+// config); the filters, eFAST, corner tracker and DART share their tables with `evio vio`.
+const yaml_config::Table<C>& corners_config_table() {
+  using yaml_config::Range;
+  using yaml_config::Table;
+  static const Table<C> table = [] {
+    auto self = [](C& c) -> C& { return c; };
+    Table<C> tracker("tracker settings");
+    tracker.boolean("enabled", &C::tracks)
+        .boolean("descriptors", &C::descriptors)
+        .include(corner_tracker_table(), &C::tracker);
+    Table<C> frames("overlay settings");
+    frames.duration_ms("every_ms", &C::frames_every_ns, Range::kNonNegative)
+        .duration_ms("window_ms", &C::frame_window_ns, Range::kPositive)
+        .integer("scale", &C::frame_scale, 1, 8)
+        .duration_ms("track_history_ms", &C::frame_track_history_ns, Range::kNonNegative);
+    Table<C> top("corners settings");
+    top.section("refractory", refractory_section<C>(), self)
+        .section("background_activity", background_activity_section<C>(), self)
+        .section("efast", efast_table(), &C::efast)
+        .section("tracker", tracker, self)
+        .section("dart", dart_table(), &C::dart)
+        .section("frames", frames, self)
+        .ignored("description");
+    return top;
+  }();
+  return table;
+}
+
+}  // namespace
+
+CornersConfig load_corners_config(const std::string& path, const std::vector<std::string>& sets) {
+  return yaml_config::read_config(corners_config_table(), CornersConfig{}, path, sets,
+                                  "a corners config YAML (see README.md, `evio corners`)");
+}
+
+std::string corners_config_text(const CornersConfig& c) {
+  return yaml_config::config_text(corners_config_table(), c,
+                                  "# evio corners configuration, resolved: every key with the value used (comments: "
+                                  "unit and range).\n# Readable by `evio corners --config`.\n");
 }
 
 namespace {
@@ -226,7 +186,7 @@ class OverlayWriter {
 }  // namespace
 
 int run_corners(const CornersArgs& args, std::ostream& out) {
-  CornersConfig cfg = args.config.empty() ? CornersConfig{} : load_corners_config(args.config);
+  CornersConfig cfg = load_corners_config(args.config, args.set);
   if (args.filter_sae) cfg.efast.filter_sae = true;
   if (args.frames_every_ns >= 0) cfg.frames_every_ns = args.frames_every_ns;
 
@@ -251,19 +211,19 @@ int run_corners(const CornersArgs& args, std::ostream& out) {
     throw InputError(args.dataset, 0, "the sensor size is unknown (no calibration in the dataset)",
                      "--calib FILE (Kalibr camchain YAML or ECD calib.txt) or --sensor WxH");
   }
-  std::unique_ptr<frontend::EventUndistorter> undistorter;
-  if (cal) undistorter = std::make_unique<frontend::EventUndistorter>(cal->camera);
-
   fs::create_directories(args.out);
-  frontend::RefractoryFilter refractory(sensor.width, sensor.height, cfg.refractory);
-  frontend::BackgroundActivityFilter background(sensor.width, sensor.height, cfg.background_activity);
-  frontend::EfastDetector detector(sensor.width, sensor.height, cfg.efast);
-  std::unique_ptr<frontend::CornerTracker> tracker;
-  if (cfg.tracks) tracker = std::make_unique<frontend::CornerTracker>(sensor.width, sensor.height, cfg.tracker);
-  std::unique_ptr<frontend::DartExtractor> dart;
-  if (cfg.tracks && cfg.descriptors) dart = std::make_unique<frontend::DartExtractor>(cfg.dart);
-  frontend::DartDescriptor descriptor;
-  int64_t descriptors = 0;
+  {
+    TextOut f((fs::path(args.out) / "corners_config.yaml").string());
+    const std::string text = corners_config_text(cfg);
+    std::fputs(text.c_str(), f.get());
+    f.close();
+  }
+  std::optional<calib::PinholeCamera> camera;
+  if (cal) camera = cal->camera;
+  std::string why;
+  if (!cfg.Validate(&why)) throw InputError(args.config.empty() ? "--filter-sae" : args.config, 0, why, "valid settings");
+  pipeline::CornerPipeline front(cfg, sensor.width, sensor.height, camera);
+  const frontend::CornerTracker* tracker = front.tracker();
   std::unique_ptr<OverlayWriter> overlay;
   if (cfg.frames_every_ns > 0) {
     overlay = std::make_unique<OverlayWriter>((fs::path(args.out) / "frames").string(), sensor.width, sensor.height, cfg);
@@ -276,7 +236,7 @@ int run_corners(const CornersArgs& args, std::ostream& out) {
   std::vector<frontend::CornerTrack> tracks;
   Progress progress("evio corners", args.progress, "events");
   EventBuffer chunk;
-  int64_t events = 0, outside = 0, corners = 0;
+  int64_t events = 0;
   int64_t t_first = 0, t_last = 0;
   double processing_s = 0, overlay_s = 0;  // overlay drawing/PNG time is not processing time
   bool first_chunk = true;
@@ -295,41 +255,28 @@ int run_corners(const CornersArgs& args, std::ostream& out) {
     const auto t0 = std::chrono::steady_clock::now();
     for (const Event& e : chunk.span()) {
       ++events;
-      if (e.x >= sensor.width || e.y >= sensor.height) {
-        ++outside;
-        continue;
-      }
-      if (overlay) {
+      if (overlay && e.x < sensor.width && e.y < sensor.height) {
         while (e.t_ns >= overlay->next_frame_ns) {
           const auto w0 = std::chrono::steady_clock::now();
-          overlay->write(tracker.get());
+          overlay->write(tracker);
           overlay->next_frame_ns += cfg.frames_every_ns;
           overlay_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - w0).count();
         }
         overlay->add_event(e);
       }
-      if (undistorter && !undistorter->valid(e.x, e.y)) continue;
-      if (cfg.refractory_enabled && !refractory.accept(e)) continue;
-      if (cfg.background_activity_enabled && !background.accept(e)) continue;
-      if (!detector.process(e)) continue;
-      ++corners;
+      if (!front.process(e)) continue;
       char* end = format_seconds(e.t_ns, line);
       *end = '\0';
       std::fprintf(corners_file.get(), "%s %d %d %d\n", line, e.x, e.y, e.polarity > 0 ? 1 : (zero_one ? 0 : -1));
       if (overlay) overlay->add_corner(e);
-      if (tracker) {
-        const bool has = dart && dart->compute(detector.sae(), e.x, e.y, e.t_ns, e.polarity, &descriptor);
-        descriptors += has;
-        tracker->add(e, has ? &descriptor : nullptr);
-        for (auto& t : tracker->take_finished()) tracks.push_back(std::move(t));
-      }
     }
+    for (auto& t : front.take_finished_tracks()) tracks.push_back(std::move(t));
     processing_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    progress.update(reader->progress(), events, std::to_string(corners) + " corners");
+    progress.update(reader->progress(), events, std::to_string(front.stats().corners) + " corners");
   }
   corners_file.close();
   if (tracker) {
-    for (auto& t : tracker->finish()) tracks.push_back(std::move(t));
+    for (auto& t : front.finish()) tracks.push_back(std::move(t));
     std::sort(tracks.begin(), tracks.end(), [](const auto& a, const auto& b) { return a.id < b.id; });
   }
   if (overlay && events > 0) overlay->write(nullptr);
@@ -361,7 +308,8 @@ int run_corners(const CornersArgs& args, std::ostream& out) {
 
   const double duration_s = events > 1 ? static_cast<double>(t_last - t_first) * 1e-9 : 0.0;
   const TrackLengths tl = summarise(tracks);
-  const frontend::EfastStats& es = detector.stats();
+  const frontend::EfastStats& es = front.efast_stats();
+  const int64_t corners = front.stats().corners, outside = front.stats().outside;
   const double reduction = corners > 0 ? static_cast<double>(events) / static_cast<double>(corners) : 0.0;
   const double ns_per_event = events > 0 ? (processing_s - overlay_s) * 1e9 / static_cast<double>(events) : 0.0;
   const double corner_rate = duration_s > 0 ? static_cast<double>(corners) / duration_s : 0.0;
@@ -373,13 +321,13 @@ int run_corners(const CornersArgs& args, std::ostream& out) {
       << ",\n  \"corners\": " << corners << ",\n  \"reduction_rate\": " << json_number(reduction)
       << ",\n  \"ns_per_event\": " << json_number(ns_per_event) << ",\n  \"duration_s\": " << json_number(duration_s)
       << ",\n  \"corners_per_second\": " << json_number(corner_rate) << ",\n  \"filters\": {\"refractory\": "
-      << (cfg.refractory_enabled ? std::to_string(refractory.stats().passed) : "null")
+      << (front.refractory_passed() ? std::to_string(*front.refractory_passed()) : "null")
       << ", \"background_activity\": "
-      << (cfg.background_activity_enabled ? std::to_string(background.stats().passed) : "null")
+      << (front.background_activity_passed() ? std::to_string(*front.background_activity_passed()) : "null")
       << "},\n  \"efast\": {\"filter_sae\": " << (cfg.efast.filter_sae ? "true" : "false") << ", \"tested\": " << es.tested
       << ", \"inner_passed\": " << es.inner_passed << ", \"outer_share\": "
       << json_number(es.tested > 0 ? static_cast<double>(es.inner_passed) / static_cast<double>(es.tested) : 0.0)
-      << "},\n  \"descriptors\": " << descriptors << ",\n  \"descriptor_decisions\": "
+      << "},\n  \"descriptors\": " << front.stats().descriptors << ",\n  \"descriptor_decisions\": "
       << (tracker ? tracker->stats().descriptor_decisions : 0) << ",\n  \"tracks\": {\"count\": " << tl.count << ", \"mean_length\": " << json_number(tl.mean)
       << ", \"median_length\": " << json_number(tl.median) << ", \"max_length\": " << json_number(tl.max)
       << ", \"mean_duration_s\": " << json_number(tl.mean_duration_s) << "},\n  \"frames_written\": "
@@ -396,7 +344,7 @@ int run_corners(const CornersArgs& args, std::ostream& out) {
                 static_cast<long long>(events), duration_s, sensor.width, sensor.height,
                 cal ? ", calibrated" : ", no calibration", static_cast<long long>(corners), reduction, corner_rate,
                 es.tested > 0 ? 100.0 * static_cast<double>(es.inner_passed) / static_cast<double>(es.tested) : 0.0,
-                ns_per_event, tracker ? (dart ? " + DART + tracker" : " + tracker") : "");
+                ns_per_event, tracker ? (cfg.descriptors ? " + DART + tracker" : " + tracker") : "");
   out << buf;
   if (tracker) {
     std::snprintf(buf, sizeof(buf), "tracks        %zu (>= %zu corner events): length mean %.1f, median %.0f, max %.0f; mean duration %.3f s\n",
@@ -404,7 +352,7 @@ int run_corners(const CornersArgs& args, std::ostream& out) {
     out << buf;
   }
   if (outside > 0) out << "warning       " << outside << " events outside the " << sensor.width << "x" << sensor.height << " sensor were skipped\n";
-  out << "wrote " << args.out << "/corners.txt" << (tracker ? ", tracks.txt" : "") << ", stats.json";
+  out << "wrote " << args.out << "/corners.txt" << (tracker ? ", tracks.txt" : "") << ", stats.json, corners_config.yaml";
   if (overlay) out << ", frames/ (" << overlay->written << " PNG)";
   out << "\n";
   return 0;

@@ -112,7 +112,9 @@ int main(int argc, char** argv) {
   const std::string dir = self_dir();
   const std::string program = "evio-" + name;
   std::vector<std::string> tried;
-  for (const std::string& candidate : {dir + "/" + program, dir + "/../libexec/evio/" + program}) {
+  const std::string beside = dir + "/" + program;                    // build tree
+  const std::string installed = dir + "/../libexec/evio/" + program;  // <prefix>/bin/evio
+  for (const std::string& candidate : {beside, installed}) {
     if (dir.empty() || access(candidate.c_str(), X_OK) != 0) {
       tried.push_back(candidate);
       continue;

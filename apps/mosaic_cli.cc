@@ -7,10 +7,9 @@
 int main(int argc, char** argv) {
   evio::apps::CommandLine cli("mosaic");
   evio::apps::MosaicArgs mosaic;
-  cli->add_option("DATASET", mosaic.dataset, "Dataset with events (IMU for --use-imu; any format evio reads)")
-      ->required();
-  cli->add_option("-o,--out", mosaic.out, "Output folder (created)")->required();
-  cli->add_option("--config", mosaic.config, "Mosaic config YAML (README.md; example datasets/mosaic/simulator.yaml)");
+  CLI::Option* dataset_opt = cli->add_option("DATASET", mosaic.dataset, "Dataset with events (IMU for --use-imu; any format evio reads)");
+  CLI::Option* out_opt = cli->add_option("-o,--out", mosaic.out, "Output folder (created)");
+  cli->add_option("--config", mosaic.config, "Mosaic config YAML (README.md; --print-config lists every key)");
   cli->add_option("--calib", mosaic.calib,
                   "Calibration: Kalibr camchain .yaml or ECD calib.txt; default: the dataset folder's calib.yaml, "
                   "else the dataset's calibration");
@@ -41,8 +40,20 @@ int main(int argc, char** argv) {
                 "Diagnostic: the tracker weighs its particles against the true panorama (a dataset written by evio "
                 "simulate with a panorama scene, rendered in the mosaic frame by the --gt start pose) instead of the "
                 "mosaic's reconstructions; no map error (needs --gt)");
+  cli->add_option("--set", mosaic.set,
+                  "Change one config value: key.sub=value (dotted key of the --config YAML, value in YAML "
+                  "syntax), applied after --config, e.g. --set tracker.particles=200; repeatable. The "
+                  "output folder's resolved config lists every key")
+      ->expected(1)
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
   evio::apps::add_dataset_options(&cli.app(), &mosaic.dataset_options);
+  bool print_config = false;
+  cli.add_print_config(&print_config, {dataset_opt, out_opt});
   return cli.run(argc, argv, [&] {
+    if (print_config) {
+      std::cout << evio::apps::mosaic_config_text(evio::apps::load_mosaic_config(mosaic.config, nullptr, mosaic.set));
+      return 0;
+    }
     mosaic.progress = !cli.quiet();
     return evio::apps::run_mosaic(mosaic, std::cout);
   });

@@ -29,7 +29,8 @@ std::string json_string(const std::string& s) { return "\"" + json_escape(s) + "
 }  // namespace
 }  // namespace evio::apps
 #include "evio/simulator/scene_config.h"
-#include "evio/sensors/yaml_config.h"
+#include "evio/sensors/config_table.h"
+#include "option_tables.h"
 
 namespace evio::apps {
 
@@ -54,67 +55,91 @@ MosaicConfig default_mosaic_config() {
 
 namespace {
 
-std::string config_yaml(const MosaicConfig& c) {
-  std::ostringstream y;
-  const auto& m = c.mosaic;
-  const auto& t = c.tracker;
-  y << "mosaic: {width: " << m.width << ", height: " << m.height << ", contrast_threshold: " << num(m.contrast_threshold)
-    << ", initial_gradient_std: " << num(m.initial_gradient_std) << ", measurement_std_abs: " << num(m.measurement_std_abs)
-    << ", measurement_relative_std: " << num(m.measurement_relative_std) << ", min_tau_ms: " << num(m.min_tau_s * 1e3)
-    << ", min_speed_px_s: " << num(m.min_speed_px_s) << ", seen_min_observations: " << m.seen_min_observations
-    << ", seen_max_gradient_std: " << num(m.seen_max_gradient_std) << ", max_path_px: " << num(m.max_path_px)
-    << ", map_viewed_texels: " << (m.map_viewed_texels ? "true" : "false")
-    << ", reconstruct_events: " << c.reconstruct_events << ", reconstruct_ms: " << num(c.reconstruct_period_ns * 1e-6)
-    << ", reconstruct_latency_events: " << c.reconstruct_latency_events << ", threads: " << c.threads
-    << ", footprint_ms: " << num(c.footprint_period_ns * 1e-6)
-    << ", full_reconstruct_every: " << c.full_reconstruct_every
-    << ", poisson_weighting: " << mapping::poisson_weighting_name(c.output_weighting)
-    << ", weight_reference_std: " << num(m.weight_reference_std) << ", viewed_edge_weight: " << num(m.viewed_edge_weight)
-    << ", weight_floor: " << num(m.weighted_poisson.weight_floor) << ", pcg_tolerance: " << num(m.weighted_poisson.tolerance)
-    << ", pcg_max_iterations: " << m.weighted_poisson.max_iterations
-    << ", pcg_preconditioner: " << mapping::poisson_preconditioner_name(m.weighted_poisson.preconditioner) << "}\n";
-  // min_particles: as resolved for the run (run_mosaic), else as configured (-1 = by input).
-  y << "tracker: {particles: " << t.num_particles
-    << ", min_particles: " << (t.min_particles > 0 ? t.min_particles : c.min_particles)
-    << ", kld_bin_rad: " << num(t.kld_bin_rad) << ", kld_epsilon: " << num(t.kld_epsilon) << ", kld_z: " << num(t.kld_z)
-    << ", batch_size: " << t.batch_size << ", event_stride: " << t.event_stride
-    << ", max_batch_ms: " << num(t.max_batch_duration_ns * 1e-6)
-    << ", motion_model: " << frontend::rotation_motion_model_name(t.motion_model)
-    << ", measurement_model: " << frontend::rotation_measurement_model_name(t.measurement_model)
-    << ", contrast_threshold: " << num(t.contrast_threshold) << ", linearize_max_spread_rad: " << num(t.linearize_max_spread_rad)
-    << ", motion_noise_rad_per_sqrt_s: " << num(t.motion_noise_rad_per_sqrt_s)
-    << ", gyro_noise_rad_per_sqrt_s: " << num(t.gyro_noise_rad_per_sqrt_s)
-    << ", velocity_noise_rad_s_per_sqrt_s: " << num(t.velocity_noise_rad_s_per_sqrt_s)
-    << ", velocity_rotation_noise_rad_per_sqrt_s: " << num(t.velocity_rotation_noise_rad_per_sqrt_s)
-    << ", initial_velocity_spread_rad_s: " << num(t.initial_velocity_spread_rad_s)
-    << ", relative_max_interval_ms: " << num(t.relative_max_interval_ns * 1e-6)
-    << ", relative_max_path_rad: " << num(t.relative_max_path_rad) << ", likelihood_std: " << num(t.likelihood_std)
-    << ", outlier_probability: " << num(t.outlier_probability) << ", resample_ess_fraction: " << num(t.resample_ess_fraction)
-    << ", seed: " << t.seed << "}\n";
-  y << "bootstrap: {duration_ms: " << num(c.bootstrap_ns * 1e-6) << ", window_ms: " << num(c.bootstrap_window_ns * 1e-6)
-    << ", window_events: " << c.bootstrap_window_events
-    << ", blur_px: " << num(c.cmax.blur_sigma_px) << ", calibrate_contrast: " << (c.calibrate_contrast ? "true" : "false")
-    << ", min_contrast_ratio: " << num(c.min_contrast_ratio) << ", calibration_sample_stride: " << c.calibration_sample_stride
-    << ", calibration_min_texel_updates: " << c.calibration_min_texel_updates
-    << ", calibration_min_samples: " << c.calibration_min_samples << ", gyro_window_ms: " << num(c.gyro_bootstrap_window_ns * 1e-6)
-    << ", gyro_step_ms: " << num(c.gyro_integration_step_ns * 1e-6) << "}\n";
-  y << "failure: {probe_every_batches: " << c.tracker.probe_every_batches << ", probe_offset_rad: " << num(c.tracker.probe_offset_rad)
-    << ", window_ms: " << num(c.failure_window_ns * 1e-6) << ", min_events: " << c.failure_min_events
-    << ", min_rate_ratio: " << num(c.failure_min_rate_ratio) << ", lost_windows: " << c.failure_lost_windows << ", lost_contrast: " << num(c.failure_lost_contrast)
-    << ", recovered_contrast: " << num(c.failure_recovered_contrast) << ", freeze_map: " << (c.failure_freeze_map ? "true" : "false")
-    << ", relocalize_spread_rad: " << num(c.failure_relocalize_spread_rad)
-    << ", rollback: " << (c.failure_rollback ? "true" : "false") << ", checkpoint_ms: " << num(c.failure_checkpoint_period_ns * 1e-6)
-    << ", checkpoints: " << c.failure_checkpoints
-    << ", global_relocalize: " << (c.failure_global_relocalize ? "true" : "false")
-    << ", global_period_ms: " << num(c.failure_global_period_ns * 1e-6) << ", global_min_gain: " << num(c.failure_global_min_gain)
-    << ", global_axis_spacing_deg: " << num(c.relocalization.axis_spacing_deg)
-    << ", global_roll_step_deg: " << num(c.relocalization.roll_step_deg) << "}\n";
-  y << "output: {trajectory_ms: " << num(c.trajectory_period_ns * 1e-6) << ", snapshot_ms: " << num(c.snapshot_period_ns * 1e-6)
-    << ", gamma: " << num(c.display.gamma) << ", low_percentile: " << num(c.display.low_percentile)
-    << ", high_percentile: " << num(c.display.high_percentile)
-    << ", transparent_unseen: " << (c.display.transparent_unseen ? "true" : "false") << "}\n";
-  return y.str();
+using C = MosaicConfig;
+
+// The table of `--config` and `--set` (one declaration per key: reading, validation, the resolved
+// config); the mosaic, particle filter, contrast maximisation, relocalisation and display options
+// come with their own tables (option_tables.h).
+const Table<C>& mosaic_config_table() {
+  static const Table<C> table = [] {
+    auto self = [](C& c) -> C& { return c; };
+    Table<C> mosaic("mosaic settings");
+    mosaic.include(gradient_mosaic_table(), &C::mosaic)
+        .integer("reconstruct_events", &C::reconstruct_events, 1, 1000000000)
+        .duration_ms("reconstruct_ms", &C::reconstruct_period_ns, Range::kPositive)
+        .integer("reconstruct_latency_events", &C::reconstruct_latency_events, 0, 1000000000)
+        .integer("threads", &C::threads, 1, 2)
+        .duration_ms("footprint_ms", &C::footprint_period_ns, Range::kPositive)
+        .integer("full_reconstruct_every", &C::full_reconstruct_every, 1, 1000000)
+        .choice("poisson_weighting", &C::output_weighting,
+                {{"none", mapping::PoissonWeighting::kNone}, {"information", mapping::PoissonWeighting::kInformation}})
+        .finish([](const Section& s, C& c) {
+          if (!s.has("height")) c.mosaic.height = c.mosaic.width / 2;  // default: the full sphere
+        });
+    // event_stride 0 and min_particles -1: chosen by input at run time (mosaic_command.h).
+    Table<C> tracker("tracker settings");
+    tracker.include(rotation_particle_filter_table(), &C::tracker, {"event_stride", "min_particles"})
+        .integer("event_stride", &C::event_stride, 0, 1000000)
+        .integer("min_particles", &C::min_particles, -1, 1000000)
+        .note("event_stride", "0: by input, 4 with --use-imu, 1 without")
+        .note("min_particles", "-1: by input, 20 with --use-imu, 40 without");
+    Table<C> bootstrap("bootstrap settings");
+    bootstrap.duration_ms("duration_ms", &C::bootstrap_ns, Range::kNonNegative)
+        .duration_ms("window_ms", &C::bootstrap_window_ns, Range::kPositive)
+        .integer("window_events", &C::bootstrap_window_events, 1000, 100000000)
+        .include(rotational_cmax_table(), &C::cmax, {"width", "height", "focal_px"})  // those: the camera's
+        .boolean("calibrate_contrast", &C::calibrate_contrast)
+        .number("min_contrast_ratio", &C::min_contrast_ratio, Range::kUnit, "")
+        .integer("calibration_sample_stride", &C::calibration_sample_stride, 1, 1000000)
+        .integer("calibration_min_texel_updates", &C::calibration_min_texel_updates, 0, 1000000)
+        .integer("calibration_min_samples", &C::calibration_min_samples, 1, 100000000)
+        .duration_ms("gyro_window_ms", &C::gyro_bootstrap_window_ns, Range::kPositive)
+        .duration_ms("gyro_step_ms", &C::gyro_integration_step_ns, Range::kPositive);
+    Table<C> failure("failure settings");
+    failure.integer("probe_every_batches", [](C& c) -> int& { return c.tracker.probe_every_batches; }, 0, 1000000)
+        .number("probe_offset_rad", [](C& c) -> double& { return c.tracker.probe_offset_rad; }, Range::kPositive, "rad")
+        .duration_ms("window_ms", &C::failure_window_ns, Range::kPositive)
+        .integer("min_events", &C::failure_min_events, 0, 1000000000)
+        .number("min_rate_ratio", &C::failure_min_rate_ratio, Range::kNonNegative, "")
+        .integer("lost_windows", &C::failure_lost_windows, 1, 1000000)
+        .number("lost_contrast", &C::failure_lost_contrast, Range::kAny, "log-likelihood per event")
+        .number("recovered_contrast", &C::failure_recovered_contrast, Range::kAny, "log-likelihood per event")
+        .boolean("freeze_map", &C::failure_freeze_map)
+        .number("relocalize_spread_rad", &C::failure_relocalize_spread_rad, Range::kNonNegative, "rad")
+        .boolean("rollback", &C::failure_rollback)
+        .duration_ms("checkpoint_ms", &C::failure_checkpoint_period_ns, Range::kPositive)
+        .integer("checkpoints", &C::failure_checkpoints, 1, 1000)
+        .boolean("global_relocalize", &C::failure_global_relocalize)
+        .duration_ms("global_period_ms", &C::failure_global_period_ns, Range::kPositive)
+        .number("global_min_gain", &C::failure_global_min_gain, Range::kPositive, "ratio")
+        .include(relocalization_table(), &C::relocalization, {}, "global_");
+    Table<C> output("output settings");
+    output.duration_ms("trajectory_ms", &C::trajectory_period_ns, Range::kPositive)
+        .duration_ms("snapshot_ms", &C::snapshot_period_ns, Range::kNonNegative)
+        .include(log_image_display_table(), &C::display);
+    Table<C> imu("IMU settings");
+    imu.duration_ms("wait_ms", &C::imu_wait_ns, Range::kNonNegative);
+    Table<C> top("mosaic pipeline settings");
+    top.section("mosaic", mosaic, self)
+        .section("tracker", tracker, self)
+        .section("bootstrap", bootstrap, self)
+        .section("failure", failure, self)
+        .section("output", output, self)
+        .section("imu", imu, self)
+        .ignored("description")
+        .finish([](const Section& s, C& c) {
+          // The tracker's C is the mosaic's unless tracker.contrast_threshold says otherwise.
+          if (!has_path(s, "tracker.contrast_threshold")) c.tracker.contrast_threshold = c.mosaic.contrast_threshold;
+        })
+        .validate();
+    return top;
+  }();
+  return table;
 }
+
+const char* kMosaicConfigHeader =
+    "# evio mosaic configuration, resolved: every key with the value used (comments: unit and range).\n"
+    "# Readable by `evio mosaic --config`.\n";
 
 // CPU time of the process (all threads), s.
 double process_cpu_s() {
@@ -123,176 +148,22 @@ double process_cpu_s() {
   return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
 }
 
-// A duration given in milliseconds under `key` (the config's *_ms keys), in ns. (Section::time_ns
-// reads seconds: `reconstruct_ms: 20` was 20 s.)
-int64_t ms_ns(const Section& s, const std::string& key, int64_t def_ns, Range r) {
-  return std::llround(s.number(key, static_cast<double>(def_ns) * 1e-6, r, "ms") * 1e6);
-}
-
 }  // namespace
 
-MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_yaml) {
-  MosaicConfig c = default_mosaic_config();
-  const std::string expected = "a mosaic config YAML (see README.md, `evio mosaic`)";
-  const YAML::Node root = load_yaml_file(path, expected);
-  const Parser parser(path, {});
-  if (!root.IsNull()) {
-    if (!root.IsMap()) parser.fail(root, "", "is not a map", expected);
-    const Section top(&parser, root, "");
-    top.allow({"mosaic", "tracker", "bootstrap", "failure", "output", "description"});
-    if (top.has("mosaic")) {
-      const Section s = top.child("mosaic", false, "a map");
-      s.allow({"width", "height", "contrast_threshold", "initial_gradient_std", "measurement_std_abs",
-               "measurement_relative_std", "min_tau_ms", "min_speed_px_s", "reconstruct_events", "reconstruct_ms",
-               "reconstruct_latency_events", "threads", "footprint_ms", "full_reconstruct_every",
-               "seen_min_observations", "seen_max_gradient_std", "max_path_px", "map_viewed_texels", "poisson_weighting", "weight_reference_std", "viewed_edge_weight", "weight_floor",
-               "pcg_tolerance", "pcg_max_iterations", "pcg_preconditioner"});
-      auto& m = c.mosaic;
-      m.width = s.integer("width", m.width, 8, 1 << 15);
-      m.height = s.integer("height", m.width / 2, 4, 1 << 14);
-      m.contrast_threshold = s.number("contrast_threshold", m.contrast_threshold, Range::kPositive, "log units");
-      m.initial_gradient_std = s.number("initial_gradient_std", m.initial_gradient_std, Range::kPositive, "log units/px");
-      m.measurement_std_abs = s.number("measurement_std_abs", m.measurement_std_abs, Range::kNonNegative, "1/s");
-      m.measurement_relative_std = s.number("measurement_relative_std", m.measurement_relative_std, Range::kNonNegative, "");
-      m.min_tau_s = s.number("min_tau_ms", m.min_tau_s * 1e3, Range::kPositive, "ms") * 1e-3;
-      m.min_speed_px_s = s.number("min_speed_px_s", m.min_speed_px_s, Range::kNonNegative, "px/s");
-      c.reconstruct_events = s.integer("reconstruct_events", static_cast<int>(c.reconstruct_events), 1, 1000000000);
-      c.reconstruct_period_ns = ms_ns(s, "reconstruct_ms", c.reconstruct_period_ns, Range::kPositive);
-      c.reconstruct_latency_events =
-          s.integer("reconstruct_latency_events", static_cast<int>(c.reconstruct_latency_events), 0, 1000000000);
-      c.threads = s.integer("threads", c.threads, 1, 2);
-      c.footprint_period_ns = ms_ns(s, "footprint_ms", c.footprint_period_ns, Range::kPositive);
-      c.full_reconstruct_every = s.integer("full_reconstruct_every", c.full_reconstruct_every, 1, 1000000);
-      m.seen_min_observations = s.integer("seen_min_observations", m.seen_min_observations, 1, 1000000);
-      m.max_path_px = s.number("max_path_px", m.max_path_px, Range::kPositive, "mosaic px");
-      m.map_viewed_texels = s.boolean("map_viewed_texels", m.map_viewed_texels);
-      m.seen_max_gradient_std = s.number("seen_max_gradient_std", m.seen_max_gradient_std, Range::kNonNegative, "log units/px");
-      const std::string weighting =
-          s.string("poisson_weighting", mapping::poisson_weighting_name(c.output_weighting), {"none", "information"});
-      c.output_weighting = weighting == "none" ? mapping::PoissonWeighting::kNone : mapping::PoissonWeighting::kInformation;
-      m.weight_reference_std = s.number("weight_reference_std", m.weight_reference_std, Range::kPositive, "log units/px");
-      m.viewed_edge_weight = s.number("viewed_edge_weight", m.viewed_edge_weight, Range::kUnit, "");
-      auto& wp = m.weighted_poisson;
-      wp.weight_floor = s.number("weight_floor", wp.weight_floor, Range::kUnit, "");
-      wp.tolerance = s.number("pcg_tolerance", wp.tolerance, Range::kUnit, "");
-      wp.max_iterations = s.integer("pcg_max_iterations", wp.max_iterations, 0, 1000000);
-      const std::string pre = s.string("pcg_preconditioner", mapping::poisson_preconditioner_name(wp.preconditioner),
-                                       {"none", "jacobi", "spectral", "scaled_spectral"});
-      wp.preconditioner = pre == "none"       ? mapping::PoissonPreconditioner::kNone
-                          : pre == "jacobi"   ? mapping::PoissonPreconditioner::kJacobi
-                          : pre == "spectral" ? mapping::PoissonPreconditioner::kSpectral
-                                              : mapping::PoissonPreconditioner::kScaledSpectral;
-      std::string why;
-      if (!m.Validate(&why)) s.fail("invalid mosaic settings: " + why, "consistent settings");
-    }
-    c.tracker.contrast_threshold = c.mosaic.contrast_threshold;  // unless tracker.contrast_threshold says otherwise
-    if (top.has("tracker")) {
-      const Section s = top.child("tracker", false, "a map");
-      s.allow({"particles", "min_particles", "kld_bin_rad", "kld_epsilon", "kld_z", "batch_size", "max_batch_ms", "motion_model", "measurement_model", "contrast_threshold", "event_stride", "linearize_max_spread_rad", "motion_noise_rad_per_sqrt_s",
-               "gyro_noise_rad_per_sqrt_s", "likelihood_std", "outlier_probability", "resample_ess_fraction", "seed",
-               "velocity_noise_rad_s_per_sqrt_s", "velocity_rotation_noise_rad_per_sqrt_s", "initial_velocity_spread_rad_s", "relative_max_interval_ms",
-               "relative_max_path_rad"});
-      auto& t = c.tracker;
-      t.num_particles = s.integer("particles", t.num_particles, 1, 1000000);
-      c.min_particles = s.integer("min_particles", c.min_particles, -1, 1000000);
-      t.kld_bin_rad = s.number("kld_bin_rad", t.kld_bin_rad, Range::kPositive, "rad");
-      t.kld_epsilon = s.number("kld_epsilon", t.kld_epsilon, Range::kPositive, "");
-      t.kld_z = s.number("kld_z", t.kld_z, Range::kPositive, "");
-      t.contrast_threshold = s.number("contrast_threshold", c.mosaic.contrast_threshold, Range::kPositive, "log units");
-      t.batch_size = s.integer("batch_size", t.batch_size, 1, 1000000);
-      c.event_stride = s.integer("event_stride", c.event_stride, 1, 1000000);
-      t.linearize_max_spread_rad = s.number("linearize_max_spread_rad", t.linearize_max_spread_rad, Range::kNonNegative, "rad");
-      t.max_batch_duration_ns = ms_ns(s, "max_batch_ms", t.max_batch_duration_ns, Range::kPositive);
-      const std::string mm = s.string("motion_model", frontend::rotation_motion_model_name(t.motion_model),
-                                      {"random_walk", "constant_velocity", "particle_velocity"});
-      t.motion_model = mm == "random_walk"         ? frontend::RotationMotionModel::kRandomWalk
-                       : mm == "constant_velocity" ? frontend::RotationMotionModel::kConstantVelocity
-                                                   : frontend::RotationMotionModel::kParticleVelocity;
-      t.velocity_noise_rad_s_per_sqrt_s = s.number("velocity_noise_rad_s_per_sqrt_s", t.velocity_noise_rad_s_per_sqrt_s,
-                                                   Range::kPositive, "rad/s/sqrt(s)");
-      t.velocity_rotation_noise_rad_per_sqrt_s = s.number("velocity_rotation_noise_rad_per_sqrt_s",
-                                                          t.velocity_rotation_noise_rad_per_sqrt_s, Range::kPositive, "rad/sqrt(s)");
-      t.initial_velocity_spread_rad_s = s.number("initial_velocity_spread_rad_s", t.initial_velocity_spread_rad_s,
-                                                 Range::kNonNegative, "rad/s");
-      t.relative_max_interval_ns = ms_ns(s, "relative_max_interval_ms", t.relative_max_interval_ns, Range::kPositive);
-      t.relative_max_path_rad = s.number("relative_max_path_rad", t.relative_max_path_rad, Range::kPositive, "rad");
-      const std::string meas = s.string("measurement_model", frontend::rotation_measurement_model_name(t.measurement_model),
-                                        {"previous_mean", "relative_motion", "auto"});
-      t.measurement_model = meas == "previous_mean"     ? frontend::RotationMeasurementModel::kPreviousMean
-                            : meas == "relative_motion" ? frontend::RotationMeasurementModel::kRelativeMotion
-                                                        : frontend::RotationMeasurementModel::kAuto;
-      t.motion_noise_rad_per_sqrt_s = s.number("motion_noise_rad_per_sqrt_s", t.motion_noise_rad_per_sqrt_s, Range::kPositive, "rad/sqrt(s)");
-      t.gyro_noise_rad_per_sqrt_s = s.number("gyro_noise_rad_per_sqrt_s", t.gyro_noise_rad_per_sqrt_s, Range::kPositive, "rad/sqrt(s)");
-      t.likelihood_std = s.number("likelihood_std", t.likelihood_std, Range::kPositive, "log units");
-      t.outlier_probability = s.number("outlier_probability", t.outlier_probability, Range::kUnit, "");
-      t.resample_ess_fraction = s.number("resample_ess_fraction", t.resample_ess_fraction, Range::kUnit, "");
-      t.seed = static_cast<uint64_t>(s.integer("seed", static_cast<int>(t.seed), 0, 2147483647));
-      std::string why;
-      if (!t.Validate(&why)) s.fail("invalid tracker settings: " + why, "consistent settings");
-    }
-    if (top.has("bootstrap")) {
-      const Section s = top.child("bootstrap", false, "a map");
-      s.allow({"duration_ms", "window_ms", "window_events", "blur_px", "calibrate_contrast", "min_contrast_ratio",
-               "calibration_sample_stride", "calibration_min_texel_updates", "calibration_min_samples", "gyro_window_ms",
-               "gyro_step_ms"});
-      c.calibrate_contrast = s.boolean("calibrate_contrast", c.calibrate_contrast);
-      c.min_contrast_ratio = s.number("min_contrast_ratio", c.min_contrast_ratio, Range::kUnit, "");
-      c.bootstrap_ns = ms_ns(s, "duration_ms", c.bootstrap_ns, Range::kNonNegative);
-      c.bootstrap_window_ns = ms_ns(s, "window_ms", c.bootstrap_window_ns, Range::kPositive);
-      c.bootstrap_window_events = s.integer("window_events", c.bootstrap_window_events, 1000, 100000000);
-      c.cmax.blur_sigma_px = s.number("blur_px", c.cmax.blur_sigma_px, Range::kPositive, "px");
-      c.calibration_sample_stride = s.integer("calibration_sample_stride", c.calibration_sample_stride, 1, 1000000);
-      c.calibration_min_texel_updates = s.integer("calibration_min_texel_updates", c.calibration_min_texel_updates, 0, 1000000);
-      c.calibration_min_samples = s.integer("calibration_min_samples", c.calibration_min_samples, 1, 100000000);
-      c.gyro_bootstrap_window_ns = ms_ns(s, "gyro_window_ms", c.gyro_bootstrap_window_ns, Range::kPositive);
-      c.gyro_integration_step_ns = ms_ns(s, "gyro_step_ms", c.gyro_integration_step_ns, Range::kPositive);
-    }
-    if (top.has("failure")) {
-      const Section s = top.child("failure", false, "a map");
-      s.allow({"probe_every_batches", "probe_offset_rad", "window_ms", "min_events", "min_rate_ratio", "lost_windows", "lost_contrast", "recovered_contrast",
-               "freeze_map", "relocalize_spread_rad", "rollback", "checkpoint_ms", "checkpoints", "global_relocalize", "global_period_ms", "global_min_gain",
-               "global_axis_spacing_deg", "global_roll_step_deg"});
-      c.failure_min_events = s.integer("min_events", c.failure_min_events, 0, 1000000000);
-      c.failure_min_rate_ratio = s.number("min_rate_ratio", c.failure_min_rate_ratio, Range::kNonNegative, "");
-      c.failure_lost_windows = s.integer("lost_windows", c.failure_lost_windows, 1, 1000000);
-      c.tracker.probe_every_batches = s.integer("probe_every_batches", c.tracker.probe_every_batches, 0, 1000000);
-      c.tracker.probe_offset_rad = s.number("probe_offset_rad", c.tracker.probe_offset_rad, Range::kPositive, "rad");
-      c.failure_window_ns = ms_ns(s, "window_ms", c.failure_window_ns, Range::kPositive);
-      c.failure_lost_contrast = s.number("lost_contrast", c.failure_lost_contrast, Range::kAny, "log-likelihood per event");
-      c.failure_recovered_contrast = s.number("recovered_contrast", c.failure_recovered_contrast, Range::kAny, "log-likelihood per event");
-      c.failure_freeze_map = s.boolean("freeze_map", c.failure_freeze_map);
-      c.failure_relocalize_spread_rad = s.number("relocalize_spread_rad", c.failure_relocalize_spread_rad, Range::kNonNegative, "rad");
-      c.failure_rollback = s.boolean("rollback", c.failure_rollback);
-      c.failure_checkpoint_period_ns = ms_ns(s, "checkpoint_ms", c.failure_checkpoint_period_ns, Range::kPositive);
-      c.failure_checkpoints = s.integer("checkpoints", c.failure_checkpoints, 1, 1000);
-      c.failure_global_relocalize = s.boolean("global_relocalize", c.failure_global_relocalize);
-      c.failure_global_period_ns = ms_ns(s, "global_period_ms", c.failure_global_period_ns, Range::kPositive);
-      c.failure_global_min_gain = s.number("global_min_gain", c.failure_global_min_gain, Range::kPositive, "ratio");
-      c.relocalization.axis_spacing_deg = s.number("global_axis_spacing_deg", c.relocalization.axis_spacing_deg, Range::kPositive, "deg");
-      c.relocalization.roll_step_deg = s.number("global_roll_step_deg", c.relocalization.roll_step_deg, Range::kPositive, "deg");
-      std::string why;
-      if (!c.Validate(&why)) s.fail("invalid failure settings: " + why, "consistent settings");
-    }
-    if (top.has("output")) {
-      const Section s = top.child("output", false, "a map");
-      s.allow({"trajectory_ms", "snapshot_ms", "gamma", "low_percentile", "high_percentile", "transparent_unseen"});
-      c.trajectory_period_ns = ms_ns(s, "trajectory_ms", c.trajectory_period_ns, Range::kPositive);
-      c.snapshot_period_ns = ms_ns(s, "snapshot_ms", c.snapshot_period_ns, Range::kNonNegative);
-      c.display.gamma = s.number("gamma", c.display.gamma, Range::kPositive, "");
-      c.display.low_percentile = s.number("low_percentile", c.display.low_percentile, Range::kNonNegative, "%");
-      c.display.high_percentile = s.number("high_percentile", c.display.high_percentile, Range::kPositive, "%");
-      c.display.transparent_unseen = s.boolean("transparent_unseen", c.display.transparent_unseen);
-      std::string why;
-      if (!c.display.Validate(&why)) s.fail("invalid output settings: " + why, "consistent settings");
-    }
-  }
-  if (resolved_yaml) *resolved_yaml = config_yaml(c);
+MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_yaml,
+                                const std::vector<std::string>& sets) {
+  MosaicConfig c = read_config(mosaic_config_table(), default_mosaic_config(), path, sets,
+                               "a mosaic config YAML (see README.md, `evio mosaic`)");
+  if (resolved_yaml) *resolved_yaml = mosaic_config_text(c);
   return c;
 }
 
+std::string mosaic_config_text(const MosaicConfig& c) {
+  return config_text(mosaic_config_table(), c, kMosaicConfigHeader);
+}
+
 int run_mosaic(const MosaicArgs& args, std::ostream& out) {
-  std::string resolved;
-  MosaicConfig cfg = args.config.empty() ? default_mosaic_config() : load_mosaic_config(args.config, &resolved);
+  MosaicConfig cfg = load_mosaic_config(args.config, nullptr, args.set);
   if (args.particles > 0) cfg.tracker.num_particles = args.particles;
   if (args.batch > 0) cfg.tracker.batch_size = args.batch;
   if (args.stride > 0) cfg.event_stride = args.stride;
@@ -314,7 +185,10 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
     if (!cfg.tracker.Validate(&why)) throw InputError(args.config.empty() ? "--particles/--batch" : args.config, 0, why, "valid tracker settings");
     if (!cfg.Validate(&why)) throw InputError(args.config.empty() ? "the defaults" : args.config, 0, why, "valid mosaic settings");
   }
-  resolved = config_yaml(cfg);
+  // The resolved config holds the values used, the stride and particle floor as chosen for this input.
+  cfg.event_stride = cfg.tracker.event_stride;
+  cfg.min_particles = cfg.tracker.min_particles;
+  const std::string resolved = mosaic_config_text(cfg);
 
   auto reader = open_dataset(args.dataset, args.dataset_options);
   const DatasetCalibration found = find_dataset_calibration(args.dataset, args.calib, *reader);
@@ -499,7 +373,7 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
     if (fs::exists(scene)) {
       const simulator::SimulationConfig sc = simulator::load_simulation_config(scene.string());
       if (sc.panorama) {
-        const Eigen::Matrix3d R_w_m = A;  // mosaic frame -> simulator world
+        const Eigen::Matrix3d& R_w_m = A;  // mosaic frame -> simulator world
         const mapping::ImageF ref = simulator::panorama_log_reference(*sc.panorama, R_w_m, cfg.mosaic.width, cfg.mosaic.height);
         const mapping::ImageQuality q = mapping::compare_images(rec.log_intensity, ref, &rec.seen);
         auto quality = [&](const mapping::ImageQuality& x) {

@@ -15,6 +15,7 @@
 #include <cstdint>
 #include <iosfwd>
 #include <string>
+#include <vector>
 
 #include "evio/mapping/mosaic_image.h"
 #include "evio/pipeline/mosaic_pipeline.h"
@@ -36,13 +37,18 @@ struct MosaicConfig : pipeline::MosaicPipelineOptions {
 };
 
 MosaicConfig default_mosaic_config();
-// Reads a mosaic config YAML over the defaults. Throws evio::InputError (file:line, key, expected form).
-MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_yaml = nullptr);
+// Reads a mosaic config YAML (path empty: none) with `--set key.sub=value` overrides over the
+// defaults. Throws evio::InputError (file:line or the --set option, key, expected form).
+MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_yaml = nullptr,
+                                const std::vector<std::string>& sets = {});
+// The resolved config (every key, value, unit and range), readable by load_mosaic_config.
+std::string mosaic_config_text(const MosaicConfig& c);
 
 struct MosaicArgs {
   std::string dataset;
   DatasetOptions dataset_options;
   std::string config;      // optional YAML
+  std::vector<std::string> set;  // --set key.sub=value overrides of the config, in order
   std::string calib;       // optional Kalibr camchain or ECD calib.txt
   std::string gt;          // optional ground truth (TUM or csv) -> eval.json
   std::string out;

@@ -7,9 +7,9 @@
 int main(int argc, char** argv) {
   evio::apps::CommandLine cli("vio");
   evio::apps::VioArgs vio;
-  cli->add_option("DATASET", vio.dataset, "Dataset with events and IMU (any format evio reads)")->required();
-  cli->add_option("-o,--out", vio.out, "Output folder (created)")->required();
-  cli->add_option("--config", vio.config, "VIO config YAML (README.md; examples in datasets/vio/*.yaml)");
+  CLI::Option* dataset_opt = cli->add_option("DATASET", vio.dataset, "Dataset with events and IMU (any format evio reads)");
+  CLI::Option* out_opt = cli->add_option("-o,--out", vio.out, "Output folder (created)");
+  cli->add_option("--config", vio.config, "VIO config YAML (README.md; examples in datasets/vio/*.yaml; --print-config lists every key)");
   cli->add_option("--calib", vio.calib,
                   "Calibration: Kalibr camchain .yaml (with imu0 noise) or ECD calib.txt; default: the dataset "
                   "folder's calib.yaml, else the dataset's calibration");
@@ -40,8 +40,20 @@ int main(int argc, char** argv) {
                   "With --oracle-error real or independent: drop observations whose own error is larger (px; 0 = keep "
                   "all)")
       ->check(CLI::NonNegativeNumber);
+  cli->add_option("--set", vio.set,
+                  "Change one config value: key.sub=value (dotted key of the --config YAML, value in YAML "
+                  "syntax), applied after --config, e.g. --set frames.events_per_frame=20000; repeatable. The "
+                  "output folder's resolved config lists every key")
+      ->expected(1)
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
   evio::apps::add_dataset_options(&cli.app(), &vio.dataset_options);
+  bool print_config = false;
+  cli.add_print_config(&print_config, {dataset_opt, out_opt});
   return cli.run(argc, argv, [&] {
+    if (print_config) {
+      std::cout << evio::apps::vio_config_text(evio::apps::load_vio_config(vio.config, nullptr, vio.set));
+      return 0;
+    }
     vio.progress = !cli.quiet();
     return evio::apps::run_vio(vio, std::cout);
   });

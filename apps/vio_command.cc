@@ -26,15 +26,13 @@
 #include "dataset_calibration.h"
 #include "progress.h"
 #include "evio/simulator/scene_config.h"
-#include "evio/sensors/yaml_config.h"
+#include "evio/sensors/config_table.h"
+#include "option_tables.h"
 
 namespace evio::apps {
 namespace {
 namespace fs = std::filesystem;
 using namespace yaml_config;  // NOLINT
-
-int64_t ms_to_ns(double ms) { return static_cast<int64_t>(std::llround(ms * 1e6)); }
-double ns_to_ms(int64_t ns) { return static_cast<double>(ns) * 1e-6; }
 
 std::string num(double v) {
   char b[40];
@@ -42,286 +40,94 @@ std::string num(double v) {
   return b;
 }
 
-// YAML names of the pipeline's choices: init.method `groundtruth` is the pipeline's `given`.
-const char* init_name(pipeline::VioInitMethod m) {
-  return m == pipeline::VioInitMethod::kGiven ? "groundtruth" : pipeline::to_string(m);
+using pipeline::VioFrontEnd;
+using pipeline::VioInitMethod;
+using pipeline::VioInputs;
+using C = VioConfig;
+
+// The table of `--config` and `--set` (one declaration per key: reading, validation, the resolved
+// config). The library's options structs come with their own tables (option_tables.h).
+const Table<C>& vio_config_table() {
+  static const Table<C> table = [] {
+    auto self = [](C& c) -> C& { return c; };
+    Table<C> filters("filter settings");
+    filters.section("refractory", refractory_section<C>(), self)
+        .section("background_activity", background_activity_section<C>(), self);
+
+    Table<C> frames("frame settings");
+    frames.include(event_frame_table(), &C::frames).boolean("velocity_at_reference", &C::frame_velocity_at_reference);
+
+    Table<C> aps("APS settings");
+    aps.number("pixel_sigma", &C::aps_pixel_sigma_px, Range::kPositive, "px")
+        .number("event_pixel_sigma", &C::aps_event_pixel_sigma_px, Range::kPositive, "px")
+        .duration_ms("max_gap_ms", &C::aps_max_gap_ns, Range::kPositive);
+
+    Table<C> corner_tracker("corner tracker settings");
+    corner_tracker.include(corner_tracker_table(), &C::corner_tracker)
+        .duration_ms("observation_period_ms", &C::observation_period_ns, Range::kPositive)
+        .duration_ms("min_track_age_ms", &C::min_track_age_ns, Range::kNonNegative)
+        .number("min_bearing_z", &C::corner_min_bearing_z, Range::kUnit, "cos of the angle to the optical axis, < 1");
+
+    Table<C> imu("IMU settings");
+    imu.include(imu_noise_table(), &C::imu_noise)
+        .duration_ms("lookahead_ms", &C::imu_lookahead_ns, Range::kNonNegative)
+        .duration_ms("wait_ms", &C::imu_wait_ns, Range::kNonNegative);
+
+    Table<C> init("initialisation settings");
+    init.choice("method", &C::init,
+                {{"auto", VioInitMethod::kAuto},
+                 {"static", VioInitMethod::kStatic},
+                 {"alignment", VioInitMethod::kAlignment},
+                 {"groundtruth", VioInitMethod::kGiven}})
+        .duration_ms("window_ms", &C::init_window_ns, Range::kPositive)
+        .number("retry_slide_fraction", &C::init_retry_slide_fraction, Range::kUnit, "of window_ms, > 0")
+        .duration_ms("imu_history_ms", &C::init_imu_history_ns, Range::kNonNegative)
+        .section("static", static_init_table(), &C::static_init)
+        .section("alignment", visual_inertial_init_table(), &C::vi_init);
+
+    Table<C> reports("report settings");
+    reports.integer("tracking_lost_min_tracks", &C::tracking_lost_min_tracks, 0, 100000)
+        .duration_ms("tracking_lost_min_duration_ms", &C::tracking_lost_min_duration_ns, Range::kPositive)
+        .integer("event_rate_drop_windows", &C::event_rate_drop_windows, 1, 100000);
+
+    Table<C> top("VIO settings");
+    top.choice("inputs", &C::inputs,
+               {{"events", VioInputs::kEvents}, {"aps", VioInputs::kAps}, {"events+aps", VioInputs::kEventsAndAps}})
+        .choice("frontend", &C::frontend, {{"frames", VioFrontEnd::kFrames}, {"corners", VioFrontEnd::kCorners}})
+        .section("filters", filters, self)
+        .section("frames", frames, self)
+        .section("tracker", feature_tracker_table(), &C::tracker)
+        .section("aps_tracker", feature_tracker_table(), &C::aps_tracker)
+        .section("aps", aps, self)
+        .section("efast", efast_table(), &C::efast)
+        .section("corner_tracker", corner_tracker, self)
+        .section("window", sliding_window_table(), &C::window)
+        .section("imu", imu, self)
+        .section("init", init, self)
+        .section("reports", reports, self)
+        .ignored("description")
+        .validate();
+    return top;
+  }();
+  return table;
 }
 
-std::string loss_name(backend::RobustLoss l) {
-  return l == backend::RobustLoss::kHuber ? "huber" : l == backend::RobustLoss::kCauchy ? "cauchy" : "none";
-}
-
-std::string tracked_landmark_name(backend::TrackedLandmarkMarginalisation m) {
-  return m == backend::TrackedLandmarkMarginalisation::kDoubleCount ? "double_count"
-         : m == backend::TrackedLandmarkMarginalisation::kRestart   ? "restart"
-         : m == backend::TrackedLandmarkMarginalisation::kSplit     ? "split"
-                                                                     : "drop";
-}
-
-// One feature-tracker section (tracker, aps_tracker) of the resolved config.
-std::string tracker_yaml(const char* key, const frontend::FeatureTrackerOptions& tk) {
-  std::ostringstream y;
-  y << key << ": {grid_cols: " << tk.grid_cols << ", grid_rows: " << tk.grid_rows << ", max_features: " << tk.max_features
-    << ", max_per_cell: " << tk.max_per_cell << ", fast_threshold: " << tk.fast_threshold
-    << ", min_distance_px: " << tk.min_distance_px << ", klt_window_px: " << tk.klt_window_px
-    << ", klt_pyramid_levels: " << tk.klt_pyramid_levels << ", klt_max_iterations: " << tk.klt_max_iterations
-    << ", klt_epsilon_px: " << num(tk.klt_epsilon_px) << ", forward_backward_max_px: " << num(tk.forward_backward_max_px)
-    << ", template_max_age_frames: " << tk.template_max_age_frames
-    << ", template_fallback: " << (tk.template_fallback ? "true" : "false")
-    << ", template_max_rotation_deg: " << num(tk.template_max_rotation_deg)
-    << ", anchor_frames: " << tk.anchor_frames << ", anchor_ransac_threshold_px: " << num(tk.anchor_ransac_threshold_px)
-    << ", ransac: " << frontend::ransac_model_name(tk.ransac)
-    << ", ransac_threshold_px: " << num(tk.ransac_threshold_px) << ", min_tracks_before_detection: " << tk.min_tracks_before_detection
-    << ", seed: " << tk.seed << "}\n";
-  return y.str();
-}
-
-// Reads a feature-tracker section over *t; fails with file:line on invalid settings.
-void parse_tracker(const Section& s, frontend::FeatureTrackerOptions* t) {
-  s.allow({"grid_cols", "grid_rows", "max_features", "max_per_cell", "fast_threshold", "min_distance_px",
-           "klt_window_px", "klt_pyramid_levels", "klt_max_iterations", "klt_epsilon_px", "forward_backward_max_px", "ransac",
-           "ransac_threshold_px", "min_tracks_before_detection", "template_max_age_frames", "template_fallback", "template_max_rotation_deg", "anchor_frames",
-           "anchor_ransac_threshold_px", "seed"});
-  t->grid_cols = s.integer("grid_cols", t->grid_cols, 1, 100);
-  t->grid_rows = s.integer("grid_rows", t->grid_rows, 1, 100);
-  t->max_features = s.integer("max_features", t->max_features, 1, 100000);
-  t->max_per_cell = s.integer("max_per_cell", t->max_per_cell, 1, 100000);
-  t->fast_threshold = s.integer("fast_threshold", t->fast_threshold, 1, 255);
-  t->min_distance_px = s.integer("min_distance_px", t->min_distance_px, 0, 1000);
-  t->klt_window_px = s.integer("klt_window_px", t->klt_window_px, 3, 255);
-  t->klt_pyramid_levels = s.integer("klt_pyramid_levels", t->klt_pyramid_levels, 0, 8);
-  t->klt_max_iterations = s.integer("klt_max_iterations", t->klt_max_iterations, 1, 1000);
-  t->klt_epsilon_px = s.number("klt_epsilon_px", t->klt_epsilon_px, Range::kPositive, "px");
-  t->forward_backward_max_px = s.number("forward_backward_max_px", t->forward_backward_max_px, Range::kPositive, "px");
-  t->template_max_age_frames = s.integer("template_max_age_frames", t->template_max_age_frames, 1, 100000);
-  t->template_fallback = s.boolean("template_fallback", t->template_fallback);
-  t->template_max_rotation_deg = s.number("template_max_rotation_deg", t->template_max_rotation_deg, Range::kNonNegative, "deg");
-  t->anchor_frames = s.integer("anchor_frames", t->anchor_frames, 0, 100000);
-  t->anchor_ransac_threshold_px = s.number("anchor_ransac_threshold_px", t->anchor_ransac_threshold_px, Range::kPositive, "px");
-  const std::string r = s.string("ransac", frontend::ransac_model_name(t->ransac), {"two_point", "five_point", "none"});
-  t->ransac = r == "two_point" ? frontend::RansacModel::kTwoPoint : r == "five_point" ? frontend::RansacModel::kFivePoint : frontend::RansacModel::kNone;
-  t->ransac_threshold_px = s.number("ransac_threshold_px", t->ransac_threshold_px, Range::kPositive, "px");
-  t->min_tracks_before_detection = s.integer("min_tracks_before_detection", t->min_tracks_before_detection, 0, 100000);
-  t->seed = static_cast<uint64_t>(s.integer("seed", static_cast<int>(t->seed), 0, 1 << 30));
-  std::string why;
-  if (!t->Validate(&why)) s.fail("invalid tracker settings: " + why, "consistent settings");
-}
-
-// The resolved config as YAML (every key, defaults included), readable by load_vio_config.
-std::string config_yaml(const VioConfig& c) {
-  std::ostringstream y;
-  y << "# evio vio configuration (resolved: every key with the value used)\n";
-  y << "inputs: " << pipeline::to_string(c.inputs) << "\n";
-  y << "frontend: " << pipeline::to_string(c.frontend) << "\n";
-  y << "filters:\n  refractory: {enabled: " << (c.refractory_enabled ? "true" : "false")
-    << ", period_ms: " << num(ns_to_ms(c.refractory.period_ns)) << "}\n";
-  y << "  background_activity: {enabled: " << (c.background_activity_enabled ? "true" : "false")
-    << ", window_ms: " << num(ns_to_ms(c.background_activity.window_ns)) << ", radius: " << c.background_activity.radius
-    << ", min_support: " << c.background_activity.min_support << "}\n";
-  const auto& fr = c.frames;
-  y << "frames: {events_per_frame: " << fr.events_per_frame << ", min_window_ms: " << num(ns_to_ms(fr.min_window_ns))
-    << ", max_window_ms: " << num(ns_to_ms(fr.max_window_ns))
-    << ", min_events: " << fr.min_events << ", motion_compensation: " << (fr.motion_compensation ? "true" : "false")
-    << ", use_depth: " << (fr.use_depth ? "true" : "false")
-    << ", velocity_at_reference: " << (c.frame_velocity_at_reference ? "true" : "false")
-    << ", event_lag_px: " << num(fr.event_lag_px)
-    << ", clip_percentile: " << num(fr.clip_percentile) << ", clip_count: " << num(fr.clip_count)
-    << ", overlap: " << num(fr.overlap) << "}\n";
-  y << tracker_yaml("tracker", c.tracker);
-  y << tracker_yaml("aps_tracker", c.aps_tracker);
-  y << "aps: {pixel_sigma: " << num(c.aps_pixel_sigma_px) << ", event_pixel_sigma: " << num(c.aps_event_pixel_sigma_px)
-    << ", max_gap_ms: " << num(ns_to_ms(c.aps_max_gap_ns)) << "}\n";
-  y << "efast: {filter_sae: " << (c.efast.filter_sae ? "true" : "false")
-    << ", filter_window_ms: " << num(ns_to_ms(c.efast.filter_window_ns)) << "}\n";
-  const auto& t = c.corner_tracker;
-  y << "corner_tracker: {max_distance_px: " << num(t.max_distance_px) << ", max_gap_ms: " << num(ns_to_ms(t.max_gap_ns))
-    << ", position_gain: " << num(t.position_gain) << ", velocity_window_ms: " << num(ns_to_ms(t.velocity_window_ns))
-    << ", observation_period_ms: " << num(ns_to_ms(c.observation_period_ns))
-    << ", min_track_age_ms: " << num(ns_to_ms(c.min_track_age_ns)) << "}\n";
-  const auto& w = c.window;
-  y << "window:\n  size: " << w.window_size << "\n  max_iterations: " << w.max_iterations
-    << "\n  function_tolerance: " << num(w.function_tolerance)
-    << "\n  max_solver_time_ms: " << num(w.max_solver_time_s * 1e3) << "\n  loss: " << loss_name(w.loss)
-    << "\n  loss_scale: " << num(w.loss_scale) << "\n  pixel_sigma: " << num(w.pixel_sigma)
-    << "\n  keyframe_min_parallax_px: " << num(w.keyframe_min_parallax_px)
-    << "\n  keyframe_min_tracked_ratio: " << num(w.keyframe_min_tracked_ratio)
-    << "\n  keyframe_max_interval_ms: " << num(w.keyframe_max_interval_s * 1e3)
-    << "\n  min_triangulation_angle_deg: " << num(w.min_triangulation_angle_deg)
-    << "\n  max_reprojection_px: " << num(w.max_reprojection_px)
-    << "\n  tracked_landmark_marginalisation: " << tracked_landmark_name(w.tracked_landmark_marginalisation)
-    << "\n  rotation_only_parallax_px: " << num(w.rotation_only_parallax_px)
-    << "\n  rotation_only_translation_px: " << num(w.rotation_only_translation_px)
-    << "\n  rotation_only_min_duration_ms: " << num(w.rotation_only_min_duration_s * 1e3)
-    << "\n  init_bias_gyro_turn_on_radps: " << num(w.init_bias_gyro_turn_on_radps)
-    << "\n  init_bias_accel_turn_on_mps2: " << num(w.init_bias_accel_turn_on_mps2)
-    << "\n  init_bias_horizon_s: " << num(w.init_bias_horizon_s)
-    << "\n  estimate_time_offset: " << (w.estimate_time_offset ? "true" : "false")
-    << "\n  time_offset_sigma_ms: " << num(w.time_offset_sigma_s * 1e3) << "\n";
-  const auto& n = c.imu_noise;
-  y << "imu: {accelerometer_noise_density: " << num(n.accelerometer_noise_density)
-    << ", accelerometer_random_walk: " << num(n.accelerometer_random_walk)
-    << ", gyroscope_noise_density: " << num(n.gyroscope_noise_density)
-    << ", gyroscope_random_walk: " << num(n.gyroscope_random_walk) << ", update_rate_hz: " << num(n.update_rate_hz) << "}\n";
-  y << "init: {method: " << init_name(c.init) << ", window_ms: " << num(ns_to_ms(c.init_window_ns)) << "}\n";
-  return y.str();
-}
+const char* kVioConfigExpected = "a VIO config YAML (see README.md, `evio vio`)";
+const char* kVioConfigHeader =
+    "# evio vio configuration, resolved: every key with the value used (comments: unit and range).\n"
+    "# Readable by `evio vio --config`.\n";
 
 }  // namespace
 
 VioConfig default_vio_config() { return VioConfig{}; }
 
-VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml) {
-  VioConfig c = default_vio_config();
-  const std::string expected = "a VIO config YAML (see README.md, `evio vio`)";
-  const YAML::Node root = load_yaml_file(path, expected);
-  const Parser parser(path, {});
-  if (!root.IsNull()) {
-    if (!root.IsMap()) parser.fail(root, "", "is not a map", expected);
-    try {
-      const Section top(&parser, root, "");
-      top.allow({"inputs", "frontend", "filters", "frames", "tracker", "aps_tracker", "aps", "efast", "corner_tracker", "window",
-                 "imu", "init", "description"});
-      const std::string in = top.string("inputs", pipeline::to_string(c.inputs), {"events", "aps", "events+aps"});
-      c.inputs = in == "aps" ? pipeline::VioInputs::kAps : in == "events+aps" ? pipeline::VioInputs::kEventsAndAps : pipeline::VioInputs::kEvents;
-      c.frontend = top.string("frontend", pipeline::to_string(c.frontend), {"frames", "corners"}) == "corners"
-                       ? pipeline::VioFrontEnd::kCorners
-                       : pipeline::VioFrontEnd::kFrames;
-      if (top.has("frames")) {
-        const Section s = top.child("frames", false, "a map");
-        s.allow({"events_per_frame", "min_window_ms", "max_window_ms", "min_events", "motion_compensation", "use_depth", "clip_percentile",
-                 "clip_count", "overlap", "velocity_at_reference", "event_lag_px"});
-        auto& f = c.frames;
-        f.events_per_frame = s.integer("events_per_frame", f.events_per_frame, 1, 100000000);
-        f.max_window_ns = ms_to_ns(s.number("max_window_ms", ns_to_ms(f.max_window_ns), Range::kPositive, "ms"));
-        f.min_window_ns = ms_to_ns(s.number("min_window_ms", ns_to_ms(f.min_window_ns), Range::kNonNegative, "ms"));
-        f.min_events = s.integer("min_events", f.min_events, 1, 100000000);
-        f.motion_compensation = s.boolean("motion_compensation", f.motion_compensation);
-        f.use_depth = s.boolean("use_depth", f.use_depth);
-        c.frame_velocity_at_reference = s.boolean("velocity_at_reference", c.frame_velocity_at_reference);
-        f.clip_percentile = s.number("clip_percentile", f.clip_percentile, Range::kUnit, "");
-        f.clip_count = s.number("clip_count", f.clip_count, Range::kNonNegative, "events per pixel");
-        f.overlap = s.number("overlap", f.overlap, Range::kNonNegative, "fraction of a frame's events");
-        f.event_lag_px = s.number("event_lag_px", f.event_lag_px, Range::kNonNegative, "px");
-        std::string why;
-        if (!f.Validate(&why)) s.fail("invalid frame settings: " + why, "consistent settings");
-      }
-      if (top.has("tracker")) parse_tracker(top.child("tracker", false, "a map"), &c.tracker);
-      if (top.has("aps_tracker")) parse_tracker(top.child("aps_tracker", false, "a map"), &c.aps_tracker);
-      if (top.has("aps")) {
-        const Section s = top.child("aps", false, "a map");
-        s.allow({"pixel_sigma", "event_pixel_sigma", "max_gap_ms"});
-        c.aps_pixel_sigma_px = s.number("pixel_sigma", c.aps_pixel_sigma_px, Range::kPositive, "px");
-        c.aps_event_pixel_sigma_px = s.number("event_pixel_sigma", c.aps_event_pixel_sigma_px, Range::kPositive, "px");
-        c.aps_max_gap_ns = ms_to_ns(s.number("max_gap_ms", ns_to_ms(c.aps_max_gap_ns), Range::kPositive, "ms"));
-      }
-      if (top.has("filters")) {
-        const Section f = top.child("filters", false, "a map");
-        f.allow({"refractory", "background_activity"});
-        if (f.has("refractory")) {
-          const Section s = f.child("refractory", false, "a map");
-          s.allow({"enabled", "period_ms"});
-          c.refractory_enabled = s.boolean("enabled", true);
-          c.refractory.period_ns = ms_to_ns(s.number("period_ms", ns_to_ms(c.refractory.period_ns), Range::kNonNegative, "ms"));
-        }
-        if (f.has("background_activity")) {
-          const Section s = f.child("background_activity", false, "a map");
-          s.allow({"enabled", "window_ms", "radius", "min_support"});
-          auto& b = c.background_activity;
-          c.background_activity_enabled = s.boolean("enabled", true);
-          b.window_ns = ms_to_ns(s.number("window_ms", ns_to_ms(b.window_ns), Range::kPositive, "ms"));
-          b.radius = s.integer("radius", b.radius, 1, 3);
-          b.min_support = s.integer("min_support", b.min_support, 1, (2 * b.radius + 1) * (2 * b.radius + 1) - 1);
-        }
-      }
-      if (top.has("efast")) {
-        const Section s = top.child("efast", false, "a map");
-        s.allow({"filter_sae", "filter_window_ms"});
-        c.efast.filter_sae = s.boolean("filter_sae", c.efast.filter_sae);
-        c.efast.filter_window_ns = ms_to_ns(s.number("filter_window_ms", ns_to_ms(c.efast.filter_window_ns), Range::kNonNegative, "ms"));
-      }
-      if (top.has("corner_tracker")) {
-        const Section s = top.child("corner_tracker", false, "a map");
-        s.allow({"max_distance_px", "max_gap_ms", "position_gain", "velocity_window_ms", "observation_period_ms",
-                 "min_track_age_ms"});
-        auto& t = c.corner_tracker;
-        t.max_distance_px = s.number("max_distance_px", t.max_distance_px, Range::kPositive, "px");
-        t.max_gap_ns = ms_to_ns(s.number("max_gap_ms", ns_to_ms(t.max_gap_ns), Range::kPositive, "ms"));
-        t.position_gain = s.number("position_gain", t.position_gain, Range::kUnit, "");
-        t.velocity_window_ns = ms_to_ns(s.number("velocity_window_ms", ns_to_ms(t.velocity_window_ns), Range::kPositive, "ms"));
-        c.observation_period_ns = ms_to_ns(s.number("observation_period_ms", ns_to_ms(c.observation_period_ns), Range::kPositive, "ms"));
-        c.min_track_age_ns = ms_to_ns(s.number("min_track_age_ms", ns_to_ms(c.min_track_age_ns), Range::kNonNegative, "ms"));
-        std::string why;
-        if (!t.Validate(&why)) s.fail("invalid corner tracker settings: " + why, "consistent settings");
-      }
-      if (top.has("window")) {
-        const Section s = top.child("window", false, "a map");
-        s.allow({"size", "max_iterations", "function_tolerance", "max_solver_time_ms", "loss", "loss_scale", "pixel_sigma",
-                 "keyframe_min_parallax_px", "keyframe_min_tracked_ratio", "keyframe_max_interval_ms",
-                 "min_triangulation_angle_deg", "max_reprojection_px", "rotation_only_parallax_px",
-                 "rotation_only_translation_px", "rotation_only_min_duration_ms", "init_bias_gyro_turn_on_radps", "init_bias_accel_turn_on_mps2",
-                 "init_bias_horizon_s", "estimate_time_offset", "time_offset_sigma_ms",
-                 "tracked_landmark_marginalisation"});
-        auto& w = c.window;
-        w.window_size = s.integer("size", w.window_size, 2, 200);
-        w.max_iterations = s.integer("max_iterations", w.max_iterations, 1, 1000);
-        w.function_tolerance = s.number("function_tolerance", w.function_tolerance, Range::kPositive, "relative cost change");
-        if (!(w.function_tolerance < 1)) s.fail_at("function_tolerance", "must be < 1", "a relative cost change in (0, 1)");
-        w.max_solver_time_s = 1e-3 * s.number("max_solver_time_ms", w.max_solver_time_s * 1e3, Range::kNonNegative, "ms");
-        const std::string loss = s.string("loss", loss_name(w.loss), {"huber", "cauchy", "none"});
-        w.loss = loss == "huber" ? backend::RobustLoss::kHuber : loss == "cauchy" ? backend::RobustLoss::kCauchy : backend::RobustLoss::kNone;
-        w.loss_scale = s.number("loss_scale", w.loss_scale, Range::kPositive, "pixel sigmas");
-        w.pixel_sigma = s.number("pixel_sigma", w.pixel_sigma, Range::kPositive, "px");
-        w.keyframe_min_parallax_px = s.number("keyframe_min_parallax_px", w.keyframe_min_parallax_px, Range::kPositive, "px");
-        w.keyframe_min_tracked_ratio = s.number("keyframe_min_tracked_ratio", w.keyframe_min_tracked_ratio, Range::kUnit, "");
-        w.keyframe_max_interval_s = 1e-3 * s.number("keyframe_max_interval_ms", w.keyframe_max_interval_s * 1e3, Range::kPositive, "ms");
-        w.min_triangulation_angle_deg = s.number("min_triangulation_angle_deg", w.min_triangulation_angle_deg, Range::kNonNegative, "deg");
-        w.max_reprojection_px = s.number("max_reprojection_px", w.max_reprojection_px, Range::kPositive, "px");
-        const std::string tlm = s.string("tracked_landmark_marginalisation", tracked_landmark_name(w.tracked_landmark_marginalisation),
-                                         {"drop", "double_count", "restart", "split"});
-        w.tracked_landmark_marginalisation = tlm == "double_count" ? backend::TrackedLandmarkMarginalisation::kDoubleCount
-                                             : tlm == "restart"    ? backend::TrackedLandmarkMarginalisation::kRestart
-                                             : tlm == "split"      ? backend::TrackedLandmarkMarginalisation::kSplit
-                                                                   : backend::TrackedLandmarkMarginalisation::kDrop;
-        w.rotation_only_parallax_px = s.number("rotation_only_parallax_px", w.rotation_only_parallax_px, Range::kNonNegative, "px");
-        w.rotation_only_translation_px = s.number("rotation_only_translation_px", w.rotation_only_translation_px, Range::kPositive, "px");
-        w.rotation_only_min_duration_s =
-            1e-3 * s.number("rotation_only_min_duration_ms", w.rotation_only_min_duration_s * 1e3, Range::kNonNegative, "ms");
-        w.init_bias_gyro_turn_on_radps = s.number("init_bias_gyro_turn_on_radps", w.init_bias_gyro_turn_on_radps, Range::kPositive, "rad/s");
-        w.init_bias_accel_turn_on_mps2 = s.number("init_bias_accel_turn_on_mps2", w.init_bias_accel_turn_on_mps2, Range::kPositive, "m/s^2");
-        w.init_bias_horizon_s = s.number("init_bias_horizon_s", w.init_bias_horizon_s, Range::kNonNegative, "s");
-        w.estimate_time_offset = s.boolean("estimate_time_offset", w.estimate_time_offset);
-        w.time_offset_sigma_s = 1e-3 * s.number("time_offset_sigma_ms", w.time_offset_sigma_s * 1e3, Range::kPositive, "ms");
-        std::string why;
-        if (!w.Validate(&why)) s.fail("invalid window settings: " + why, "consistent settings");
-      }
-      if (top.has("imu")) {
-        const Section s = top.child("imu", false, "a map");
-        s.allow({"accelerometer_noise_density", "accelerometer_random_walk", "gyroscope_noise_density",
-                 "gyroscope_random_walk", "update_rate_hz"});
-        auto& n = c.imu_noise;
-        n.accelerometer_noise_density = s.number("accelerometer_noise_density", n.accelerometer_noise_density, Range::kPositive, "m/s^2/sqrt(Hz)");
-        n.accelerometer_random_walk = s.number("accelerometer_random_walk", n.accelerometer_random_walk, Range::kPositive, "m/s^3/sqrt(Hz)");
-        n.gyroscope_noise_density = s.number("gyroscope_noise_density", n.gyroscope_noise_density, Range::kPositive, "rad/s/sqrt(Hz)");
-        n.gyroscope_random_walk = s.number("gyroscope_random_walk", n.gyroscope_random_walk, Range::kPositive, "rad/s^2/sqrt(Hz)");
-        n.update_rate_hz = s.number("update_rate_hz", n.update_rate_hz, Range::kPositive, "Hz");
-      }
-      if (top.has("init")) {
-        const Section s = top.child("init", false, "a map");
-        s.allow({"method", "window_ms"});
-        const std::string m = s.string("method", init_name(c.init), {"auto", "static", "alignment", "groundtruth"});
-        c.init = m == "static"      ? pipeline::VioInitMethod::kStatic
-                 : m == "alignment" ? pipeline::VioInitMethod::kAlignment
-                 : m == "groundtruth" ? pipeline::VioInitMethod::kGiven
-                                      : pipeline::VioInitMethod::kAuto;
-        c.init_window_ns = ms_to_ns(s.number("window_ms", ns_to_ms(c.init_window_ns), Range::kPositive, "ms"));
-      }
-    } catch (const YAML::Exception& e) {
-      throw InputError(path, static_cast<int64_t>(e.mark.line) + 1, "YAML error: " + e.msg, expected);
-    }
-  }
-  if (resolved_yaml) *resolved_yaml = config_yaml(c);
+VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml, const std::vector<std::string>& sets) {
+  VioConfig c = read_config(vio_config_table(), default_vio_config(), path, sets, kVioConfigExpected);
+  if (resolved_yaml) *resolved_yaml = vio_config_text(c);
   return c;
 }
+
+std::string vio_config_text(const VioConfig& c) { return config_text(vio_config_table(), c, kVioConfigHeader); }
 
 namespace {
 
@@ -370,12 +176,7 @@ int run_vio(const VioArgs& args, std::ostream& out) {
       throw InputError(args.oracle_scene, 0, "--oracle-tracks needs a planes scene (got " + sc.scene_type + ")", "scene: planes");
   }
   std::string resolved;
-  VioConfig cfg = default_vio_config();
-  if (!args.config.empty()) {
-    cfg = load_vio_config(args.config, &resolved);
-  } else {
-    resolved = config_yaml(cfg);
-  }
+  const VioConfig cfg = load_vio_config(args.config, &resolved, args.set);
   auto reader = open_dataset(args.dataset, args.dataset_options);
   // Calibration: --calib, else the dataset folder's calib.yaml (camchain + imu0), else the reader's.
   const DatasetCalibration found = find_dataset_calibration(args.dataset, args.calib, *reader);

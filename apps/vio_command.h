@@ -9,6 +9,7 @@
 
 #include <iosfwd>
 #include <string>
+#include <vector>
 
 #include "evio/calib/calibration_io.h"
 #include "evio/pipeline/vio_pipeline.h"
@@ -35,13 +36,20 @@ struct VioConfig : pipeline::VioPipelineOptions {
 };
 
 VioConfig default_vio_config();
-// Reads a VIO config YAML over the defaults. Throws evio::InputError (file:line, key, expected form).
-VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml = nullptr);
+// Reads a VIO config YAML (path empty: none) with `--set key.sub=value` overrides over the
+// defaults; resolved_yaml receives vio_config_text of the result. Throws evio::InputError
+// (file:line or the --set option, key, expected form).
+VioConfig load_vio_config(const std::string& path, std::string* resolved_yaml = nullptr,
+                          const std::vector<std::string>& sets = {});
+// The resolved config: every key with its value and a comment giving its unit and range;
+// load_vio_config reads it back to the same config.
+std::string vio_config_text(const VioConfig& c);
 
 struct VioArgs {
   std::string dataset;
   DatasetOptions dataset_options;
   std::string config;   // optional YAML
+  std::vector<std::string> set;  // --set key.sub=value overrides of the config, in order
   std::string calib;    // optional Kalibr camchain (+ imu0) or ECD calib.txt
   std::string gt;       // optional ground truth (TUM or csv) -> eval.json
   std::string out;

@@ -670,23 +670,7 @@ SimulationConfig parse_simulation_config(const std::string& yaml_text, const std
   if (root.IsNull()) root = YAML::Node(YAML::NodeType::Map);
   if (!root.IsMap()) throw InputError(path, 1, "top level is not a map", expected);
 
-  std::vector<Override> applied;
-  for (const std::string& s : overrides.set) {
-    const std::string text = "--set " + s;
-    const size_t eq = s.find('=');
-    if (eq == std::string::npos || eq == 0) {
-      throw InputError(text, 0, "no '=' after the key", "--set key.sub=value, e.g. --set events.seed=3");
-    }
-    const std::string key = s.substr(0, eq);
-    YAML::Node value;
-    try {
-      value = strip_marks(YAML::Load(s.substr(eq + 1)));
-    } catch (const YAML::Exception& e) {
-      throw InputError(text, 0, "value is not valid YAML: " + e.msg, "--set key.sub=value (value in YAML syntax)");
-    }
-    apply_override(root, key, value, text);
-    applied.push_back({key, text});
-  }
+  std::vector<Override> applied = apply_set_overrides(root, overrides.set);
   if (overrides.seed) {
     root["seed"] = YAML::Node(*overrides.seed);  // a new node: no file mark (errors name --seed)
     applied.push_back({"seed", "--seed " + std::to_string(*overrides.seed)});

@@ -33,7 +33,7 @@ class Equirectangular {
   // Same, with the 2x3 Jacobian d(u, v)/d(d) at d. Near the poles (|cos lat| < 1e-9) the
   // longitude derivative is undefined; its row is set to zero there.
   Eigen::Vector2d project(const Eigen::Vector3d& d, Eigen::Matrix<double, 2, 3>* J) const {
-    const Eigen::Vector2d uv = project(d);
+    Eigen::Vector2d uv = project(d);
     const double rxy2 = d.x() * d.x() + d.y() * d.y();
     const double rxy = std::sqrt(rxy2);
     const double r2 = rxy2 + d.z() * d.z();

@@ -114,7 +114,7 @@ struct DartDescriptor {
   int max_ring_shift = 0;  // from the options it was computed with
   bool half_wedge_shifts = false;  // from the options it was computed with
   int recent_pixels = 0;   // pixels counted (before weighting/normalisation)
-  float at(int ring, int wedge) const { return bins[static_cast<size_t>(ring * wedges + wedge)]; }
+  float at(int ring, int wedge) const { return bins[static_cast<size_t>(ring) * static_cast<size_t>(wedges) + static_cast<size_t>(wedge)]; }
 };
 
 // One entry of the pixel -> bin lookup table.

@@ -110,8 +110,8 @@ inline YAML::Node strip_marks(const YAML::Node& n) {
 }
 
 // Sets root[path] = value, creating maps on the way.
-inline void apply_override(YAML::Node root, const std::string& dotted, const YAML::Node& value, const std::string& text) {
-  const std::string expected = "--set key.sub=value with a dotted key path of the scene YAML (list entries by index)";
+inline void apply_override(const YAML::Node& root, const std::string& dotted, const YAML::Node& value, const std::string& text) {
+  const std::string expected = "--set key.sub=value with a dotted key path of the YAML (list entries by index)";
   const std::vector<std::string> parts = split_path(dotted);
   for (const std::string& p : parts) {
     if (p.empty()) throw InputError(text, 0, "empty key in '" + dotted + "'", expected);
@@ -149,6 +149,29 @@ inline void apply_override(YAML::Node root, const std::string& dotted, const YAM
     next.reset(cur[key]);
     cur.reset(next);
   }
+}
+
+// Applies command-line overrides `key.sub=value` (value in YAML syntax, list entries by index) to
+// root, in order; returns what each set, for error messages that name the option.
+inline std::vector<Override> apply_set_overrides(const YAML::Node& root, const std::vector<std::string>& sets) {
+  std::vector<Override> applied;
+  for (const std::string& s : sets) {
+    const std::string text = "--set " + s;
+    const size_t eq = s.find('=');
+    if (eq == std::string::npos || eq == 0) {
+      throw InputError(text, 0, "no '=' after the key", "--set key.sub=value, e.g. --set events.seed=3");
+    }
+    const std::string key = s.substr(0, eq);
+    YAML::Node value;
+    try {
+      value = strip_marks(YAML::Load(s.substr(eq + 1)));
+    } catch (const YAML::Exception& e) {
+      throw InputError(text, 0, "value is not valid YAML: " + e.msg, "--set key.sub=value (value in YAML syntax)");
+    }
+    apply_override(root, key, value, text);
+    applied.push_back({key, text});
+  }
+  return applied;
 }
 
 // ---- the parser -------------------------------------------------------------------------------------
@@ -221,7 +244,7 @@ inline bool parse_finite(const std::string& s, double* v) {
 // One YAML map with its dotted path.
 class Section {
  public:
-  Section(const Parser* parser, YAML::Node node, std::string path) : p_(parser), path_(std::move(path)) {
+  Section(const Parser* parser, const YAML::Node& node, std::string path) : p_(parser), path_(std::move(path)) {
     node_.reset(node);
   }
 
@@ -316,7 +339,7 @@ class Section {
     }
     const YAML::Node n = get(key);
     if (!n.IsScalar()) p_->fail(n, key_path(key), "is not a string", list.empty() ? "a string" : list);
-    const std::string s = n.Scalar();
+    std::string s = n.Scalar();
     if (!allowed.empty() && std::find(allowed.begin(), allowed.end(), s) == allowed.end()) {
       p_->fail(n, key_path(key), "'" + s + "' is not allowed", list);
     }

@@ -1,0 +1,173 @@
+// Config tables of the back-end's and the mapping module's options structs (option_tables.h).
+#include "option_tables.h"
+
+namespace evio::apps {
+
+using yaml_config::Range;
+using yaml_config::Table;
+
+const Table<backend::SlidingWindowOptions>& sliding_window_table() {
+  using O = backend::SlidingWindowOptions;
+  using backend::RobustLoss;
+  using backend::TrackedLandmarkMarginalisation;
+  static const Table<O> t =
+      Table<O>("window settings")
+          .integer("size", &O::window_size, 2, 200)
+          .integer("max_iterations", &O::max_iterations, 1, 1000)
+          .number("function_tolerance", &O::function_tolerance, Range::kPositive, "relative cost change, < 1")
+          .seconds_as_ms("max_solver_time_ms", &O::max_solver_time_s, Range::kNonNegative)
+          .choice("loss", &O::loss, {{"huber", RobustLoss::kHuber}, {"cauchy", RobustLoss::kCauchy}, {"none", RobustLoss::kNone}})
+          .number("loss_scale", &O::loss_scale, Range::kPositive, "pixel sigmas")
+          .number("pixel_sigma", &O::pixel_sigma, Range::kPositive, "px")
+          .number("keyframe_min_parallax_px", &O::keyframe_min_parallax_px, Range::kPositive, "px")
+          .number("keyframe_min_tracked_ratio", &O::keyframe_min_tracked_ratio, Range::kUnit, "")
+          .seconds_as_ms("keyframe_max_interval_ms", &O::keyframe_max_interval_s, Range::kPositive)
+          .number("min_triangulation_angle_deg", &O::min_triangulation_angle_deg, Range::kNonNegative, "deg")
+          .number("max_reprojection_px", &O::max_reprojection_px, Range::kPositive, "px")
+          .number("min_depth_m", &O::min_depth_m, Range::kPositive, "m")
+          .choice("tracked_landmark_marginalisation", &O::tracked_landmark_marginalisation,
+                  {{"drop", TrackedLandmarkMarginalisation::kDrop},
+                   {"double_count", TrackedLandmarkMarginalisation::kDoubleCount},
+                   {"restart", TrackedLandmarkMarginalisation::kRestart},
+                   {"split", TrackedLandmarkMarginalisation::kSplit}})
+          .boolean("rotation_only_model", &O::rotation_only_model)
+          .number("rotation_only_gric_margin", &O::rotation_only_gric_margin, Range::kAny, "GRIC units")
+          .integer("rotation_only_min_keyframes", &O::rotation_only_min_keyframes, 1, 1000)
+          .seconds_as_ms("rotation_only_min_duration_ms", &O::rotation_only_min_duration_s, Range::kNonNegative)
+          .number("rotation_only_parallax_px", &O::rotation_only_parallax_px, Range::kNonNegative, "px")
+          .number("rotation_only_translation_px", &O::rotation_only_translation_px, Range::kPositive, "px")
+          .integer("model_selection_min_tracks", &O::model_selection_min_tracks, 6, 100000)
+          .seconds_as_ms("model_selection_min_interval_ms", &O::model_selection_min_interval_s, Range::kNonNegative)
+          .number("model_selection_imu_veto_p", &O::model_selection_imu_veto_p, Range::kUnit, "probability")
+          .number("model_selection_accel_sigma_mps2", &O::model_selection_accel_sigma_mps2, Range::kPositive, "m/s^2")
+          .number("model_selection_velocity_sigma_mps", &O::model_selection_velocity_sigma_mps, Range::kPositive, "m/s")
+          .vector3("gravity_w", &O::gravity_w, "m/s^2, world frame")
+          .boolean("compute_covariance", &O::compute_covariance)
+          .boolean("estimate_time_offset", &O::estimate_time_offset)
+          .seconds_as_ms("time_offset_sigma_ms", &O::time_offset_sigma_s, Range::kPositive)
+          .number("init_sigma_roll_pitch_rad", &O::init_sigma_roll_pitch_rad, Range::kPositive, "rad")
+          .number("init_sigma_yaw_rad", &O::init_sigma_yaw_rad, Range::kPositive, "rad")
+          .number("init_sigma_position_m", &O::init_sigma_position_m, Range::kPositive, "m")
+          .number("init_sigma_velocity_mps", &O::init_sigma_velocity_mps, Range::kPositive, "m/s")
+          .number("init_bias_gyro_turn_on_radps", &O::init_bias_gyro_turn_on_radps, Range::kPositive, "rad/s")
+          .number("init_bias_accel_turn_on_mps2", &O::init_bias_accel_turn_on_mps2, Range::kPositive, "m/s^2")
+          .number("init_bias_horizon_s", &O::init_bias_horizon_s, Range::kNonNegative, "s")
+          .validate([](const O& o, std::string* why) {
+            if (!(o.function_tolerance < 1)) {
+              *why = "function_tolerance must be < 1";
+              return false;
+            }
+            return o.Validate(why);
+          });
+  return t;
+}
+
+const Table<backend::StaticInitOptions>& static_init_table() {
+  using O = backend::StaticInitOptions;
+  static const Table<O> t = Table<O>("static initialisation settings")
+                                .duration_ms("window_ms", &O::window_ns, Range::kPositive)
+                                .number("max_gyro_noise_ratio", &O::max_gyro_noise_ratio, Range::kPositive, "")
+                                .number("max_accel_noise_ratio", &O::max_accel_noise_ratio, Range::kPositive, "")
+                                .number("gravity_mps2", &O::gravity_mps2, Range::kPositive, "m/s^2")
+                                .number("max_gravity_error", &O::max_gravity_error, Range::kPositive, "m/s^2")
+                                .boolean("allow_rotation", &O::allow_rotation)
+                                .duration_ms("still_tail_ms", &O::still_tail_ns, Range::kNonNegative)
+                                .validate();
+  return t;
+}
+
+const Table<backend::VisualInertialInitOptions>& visual_inertial_init_table() {
+  using O = backend::VisualInertialInitOptions;
+  static const Table<O> t =
+      Table<O>("visual-inertial initialisation settings")
+          .integer("min_frames", &O::min_frames, 3, 100000)
+          .integer("min_tracks", &O::min_tracks, 1, 100000)
+          .integer("min_track_frames", &O::min_track_frames, 2, 100000)
+          .integer("max_tracks", &O::max_tracks, 1, 100000)
+          .number("gravity_mps2", &O::gravity_mps2, Range::kPositive, "m/s^2")
+          .number("max_gravity_error", &O::max_gravity_error, Range::kPositive, "m/s^2")
+          .number("min_accel_excitation_mps2", &O::min_accel_excitation_mps2, Range::kNonNegative, "m/s^2")
+          .validate();
+  return t;
+}
+
+const Table<mapping::GradientMosaicOptions>& gradient_mosaic_table() {
+  using O = mapping::GradientMosaicOptions;
+  using mapping::PoissonBoundary;
+  using mapping::PoissonPreconditioner;
+  static const Table<O> t =
+      Table<O>("mosaic settings")
+          .integer("width", &O::width, 8, 1 << 15)
+          .integer("height", &O::height, 4, 1 << 14)
+          .number("contrast_threshold", &O::contrast_threshold, Range::kPositive, "log units")
+          .number("initial_gradient_std", &O::initial_gradient_std, Range::kPositive, "log units/px")
+          .number("measurement_std_abs", &O::measurement_std_abs, Range::kNonNegative, "1/s")
+          .number("measurement_relative_std", &O::measurement_relative_std, Range::kNonNegative, "")
+          .seconds_as_ms("min_tau_ms", &O::min_tau_s, Range::kPositive)
+          .number("min_speed_px_s", &O::min_speed_px_s, Range::kNonNegative, "px/s")
+          .number("min_gradient_std", &O::min_gradient_std, Range::kPositive, "log units/px")
+          .integer("seen_min_observations", &O::seen_min_observations, 1, 1000000)
+          .number("seen_max_gradient_std", &O::seen_max_gradient_std, Range::kNonNegative, "log units/px")
+          .number("max_path_px", &O::max_path_px, Range::kPositive, "mosaic px")
+          .boolean("map_viewed_texels", &O::map_viewed_texels)
+          .number("weight_reference_std", &O::weight_reference_std, Range::kPositive, "log units/px")
+          .number("viewed_edge_weight", &O::viewed_edge_weight, Range::kUnit, "")
+          .choice("poisson_boundary", [](O& o) -> PoissonBoundary& { return o.poisson.boundary; },
+                  {{"periodic_u", PoissonBoundary::kPeriodicU}, {"neumann", PoissonBoundary::kNeumann}})
+          .integer("poisson_max_region_side", [](O& o) -> int& { return o.poisson.max_region_side; }, 1, 1 << 15)
+          .number("weight_floor", [](O& o) -> double& { return o.weighted_poisson.weight_floor; }, Range::kUnit, "")
+          .number("pcg_tolerance", [](O& o) -> double& { return o.weighted_poisson.tolerance; }, Range::kUnit, "")
+          .integer("pcg_max_iterations", [](O& o) -> int& { return o.weighted_poisson.max_iterations; }, 0, 1000000)
+          .choice("pcg_preconditioner", [](O& o) -> PoissonPreconditioner& { return o.weighted_poisson.preconditioner; },
+                  {{"none", PoissonPreconditioner::kNone},
+                   {"jacobi", PoissonPreconditioner::kJacobi},
+                   {"spectral", PoissonPreconditioner::kSpectral},
+                   {"scaled_spectral", PoissonPreconditioner::kScaledSpectral}})
+          .validate();
+  return t;
+}
+
+const Table<mapping::RotationalCmaxOptions>& rotational_cmax_table() {
+  using O = mapping::RotationalCmaxOptions;
+  static const Table<O> t = Table<O>("contrast maximisation settings")
+                                .integer("width", &O::width, 1, 1 << 15)
+                                .integer("height", &O::height, 1, 1 << 15)
+                                .number("focal_px", &O::focal_px, Range::kPositive, "px")
+                                .number("blur_px", &O::blur_sigma_px, Range::kPositive, "px")
+                                .number("coarse_blur_factor", &O::coarse_blur_factor, Range::kPositive, ">= 1")
+                                .number("initial_step_radps", &O::initial_step_radps, Range::kPositive, "rad/s")
+                                .number("min_step_radps", &O::min_step_radps, Range::kPositive, "rad/s")
+                                .integer("max_evaluations", &O::max_evaluations, 10, 100000000)
+                                .validate();
+  return t;
+}
+
+const Table<mapping::RotationRelocalizationOptions>& relocalization_table() {
+  using O = mapping::RotationRelocalizationOptions;
+  static const Table<O> t = Table<O>("relocalisation settings")
+                                .number("axis_spacing_deg", &O::axis_spacing_deg, Range::kPositive, "deg")
+                                .number("roll_step_deg", &O::roll_step_deg, Range::kPositive, "deg")
+                                .integer("coarse_bearings", &O::coarse_bearings, 1, 1000000)
+                                .integer("fine_bearings", &O::fine_bearings, 1, 10000000)
+                                .number("coarse_blur_texels", &O::coarse_blur_texels, Range::kNonNegative, "texels")
+                                .number("fine_blur_texels", &O::fine_blur_texels, Range::kNonNegative, "texels")
+                                .integer("refine_candidates", &O::refine_candidates, 1, 100000)
+                                .number("refine_initial_step_deg", &O::refine_initial_step_deg, Range::kPositive, "deg")
+                                .number("refine_final_step_deg", &O::refine_final_step_deg, Range::kPositive, "deg")
+                                .validate();
+  return t;
+}
+
+const Table<mapping::LogImageDisplayOptions>& log_image_display_table() {
+  using O = mapping::LogImageDisplayOptions;
+  static const Table<O> t = Table<O>("display settings")
+                                .number("gamma", &O::gamma, Range::kPositive, "")
+                                .number("low_percentile", &O::low_percentile, Range::kNonNegative, "%")
+                                .number("high_percentile", &O::high_percentile, Range::kPositive, "%")
+                                .boolean("linear_intensity", &O::linear_intensity)
+                                .boolean("transparent_unseen", &O::transparent_unseen)
+                                .validate();
+  return t;
+}
+
+}  // namespace evio::apps
