@@ -16,6 +16,7 @@
 #include <unistd.h>
 
 #include "evio/calib/error.h"
+#include "evio/evaluation/run_summary.h"
 #include "evio/calib/log.h"
 #include "evio/sensors/time.h"
 
@@ -46,50 +47,11 @@ std::string stats_json(const Stats& s) {
          ", \"count\": " + std::to_string(s.count) + "}";
 }
 
-std::string lower(std::string s) {
-  for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return s;
-}
-
-// csv: a .csv extension, or a first line that is not a `#` comment starting with a letter (a
-// header) or holding a comma. `#` lines are skipped (TUM comments; a `#timestamp,...` header is
-// followed by comma-separated rows anyway).
-bool looks_like_csv(const std::string& path) {
-  if (lower(fs::path(path).extension().string()) == ".csv") return true;
-  std::ifstream f(path);
-  std::string line;
-  while (std::getline(f, line)) {
-    const size_t k = line.find_first_not_of(" \t\r");
-    if (k == std::string::npos || line[k] == '#') continue;
-    return std::isalpha(static_cast<unsigned char>(line[k])) || line.find(',') != std::string::npos;
-  }
-  return false;
-}
-
 // File-name-safe prefix.
 std::string safe_name(const std::string& s) {
   std::string o;
   for (char c : s) o += std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '_' || c == '.' ? c : '_';
   return o.empty() ? std::string("estimate") : o;
-}
-
-double median_of(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  const size_t n = v.size();
-  return n % 2 == 1 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
-// Mean over the sub-trajectory lengths of the mean translation error in % (0 when none).
-double rpe_trans_percent_mean(const evaluation::EvaluationResult& r) {
-  double s = 0;
-  size_t n = 0;
-  for (const auto& e : r.rpe) {
-    if (e.count == 0) continue;
-    s += e.trans_percent.mean;
-    ++n;
-  }
-  return n == 0 ? std::nan("") : s / static_cast<double>(n);
 }
 
 void write_file(const fs::path& p, const std::string& text) {
@@ -130,18 +92,6 @@ const char* kPlotHint =
 
 }  // namespace
 
-Trajectory load_trajectory(const std::string& path, const TextReadOptions& read) {
-  std::error_code ec;
-  if (!fs::exists(path, ec)) throw InputError(path, 0, "no such file", "a TUM or csv trajectory file");
-  const bool csv = looks_like_csv(path);
-  Trajectory t = csv ? read_euroc_csv(path, read) : read_tum(path, read);
-  const std::string form = csv ? "csv: a header line, then `timestamp[ns], x, y, z, qx, qy, qz, qw` rows"
-                               : "TUM: lines `t tx ty tz qx qy qz qw` (t in s)";
-  if (t.empty()) throw InputError(path, 0, "no poses in the file", "at least 2 poses; " + form);
-  if (t.size() < 2) throw InputError(path, 0, "only 1 pose: a trajectory needs at least 2", form);
-  return t;
-}
-
 std::vector<EstimateEvaluation> evaluate_all(const EvalArgs& args) {
   std::string why;
   if (!args.options.Validate(&why)) throw InputError("evio eval", 0, "invalid options: " + why);
@@ -154,7 +104,7 @@ std::vector<EstimateEvaluation> evaluate_all(const EvalArgs& args) {
   }
   TextReadOptions gt_read = args.read;
   gt_read.time_unit = args.groundtruth_time_unit;
-  const Trajectory gt = load_trajectory(args.groundtruth, gt_read);
+  const Trajectory gt = read_trajectory(args.groundtruth, gt_read);
   std::vector<EstimateEvaluation> out;
   for (size_t i = 0; i < args.estimates.size(); ++i) {
     EstimateEvaluation e;
@@ -162,7 +112,7 @@ std::vector<EstimateEvaluation> evaluate_all(const EvalArgs& args) {
     const std::string stem = fs::path(e.file).stem().string();
     e.label = args.labels.empty() ? e.file : args.labels[i];
     e.name = "est" + std::to_string(i) + "_" + safe_name(stem);
-    const Trajectory est = load_trajectory(e.file, args.read);
+    const Trajectory est = read_trajectory(e.file, args.read);
     try {
       e.result = evaluation::evaluate(gt, est, args.options);
     } catch (const std::invalid_argument& ex) {
@@ -233,43 +183,9 @@ std::string results_json(const EvalArgs& args, const std::vector<EstimateEvaluat
 }
 
 std::vector<SummaryRow> summarize(const std::vector<EstimateEvaluation>& results) {
-  std::vector<std::string> labels;  // first-appearance order
-  for (const auto& e : results) {
-    if (std::find(labels.begin(), labels.end(), e.label) == labels.end()) labels.push_back(e.label);
-  }
-  using Getter = double (*)(const evaluation::EvaluationResult&);
-  const std::vector<std::pair<const char*, Getter>> metrics = {
-      {"ate_trans_rmse_m", [](const evaluation::EvaluationResult& r) { return r.ate.trans_m.rmse; }},
-      {"ate_rot_rmse_deg", [](const evaluation::EvaluationResult& r) { return r.ate.rot_deg.rmse; }},
-      {"mean_position_error_percent", [](const evaluation::EvaluationResult& r) { return r.mean_position_error_percent; }},
-      {"rpe_trans_percent_mean", [](const evaluation::EvaluationResult& r) { return rpe_trans_percent_mean(r); }},
-      {"yaw_drift_deg_per_m", [](const evaluation::EvaluationResult& r) { return r.yaw_drift_deg_per_m; }},
-  };
-  std::vector<SummaryRow> rows;
-  for (const std::string& label : labels) {
-    for (const auto& [name, get] : metrics) {
-      std::vector<double> v;
-      for (const auto& e : results) {
-        if (e.label != label) continue;
-        const double x = get(e.result);
-        if (std::isfinite(x)) v.push_back(x);
-      }
-      SummaryRow row;
-      row.label = label;
-      row.metric = name;
-      row.runs = v.size();
-      if (!v.empty()) {
-        double s = 0;
-        for (double x : v) s += x;
-        row.mean = s / static_cast<double>(v.size());
-        row.median = median_of(v);
-        row.min = *std::min_element(v.begin(), v.end());
-        row.max = *std::max_element(v.begin(), v.end());
-      }
-      rows.push_back(row);
-    }
-  }
-  return rows;
+  std::vector<std::pair<std::string, const evaluation::EvaluationResult*>> runs;
+  for (const auto& e : results) runs.emplace_back(e.label, &e.result);
+  return evaluation::summarize_runs(runs);
 }
 
 std::string summary_csv(const std::vector<SummaryRow>& rows) {

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "evio/evaluation/run_summary.h"
 #include "evio/evaluation/trajectory_evaluation.h"
 #include "evio/sensors/trajectory.h"
 
@@ -37,23 +38,15 @@ struct EstimateEvaluation {
   evaluation::EvaluationResult result;
 };
 
-// Loads a trajectory: csv (extension .csv, or a first line with commas) through read_euroc_csv,
-// otherwise TUM. Throws evio::InputError for unreadable files, bad lines, and fewer than 2 poses.
-Trajectory load_trajectory(const std::string& path, const TextReadOptions& read = {});
-
 // Evaluates each estimate (throws evio::InputError when options are invalid or nothing associates).
 std::vector<EstimateEvaluation> evaluate_all(const EvalArgs& args);
 
 // results.json, exactly the schema of README.md (numbers printed with %.17g).
 std::string results_json(const EvalArgs& args, const std::vector<EstimateEvaluation>& results);
 
-// Summary over runs: per label and metric, count/mean/median/min/max of the runs' values.
-struct SummaryRow {
-  std::string label;
-  std::string metric;   // e.g. "ate_trans_rmse_m"
-  size_t runs = 0;
-  double mean = 0, median = 0, min = 0, max = 0;
-};
+// Summary over runs: per label and metric, count/mean/median/min/max of the runs' values
+// (evaluation::summarize_runs).
+using SummaryRow = evaluation::RunSummary;
 std::vector<SummaryRow> summarize(const std::vector<EstimateEvaluation>& results);
 std::string summary_csv(const std::vector<SummaryRow>& rows);
 std::string summary_yaml(const std::vector<SummaryRow>& rows);

@@ -11,7 +11,7 @@
 
 #include <yaml-cpp/yaml.h>
 
-#include "dataset_calibration.h"
+#include "evio/sensors/dataset_calibration.h"
 #include "eval_command.h"
 #include "evio/calib/equirectangular.h"
 #include "evio/calib/error.h"
@@ -212,7 +212,7 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
     if (args.gt.empty())
       throw InputError(args.oracle_map ? "--oracle-map" : args.gt_mapping ? "--gt-mapping" : "--gt-bootstrap", 0,
                        "no ground truth given", "--gt FILE with it");
-    diag_gt = load_trajectory(args.gt);
+    diag_gt = read_trajectory(args.gt);
   }
   if (args.gt_bootstrap || args.gt_mapping) {
     mosaic.set_bootstrap_reference([&diag_gt](int64_t t_ns) -> std::optional<Eigen::Quaterniond> {
@@ -337,7 +337,7 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
       << num(100.0 * static_cast<double>(seen) / static_cast<double>(rec.seen.size())) << "% seen\n";
 
   if (!args.gt.empty()) {
-    const Trajectory gt = load_trajectory(args.gt);
+    const Trajectory gt = read_trajectory(args.gt);
     // Align the initial orientation: A maps the mosaic frame to the ground truth's world.
     std::optional<calib::SE3> g0;
     size_t first = 0;

@@ -23,7 +23,7 @@
 #include "evio/sensors/ecd.h"
 #include "evio/sensors/time.h"
 #include "json_util.h"
-#include "dataset_calibration.h"
+#include "evio/sensors/dataset_calibration.h"
 #include "progress.h"
 #include "evio/simulator/scene_config.h"
 #include "evio/sensors/config_table.h"
@@ -204,7 +204,7 @@ int run_vio(const VioArgs& args, std::ostream& out) {
   pipeline::VioPipeline vio(cfg, *cal, noise);
   if (cfg.init == pipeline::VioInitMethod::kGiven) {
     if (args.gt.empty()) throw InputError(args.config, 0, "init.method groundtruth needs --gt", "--gt GT.tum, or another init.method");
-    vio.set_initial_state_provider([gt = load_trajectory(args.gt)](int64_t t_ns) { return evaluation::groundtruth_state(gt, t_ns); });
+    vio.set_initial_state_provider([gt = read_trajectory(args.gt)](int64_t t_ns) { return evaluation::groundtruth_state(gt, t_ns); });
   }
   std::unique_ptr<evaluation::TrackOracle> oracle;
   if (oracle_planes) {
@@ -219,11 +219,11 @@ int run_vio(const VioArgs& args, std::ostream& out) {
     const evaluation::RayCaster cast = [p = oracle_planes](const Eigen::Vector3d& o, const Eigen::Vector3d& d) {
       return p->intersect(o, d);
     };
-    oracle = std::make_unique<evaluation::TrackOracle>(load_trajectory(args.gt), *cal, cast, oo);
+    oracle = std::make_unique<evaluation::TrackOracle>(read_trajectory(args.gt), *cal, cast, oo);
     vio.set_observation_filter([o = oracle.get()](FeatureObservations* f) { o->apply(f); });
     if (args.oracle_frame_motion) {
       vio.set_frame_motion_oracle(
-          [gt = load_trajectory(args.gt), T_c_b = cal->T_c_b, plane = args.oracle_frame_plane, cast](
+          [gt = read_trajectory(args.gt), T_c_b = cal->T_c_b, plane = args.oracle_frame_plane, cast](
               const FeatureObservations& f, Eigen::Vector3d* v_c, double* depth_m, Eigen::Vector4d* plane_c) {
             return evaluation::true_frame_motion(gt, T_c_b, cast, f, v_c, depth_m, plane ? plane_c : nullptr);
           });

@@ -23,8 +23,8 @@
 #include "evio/frontend/event_frame.h"
 #include "evio/sensors/dataset.h"
 #include "evio/simulator/scene.h"
-#include "dataset_calibration.h"
-#include "eval_command.h"
+#include "evio/sensors/dataset_calibration.h"
+#include "evio/sensors/trajectory.h"
 #include "evio/simulator/scene_config.h"
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
@@ -87,7 +87,7 @@ Shift edge_shift(const calib::CameraCalibration& cal, const simulator::Simulator
 int main(int argc, char** argv) {
   const std::string seq = argv[1], scene = argv[2];
   auto reader = open_dataset(seq);
-  auto cal = *apps::find_dataset_calibration(seq, "", *reader).camera;
+  auto cal = *find_dataset_calibration(seq, "", *reader).camera;
   std::vector<ImuSample> imu = reader->read_imu();
   std::vector<Event> ev; EventBuffer chunk;
   while (reader->read_events(&chunk, size_t{1} << 20) > 0) { ev.insert(ev.end(), chunk.begin(), chunk.end()); chunk.clear(); }
@@ -99,7 +99,7 @@ int main(int argc, char** argv) {
     printf("filters keep %zu of %zu\n", kept.size(), ev.size());
     ev.swap(kept);
   }
-  const auto gt = apps::load_trajectory(seq + "/groundtruth.txt");
+  const auto gt = read_trajectory(seq + "/groundtruth.txt");
   const auto sc = simulator::load_simulation_config(scene);
   auto planes = std::dynamic_pointer_cast<const simulator::PlanarScene>(sc.scene);
   evaluation::RayCaster cast = [planes](const Eigen::Vector3d& o, const Eigen::Vector3d& d) { return planes->intersect(o, d); };

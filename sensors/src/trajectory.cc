@@ -6,6 +6,9 @@
 #include <charconv>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <string>
 #include <stdexcept>
 
 #include "evio/calib/error.h"
@@ -258,6 +261,39 @@ Trajectory read_euroc_csv(const std::string& path, const TextReadOptions& option
   r.lines = lines.line_number();
   handler.finish();
   return traj;
+}
+
+namespace {
+
+// csv: a .csv extension, or a first line that is not a `#` comment starting with a letter (a
+// header) or holding a comma. `#` lines are skipped (TUM comments; a `#timestamp,...` header is
+// followed by comma-separated rows anyway).
+bool looks_like_csv(const std::string& path) {
+  std::string ext = std::filesystem::path(path).extension().string();
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  if (ext == ".csv") return true;
+  std::ifstream f(path);
+  std::string line;
+  while (std::getline(f, line)) {
+    const size_t k = line.find_first_not_of(" \t\r");
+    if (k == std::string::npos || line[k] == '#') continue;
+    return std::isalpha(static_cast<unsigned char>(line[k])) || line.find(',') != std::string::npos;
+  }
+  return false;
+}
+
+}  // namespace
+
+Trajectory read_trajectory(const std::string& path, const TextReadOptions& options) {
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec)) throw InputError(path, 0, "no such file", "a TUM or csv trajectory file");
+  const bool csv = looks_like_csv(path);
+  Trajectory t = csv ? read_euroc_csv(path, options) : read_tum(path, options);
+  const std::string form = csv ? "csv: a header line, then `timestamp[ns], x, y, z, qx, qy, qz, qw` rows"
+                               : "TUM: lines `t tx ty tz qx qy qz qw` (t in s)";
+  if (t.empty()) throw InputError(path, 0, "no poses in the file", "at least 2 poses; " + form);
+  if (t.size() < 2) throw InputError(path, 0, "only 1 pose: a trajectory needs at least 2", form);
+  return t;
 }
 
 }  // namespace evio

@@ -168,7 +168,7 @@ TEST(EvalCommand, ReadsCsvGroundTruthByContent) {
   for (int i = 0; i < 20; ++i) {
     csv += std::to_string(int64_t{i} * 100000000) + "," + std::to_string(0.1 * i) + ",0,0,0,0,0,1\n";
   }
-  const Trajectory t = load_trajectory(dir.write("gt.txt", csv));
+  const Trajectory t = read_trajectory(dir.write("gt.txt", csv));
   ASSERT_EQ(t.size(), 20u);
   EXPECT_EQ(t[19].t_ns, 1900000000);
   EXPECT_NEAR(t.path_length_m(), 1.9, 1e-12);

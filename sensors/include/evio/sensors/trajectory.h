@@ -62,4 +62,9 @@ void write_tum(const std::string& path, const Trajectory& trajectory);
 Trajectory read_euroc_csv(const std::string& path, const TextReadOptions& options = {},
                           ReadReport* report = nullptr);
 
+// A trajectory file of either form: csv (read_euroc_csv) when the extension is .csv or the first
+// line that is not a `#` comment starts with a letter (a header) or holds a comma, else TUM.
+// Throws evio::InputError for a missing file, bad lines, and fewer than 2 poses.
+Trajectory read_trajectory(const std::string& path, const TextReadOptions& options = {});
+
 }  // namespace evio

@@ -1,4 +1,4 @@
-// The camera calibration a command uses for a dataset, found one way for every command: --calib
+// The camera calibration of a dataset, found one way for every command and tool: a given file
 // (Kalibr camchain YAML or ECD calib.txt), else the dataset folder's calib.yaml (written by
 // `evio simulate`), else the calibration the dataset itself carries.
 #pragma once
@@ -10,7 +10,7 @@
 #include "evio/calib/calibration_io.h"
 #include "evio/sensors/dataset.h"
 
-namespace evio::apps {
+namespace evio {
 
 struct DatasetCalibration {
   std::optional<calib::CameraCalibration> camera;  // nullopt: none found
@@ -38,4 +38,4 @@ inline DatasetCalibration find_dataset_calibration(const std::string& dataset, c
   return out;
 }
 
-}  // namespace evio::apps
+}  // namespace evio
