@@ -1,10 +1,8 @@
 #include "evio/sensors/aedat4.h"
 
 #include <fcntl.h>
-#include <lz4frame.h>
 #include <sys/stat.h>
 #include <unistd.h>
-#include <zstd.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -22,6 +20,7 @@
 #include "aedat4_flatbuffer.h"
 #include "aedat4_xml.h"
 #include "byte_order.h"
+#include "frame_decompress.h"
 
 namespace evio {
 namespace {
@@ -34,6 +33,7 @@ constexpr size_t kMagicSize = sizeof(kMagic) - 1;  // 14 bytes
 // Largest header, packet (compressed or decompressed) and data table accepted, bytes. A 4K BGRA
 // frame is 33 MB; anything above this limit is treated as a corrupt size field.
 constexpr int64_t kMaxBlockBytes = int64_t{256} << 20;
+const detail::DecompressLimit kPacketLimit{static_cast<size_t>(kMaxBlockBytes), "packets of at most 256 MiB after decompression"};
 constexpr int64_t kMaxUs = std::numeric_limits<int64_t>::max() / 1000;  // us that fit in int64 ns
 constexpr double kStandardGravity = 9.80665;                            // m/s^2 per g
 constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
@@ -79,29 +79,6 @@ inline bool us_to_ns(int64_t t_us, int64_t* t_ns) {
 // The file, read with pread (no stream position shared between the event stream and side reads)
 
 using File = detail::BinaryFile;
-
-// ---------------------------------------------------------------------------------------------
-// Decompression (LZ4 frame format, Zstd frames) into a growable buffer with a size limit
-
-struct Lz4Ctx {
-  LZ4F_dctx* ctx = nullptr;
-  Lz4Ctx() {
-    if (LZ4F_isError(LZ4F_createDecompressionContext(&ctx, LZ4F_VERSION))) ctx = nullptr;
-  }
-  ~Lz4Ctx() {
-    if (ctx != nullptr) LZ4F_freeDecompressionContext(ctx);
-  }
-  Lz4Ctx(const Lz4Ctx&) = delete;
-  Lz4Ctx& operator=(const Lz4Ctx&) = delete;
-};
-
-struct ZstdCtx {
-  ZSTD_DCtx* ctx = ZSTD_createDCtx();
-  ~ZstdCtx() { ZSTD_freeDCtx(ctx); }
-  ZstdCtx() = default;
-  ZstdCtx(const ZstdCtx&) = delete;
-  ZstdCtx& operator=(const ZstdCtx&) = delete;
-};
 
 // A stream from the infoNode.
 struct Stream {
@@ -213,8 +190,6 @@ class Aedat4Reader final : public DatasetReader {
                        std::vector<uint8_t>* buf);
   // Decompresses src according to compression_ into *out (resized to the decompressed size).
   void decompress(const uint8_t* src, size_t n, std::vector<uint8_t>* out, const std::string& where);
-  void decompress_lz4(const uint8_t* src, size_t n, std::vector<uint8_t>* out, const std::string& where);
-  void decompress_zstd(const uint8_t* src, size_t n, std::vector<uint8_t>* out, const std::string& where);
   bool load_next_event_packet();
   void bad_event(const char* kind, size_t index, const std::string& problem);
   std::string event_form() const;
@@ -234,8 +209,8 @@ class Aedat4Reader final : public DatasetReader {
   bool counts_known_ = false;
   int event_stream_ = -1, imu_stream_ = -1, frame_stream_ = -1, trigger_stream_ = -1;  // index into streams_
   SensorSize sensor_;
-  Lz4Ctx lz4_;
-  ZstdCtx zstd_;
+  detail::Lz4FrameDecoder lz4_;
+  detail::ZstdFrameDecoder zstd_;
 
   // Event stream state.
   PacketCursor events_;
@@ -530,98 +505,15 @@ void Aedat4Reader::decompress(const uint8_t* src, size_t n, std::vector<uint8_t>
       return;
     case kLz4:
     case kLz4High:
-      decompress_lz4(src, n, out, where);
+      lz4_.decode(src, n, out, kPacketLimit, path_, where,
+                  "LZ4 frame(s) (lz4 frame format, magic 04 22 4d 18) holding the packet's flatbuffer");
       return;
     case kZstd:
     case kZstdHigh:
-      decompress_zstd(src, n, out, where);
+      zstd_.decode(src, n, out, kPacketLimit, path_, where, "Zstd frame(s) (magic 28 b5 2f fd) holding the packet's flatbuffer");
       return;
   }
   throw InputError(path_, 0, where + ": unknown compression " + num(compression_), kFileForm);
-}
-
-namespace {
-size_t grow(std::vector<uint8_t>* out, const std::string& path, const std::string& where, const char* what) {
-  const size_t cap = static_cast<size_t>(kMaxBlockBytes);
-  if (out->size() >= cap) {
-    throw InputError(path, 0, where + ": " + what + " data decompresses to more than " + num(kMaxBlockBytes) + " bytes",
-                     "packets of at most 256 MiB after decompression");
-  }
-  const size_t n = std::min(cap, std::max<size_t>(out->size() * 2, 1 << 16));
-  out->resize(n);
-  return n;
-}
-}  // namespace
-
-void Aedat4Reader::decompress_lz4(const uint8_t* src, size_t n, std::vector<uint8_t>* out, const std::string& where) {
-  const char* expected = "LZ4 frame(s) (lz4 frame format, magic 04 22 4d 18) holding the packet's flatbuffer";
-  if (lz4_.ctx == nullptr) throw InputError(path_, 0, where + ": cannot create an LZ4 decompression context");
-  LZ4F_resetDecompressionContext(lz4_.ctx);
-  out->resize(std::min<size_t>(static_cast<size_t>(kMaxBlockBytes), std::max<size_t>(n * 3, 1 << 16)));
-  size_t produced = 0, consumed = 0;
-  bool in_frame = false;
-  while (consumed < n || in_frame) {
-    if (produced == out->size()) grow(out, path_, where, "LZ4");
-    size_t dst = out->size() - produced;
-    size_t srcn = n - consumed;
-    const size_t r = LZ4F_decompress(lz4_.ctx, out->data() + produced, &dst, src + consumed, &srcn, nullptr);
-    if (LZ4F_isError(r)) {
-      LZ4F_resetDecompressionContext(lz4_.ctx);
-      throw InputError(path_, 0,
-                       where + ": corrupt LZ4 data near compressed byte " + num(static_cast<int64_t>(consumed)) + " (" +
-                           LZ4F_getErrorName(r) + ")",
-                       expected);
-    }
-    produced += dst;
-    consumed += srcn;
-    in_frame = r != 0;
-    if (in_frame && srcn == 0 && dst == 0 && produced < out->size()) {  // no progress with room to write
-      LZ4F_resetDecompressionContext(lz4_.ctx);
-      throw InputError(
-          path_, 0,
-          where + (consumed == n
-                       ? ": truncated LZ4 frame (" + num(static_cast<int64_t>(n)) + " compressed bytes end mid-frame)"
-                       : ": LZ4 decoder stopped at compressed byte " + num(static_cast<int64_t>(consumed))),
-          expected);
-    }
-  }
-  out->resize(produced);
-}
-
-void Aedat4Reader::decompress_zstd(const uint8_t* src, size_t n, std::vector<uint8_t>* out, const std::string& where) {
-  const char* expected = "Zstd frame(s) (magic 28 b5 2f fd) holding the packet's flatbuffer";
-  if (zstd_.ctx == nullptr) throw InputError(path_, 0, where + ": cannot create a Zstd decompression context");
-  ZSTD_DCtx_reset(zstd_.ctx, ZSTD_reset_session_only);
-  out->resize(std::min<size_t>(static_cast<size_t>(kMaxBlockBytes), std::max<size_t>(n * 4, 1 << 16)));
-  ZSTD_inBuffer in{src, n, 0};
-  size_t produced = 0;
-  bool in_frame = false;
-  while (in.pos < in.size || in_frame) {
-    if (produced == out->size()) grow(out, path_, where, "Zstd");
-    ZSTD_outBuffer ob{out->data(), out->size(), produced};
-    const size_t before_in = in.pos;
-    const size_t r = ZSTD_decompressStream(zstd_.ctx, &ob, &in);
-    if (ZSTD_isError(r)) {
-      ZSTD_DCtx_reset(zstd_.ctx, ZSTD_reset_session_only);
-      throw InputError(path_, 0,
-                       where + ": corrupt Zstd data near compressed byte " + num(static_cast<int64_t>(in.pos)) + " (" +
-                           ZSTD_getErrorName(r) + ")",
-                       expected);
-    }
-    const bool progress = ob.pos != produced || in.pos != before_in;
-    produced = ob.pos;
-    in_frame = r != 0;
-    if (in_frame && !progress && produced < out->size()) {  // no progress with room to write
-      ZSTD_DCtx_reset(zstd_.ctx, ZSTD_reset_session_only);
-      throw InputError(
-          path_, 0,
-          where + (in.pos == in.size
-                       ? ": truncated Zstd frame (" + num(static_cast<int64_t>(n)) + " compressed bytes end mid-frame)"
-                       : ": Zstd decoder stopped at compressed byte " + num(static_cast<int64_t>(in.pos))),
-          expected);
-    }
-  }
-  out->resize(produced);
 }
 
 FbBuffer Aedat4Reader::load_packet(const PacketRef& ref, const char* table_name, std::vector<uint8_t>* raw,

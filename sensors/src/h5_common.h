@@ -450,6 +450,90 @@ struct Scalar {
   double as_double() const { return is_float ? f : static_cast<double>(i); }
 };
 
+// Errors of the HDF5 readers: the file, the problem and the expected form.
+[[noreturn]] inline void fail(const std::string& path, const std::string& problem, const std::string& expected = {}) {
+  throw InputError(path, 0, problem, expected);
+}
+[[noreturn]] inline void fail_h5(const std::string& path, const std::string& what,
+                                 const std::string& expected = "an intact HDF5 file") {
+  throw InputError(path, 0, what + ": " + h5_error_text(), expected);
+}
+
+// Reads a scalar number of HDF5 type ftype through read(mem_type, buffer) (a dataset or an
+// attribute): floats as double, integers as int64 (uint64 above 2^63 is an error).
+template <typename ReadFn>
+Scalar read_scalar(const std::string& path, hid_t ftype, const std::string& name, const std::string& role, ReadFn&& read) {
+  const std::optional<NumType> t = classify(ftype);
+  if (!t) fail(path, q_name(name) + " (" + role + ") is not a number (type class " + class_name(H5Tget_class(ftype)) + ")", "a numeric scalar");
+  Scalar s;
+  if (t->is_float) {
+    s.is_float = true;
+    if (read(H5T_NATIVE_DOUBLE, &s.f) < 0) fail_h5(path, "cannot read " + q_name(name));
+  } else if (t->num == Num::kU64) {
+    uint64_t u = 0;
+    if (read(H5T_NATIVE_UINT64, &u) < 0) fail_h5(path, "cannot read " + q_name(name));
+    if (u > static_cast<uint64_t>(std::numeric_limits<int64_t>::max())) fail(path, q_name(name) + " = " + std::to_string(u) + " is out of range", "a value below 2^63");
+    s.i = static_cast<int64_t>(u);
+  } else {
+    if (read(H5T_NATIVE_INT64, &s.i) < 0) fail_h5(path, "cannot read " + q_name(name));
+  }
+  return s;
+}
+
+// Attribute `name` on obj as a number; nullopt when absent.
+inline std::optional<Scalar> read_number_attr(const std::string& path, hid_t obj, const std::string& obj_name, const char* name) {
+  const htri_t e = H5Aexists(obj, name);
+  if (e <= 0) {
+    H5Eclear2(H5E_DEFAULT);
+    return std::nullopt;
+  }
+  Hid attr(H5Aopen(obj, name, H5P_DEFAULT));
+  Hid space(attr.valid() ? H5Aget_space(attr.get()) : -1);
+  Hid ftype(attr.valid() ? H5Aget_type(attr.get()) : -1);
+  const std::string full = obj_name + " attribute " + name;
+  if (!attr.valid() || !space.valid() || !ftype.valid()) fail_h5(path, "cannot read " + full);
+  if (H5Sget_simple_extent_npoints(space.get()) != 1) fail(path, full + " holds " + std::to_string(H5Sget_simple_extent_npoints(space.get())) + " values", "a scalar");
+  return read_scalar(path, ftype.get(), full, "attribute", [&](hid_t mem, void* buf) { return H5Aread(attr.get(), mem, buf); });
+}
+
+// String attribute `name` on obj; nullopt when absent.
+inline std::optional<std::string> read_string_attr(const std::string& path, hid_t obj, const std::string& obj_name, const char* name) {
+  const htri_t e = H5Aexists(obj, name);
+  if (e <= 0) {
+    H5Eclear2(H5E_DEFAULT);
+    return std::nullopt;
+  }
+  const std::string full = obj_name + " attribute " + name;
+  Hid attr(H5Aopen(obj, name, H5P_DEFAULT));
+  Hid space(attr.valid() ? H5Aget_space(attr.get()) : -1);
+  Hid ftype(attr.valid() ? H5Aget_type(attr.get()) : -1);
+  if (!attr.valid() || !space.valid() || !ftype.valid()) fail_h5(path, "cannot read " + full);
+  if (H5Tget_class(ftype.get()) != H5T_STRING) fail(path, full + " is not a string", "a string such as \"us\" or \"ns\"");
+  if (H5Sget_simple_extent_npoints(space.get()) != 1) fail(path, full + " holds several values", "one string");
+  Hid mem(H5Tcopy(H5T_C_S1));
+  if (!mem.valid()) fail_h5(path, "cannot read " + full);
+  std::string value;
+  if (H5Tis_variable_str(ftype.get()) > 0) {
+    if (H5Tset_size(mem.get(), H5T_VARIABLE) < 0) fail_h5(path, "cannot read " + full);
+    char* s = nullptr;
+    if (H5Aread(attr.get(), mem.get(), &s) < 0) fail_h5(path, "cannot read " + full);
+    if (s != nullptr) {
+      value.assign(s, strnlen(s, 256));
+      H5free_memory(s);
+    }
+  } else {
+    const size_t size = H5Tget_size(ftype.get());
+    if (size == 0 || size > 4096) fail(path, full + " is a string of " + std::to_string(size) + " bytes", "a short string");
+    std::vector<char> buf(size + 1, '\0');
+    if (H5Tset_size(mem.get(), size) < 0 || H5Tset_strpad(mem.get(), H5T_STR_NULLPAD) < 0 ||
+        H5Aread(attr.get(), mem.get(), buf.data()) < 0) {
+      fail_h5(path, "cannot read " + full);
+    }
+    value.assign(buf.data(), strnlen(buf.data(), size));
+  }
+  return value;
+}
+
 inline std::optional<TimeUnit> parse_unit_text(std::string u) {
   while (!u.empty() && (u.back() == ' ' || u.back() == '\0')) u.pop_back();
   if (auto t = time_unit_from_name(u); t && *t != TimeUnit::kAuto) return t;

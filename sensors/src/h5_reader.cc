@@ -328,87 +328,14 @@ struct H5EventReader::Impl {
       fail("dataset " + q_name(name) + " (" + role + ") holds " + std::to_string(H5Sget_simple_extent_npoints(space.get())) + " values",
            "a scalar (one value)");
     }
-    return read_scalar(ftype.get(), name, role, [&](hid_t mem, void* buf) {
+    return read_scalar(path, ftype.get(), name, role, [&](hid_t mem, void* buf) {
       return H5Dread(ds.get(), mem, H5S_ALL, H5S_ALL, H5P_DEFAULT, buf);
     });
   }
 
-  template <typename ReadFn>
-  Scalar read_scalar(hid_t ftype, const std::string& name, const std::string& role, ReadFn&& read) const {
-    const std::optional<NumType> t = classify(ftype);
-    if (!t) fail(q_name(name) + " (" + role + ") is not a number (type class " + class_name(H5Tget_class(ftype)) + ")", "a numeric scalar");
-    Scalar s;
-    if (t->is_float) {
-      s.is_float = true;
-      if (read(H5T_NATIVE_DOUBLE, &s.f) < 0) fail_h5("cannot read " + q_name(name));
-    } else if (t->num == Num::kU64) {
-      uint64_t u = 0;
-      if (read(H5T_NATIVE_UINT64, &u) < 0) fail_h5("cannot read " + q_name(name));
-      if (u > static_cast<uint64_t>(std::numeric_limits<int64_t>::max())) fail(q_name(name) + " = " + std::to_string(u) + " is out of range", "a value below 2^63");
-      s.i = static_cast<int64_t>(u);
-    } else {
-      if (read(H5T_NATIVE_INT64, &s.i) < 0) fail_h5("cannot read " + q_name(name));
-    }
-    return s;
-  }
-
-  // Attribute `name` on obj as a number; nullopt when absent.
-  std::optional<Scalar> read_number_attr(hid_t obj, const std::string& obj_name, const char* name) const {
-    const htri_t e = H5Aexists(obj, name);
-    if (e <= 0) {
-      H5Eclear2(H5E_DEFAULT);
-      return std::nullopt;
-    }
-    Hid attr(H5Aopen(obj, name, H5P_DEFAULT));
-    Hid space(attr.valid() ? H5Aget_space(attr.get()) : -1);
-    Hid ftype(attr.valid() ? H5Aget_type(attr.get()) : -1);
-    const std::string full = obj_name + " attribute " + name;
-    if (!attr.valid() || !space.valid() || !ftype.valid()) fail_h5("cannot read " + full);
-    if (H5Sget_simple_extent_npoints(space.get()) != 1) fail(full + " holds " + std::to_string(H5Sget_simple_extent_npoints(space.get())) + " values", "a scalar");
-    return read_scalar(ftype.get(), full, "attribute", [&](hid_t mem, void* buf) { return H5Aread(attr.get(), mem, buf); });
-  }
-
-  // String attribute `name` on obj; nullopt when absent.
-  std::optional<std::string> read_string_attr(hid_t obj, const std::string& obj_name, const char* name) const {
-    const htri_t e = H5Aexists(obj, name);
-    if (e <= 0) {
-      H5Eclear2(H5E_DEFAULT);
-      return std::nullopt;
-    }
-    const std::string full = obj_name + " attribute " + name;
-    Hid attr(H5Aopen(obj, name, H5P_DEFAULT));
-    Hid space(attr.valid() ? H5Aget_space(attr.get()) : -1);
-    Hid ftype(attr.valid() ? H5Aget_type(attr.get()) : -1);
-    if (!attr.valid() || !space.valid() || !ftype.valid()) fail_h5("cannot read " + full);
-    if (H5Tget_class(ftype.get()) != H5T_STRING) fail(full + " is not a string", "a string such as \"us\" or \"ns\"");
-    if (H5Sget_simple_extent_npoints(space.get()) != 1) fail(full + " holds several values", "one string");
-    Hid mem(H5Tcopy(H5T_C_S1));
-    if (!mem.valid()) fail_h5("cannot read " + full);
-    std::string value;
-    if (H5Tis_variable_str(ftype.get()) > 0) {
-      if (H5Tset_size(mem.get(), H5T_VARIABLE) < 0) fail_h5("cannot read " + full);
-      char* s = nullptr;
-      if (H5Aread(attr.get(), mem.get(), &s) < 0) fail_h5("cannot read " + full);
-      if (s != nullptr) {
-        value.assign(s, strnlen(s, 256));
-        H5free_memory(s);
-      }
-    } else {
-      const size_t size = H5Tget_size(ftype.get());
-      if (size == 0 || size > 4096) fail(full + " is a string of " + std::to_string(size) + " bytes", "a short string");
-      std::vector<char> buf(size + 1, '\0');
-      if (H5Tset_size(mem.get(), size) < 0 || H5Tset_strpad(mem.get(), H5T_STR_NULLPAD) < 0 ||
-          H5Aread(attr.get(), mem.get(), buf.data()) < 0) {
-        fail_h5("cannot read " + full);
-      }
-      value.assign(buf.data(), strnlen(buf.data(), size));
-    }
-    return value;
-  }
-
   // The `unit` attribute of dataset `name`, nullopt when absent.
   std::optional<TimeUnit> unit_attr(hid_t ds, const std::string& name) const {
-    const std::optional<std::string> u = read_string_attr(ds, "dataset " + q_name(name), "unit");
+    const std::optional<std::string> u = read_string_attr(path, ds, "dataset " + q_name(name), "unit");
     if (!u) return std::nullopt;
     const std::optional<TimeUnit> unit = parse_unit_text(*u);
     if (!unit) fail("dataset " + q_name(name) + " attribute unit = \"" + *u + "\" is not a time unit", "unit \"s\", \"ms\", \"us\" or \"ns\"");
@@ -569,14 +496,14 @@ struct H5EventReader::Impl {
   // ---- sensor size ---------------------------------------------------------------------------
 
   std::optional<int64_t> sensor_value(hid_t obj, const std::string& obj_name, const char* name, bool dataset_too) {
-    std::optional<Scalar> s = read_number_attr(obj, obj_name, name);
+    std::optional<Scalar> s = read_number_attr(path, obj, obj_name, name);
     std::string where = obj_name + " attribute " + name;
     if (!s && dataset_too && is_dataset(obj, name, apl.get())) {
       Hid ds(H5Dopen2(obj, name, apl.get()));
       Hid space(ds.valid() ? H5Dget_space(ds.get()) : -1);
       Hid ftype(ds.valid() ? H5Dget_type(ds.get()) : -1);
       if (ds.valid() && space.valid() && ftype.valid() && H5Sget_simple_extent_npoints(space.get()) == 1) {
-        s = read_scalar(ftype.get(), name, "sensor size", [&](hid_t mem, void* buf) {
+        s = read_scalar(path, ftype.get(), name, "sensor size", [&](hid_t mem, void* buf) {
           return H5Dread(ds.get(), mem, H5S_ALL, H5S_ALL, H5P_DEFAULT, buf);
         });
         where = "dataset " + q_name(name);
