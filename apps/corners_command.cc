@@ -11,12 +11,12 @@
 #include <sstream>
 #include <vector>
 
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <yaml-cpp/yaml.h>
 
 #include "evio/calib/calibration_io.h"
 #include "evio/calib/error.h"
+#include "evio/sensors/image_io.h"
 #include "evio/sensors/time.h"
 #include "json_util.h"
 #include "progress.h"
@@ -166,7 +166,7 @@ class OverlayWriter {
     char name[64];
     std::snprintf(name, sizeof(name), "frame_%06d.png", written);
     const std::string path = (fs::path(dir_) / name).string();
-    if (!cv::imwrite(path, color)) throw InputError(path, 0, "cannot write the PNG", "a writable output folder");
+    if (!write_image(path, color)) throw InputError(path, 0, "cannot write the PNG", "a writable output folder");
     ++written;
     reset_image();
   }

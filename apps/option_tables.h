@@ -23,7 +23,8 @@
 
 namespace evio::apps {
 
-// option_tables_frontend.cc
+// option_tables_events.cc, option_tables_frames.cc, option_tables_rotation.cc (one file per group, so
+// a program links only the modules whose tables it uses)
 const yaml_config::Table<frontend::RefractoryFilterOptions>& refractory_table();           // period_ms, per_polarity
 const yaml_config::Table<frontend::BackgroundActivityFilterOptions>& background_activity_table();  // window_ms, radius, min_support
 const yaml_config::Table<frontend::EfastOptions>& efast_table();
@@ -33,9 +34,9 @@ const yaml_config::Table<frontend::EventFrameOptions>& event_frame_table();
 const yaml_config::Table<frontend::FeatureTrackerOptions>& feature_tracker_table();
 // Without probe_every_batches / probe_offset_rad (the mosaic's failure section holds them).
 const yaml_config::Table<frontend::RotationParticleFilterOptions>& rotation_particle_filter_table();
-const yaml_config::Table<calib::ImuNoise>& imu_noise_table();  // Kalibr's imu0 densities
 
-// option_tables_estimation.cc
+// option_tables_backend.cc and option_tables_mapping.cc
+const yaml_config::Table<calib::ImuNoise>& imu_noise_table();  // Kalibr's imu0 densities
 const yaml_config::Table<backend::SlidingWindowOptions>& sliding_window_table();
 const yaml_config::Table<backend::StaticInitOptions>& static_init_table();
 const yaml_config::Table<backend::VisualInertialInitOptions>& visual_inertial_init_table();

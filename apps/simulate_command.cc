@@ -18,13 +18,13 @@
 #include <sstream>
 #include <stdexcept>
 
-#include <opencv2/imgcodecs.hpp>
 
 #include "evio/calib/calibration_io.h"
 #include "evio/calib/error.h"
 #include "evio/calib/log.h"
 #include "evio/sensors/ecd.h"
 #include "evio/sensors/h5.h"
+#include "evio/sensors/image_io.h"
 #include "evio/simulator/imu.h"
 #include "evio/simulator/simulator.h"
 #include "evio/sensors/time.h"
@@ -147,7 +147,7 @@ class FolderSink final : public simulator::SimulationSink {
     char name[64];
     std::snprintf(name, sizeof(name), "images/frame_%08zu.png", frame_count_++);
     const std::string path = (dir_ / name).string();
-    if (!cv::imwrite(path, frame.image)) throw InputError(path, 0, "cannot write image", kWritable);
+    if (!write_image(path, frame.image)) throw InputError(path, 0, "cannot write image", kWritable);
     images_->print("%s %s\n", format_seconds(frame.t_ns).c_str(), name);
   }
 
@@ -163,7 +163,7 @@ class FolderSink final : public simulator::SimulationSink {
     }
     if (g.labels && !view.label.empty()) {
       const std::string path = (dir_ / "labels" / (std::string(name) + ".png")).string();
-      if (!cv::imwrite(path, view.label)) throw InputError(path, 0, "cannot write label image", kWritable);
+      if (!write_image(path, view.label)) throw InputError(path, 0, "cannot write label image", kWritable);
     }
     const calib::SE3& T = camera.T_w_c;
     maps_->print("%s %s %s %.17g %.17g %.17g %.17g %.17g %.17g %.17g\n", name, format_seconds(view.t_ns).c_str(),
@@ -284,7 +284,7 @@ int run_simulate(const SimulateArgs& args, std::ostream& out) {
   if (c.panorama && c.write_panorama) {
     write_npy_float32((dir / "panorama.npy").string(), c.panorama->level(0));
     const std::string png = (dir / "panorama.png").string();
-    if (!cv::imwrite(png, display_image(c.panorama->level(0)))) throw InputError(png, 0, "cannot write", kWritable);
+    if (!write_image(png, display_image(c.panorama->level(0)))) throw InputError(png, 0, "cannot write", kWritable);
   }
 
   // The simulation.

@@ -6,14 +6,45 @@
 #include <iterator>
 #include <stdexcept>
 
-#include <pcl/io/pcd_io.h>
-#include <pcl/io/ply_io.h>
-#include <pcl/point_cloud.h>
-#include <pcl/point_types.h>
+#include <vector>
 
 #include "evio/calib/error.h"
+#include "evio/calib/plugin.h"
 
 namespace evio::mapping {
+namespace {
+
+// The PCL plugin (pcl_io_plugin.cc), opened at the first map write or read (calib/plugin.h).
+struct PclPlugin {
+  int (*write)(const char*, const float*, size_t, int);
+  int (*read)(const char*, int, void (*)(void*, const float*, size_t), void*);
+};
+
+const PclPlugin& pcl_plugin() {
+  static const PclPlugin plugin = [] {
+    const std::string file = "libevio_pcl_io.so";
+    void* h = open_plugin(file);
+    return PclPlugin{reinterpret_cast<decltype(PclPlugin::write)>(plugin_symbol(h, file, "evio_pcl_write")),
+                     reinterpret_cast<decltype(PclPlugin::read)>(plugin_symbol(h, file, "evio_pcl_read"))};
+  }();
+  return plugin;
+}
+
+int format_code(MapFormat f) {
+  switch (f) {
+    case MapFormat::kPlyBinary:
+      return 0;
+    case MapFormat::kPlyAscii:
+      return 1;
+    case MapFormat::kPcdBinary:
+      return 2;
+    case MapFormat::kPcdAscii:
+      return 3;
+  }
+  return 0;
+}
+
+}  // namespace
 
 MapFormat map_format_for(const std::string& path) {
   const std::string ext = std::filesystem::path(path).extension().string();
@@ -23,21 +54,14 @@ MapFormat map_format_for(const std::string& path) {
 }
 
 void write_landmark_map(const std::string& path, const std::vector<MapPoint>& points, MapFormat format) {
-  pcl::PointCloud<pcl::PointXYZI> cloud;
-  cloud.reserve(points.size());
+  std::vector<float> xyzi;
+  xyzi.reserve(4 * points.size());
   for (const MapPoint& m : points) {
     if (!m.p_w.allFinite() || !std::isfinite(m.intensity)) throw std::invalid_argument("landmark map: non-finite point");
-    pcl::PointXYZI q;
-    q.x = static_cast<float>(m.p_w.x());
-    q.y = static_cast<float>(m.p_w.y());
-    q.z = static_cast<float>(m.p_w.z());
-    q.intensity = m.intensity;
-    cloud.push_back(q);
+    xyzi.insert(xyzi.end(), {static_cast<float>(m.p_w.x()), static_cast<float>(m.p_w.y()),
+                             static_cast<float>(m.p_w.z()), m.intensity});
   }
-  cloud.width = static_cast<uint32_t>(cloud.size());
-  cloud.height = 1;
-  cloud.is_dense = true;
-  if (cloud.empty()) {
+  if (points.empty()) {
     // PCL refuses to write empty clouds: a valid empty file by hand (same fields).
     std::ofstream f(path);
     if (format == MapFormat::kPlyBinary || format == MapFormat::kPlyAscii) {
@@ -51,26 +75,11 @@ void write_landmark_map(const std::string& path, const std::vector<MapPoint>& po
     if (!f) throw InputError(path, 0, "cannot write the landmark map", "a writable output folder");
     return;
   }
-  int rc = -1;
-  switch (format) {
-    case MapFormat::kPlyBinary:
-      rc = pcl::io::savePLYFileBinary(path, cloud);
-      break;
-    case MapFormat::kPlyAscii:
-      rc = pcl::io::savePLYFileASCII(path, cloud);
-      break;
-    case MapFormat::kPcdBinary:
-      rc = pcl::io::savePCDFileBinary(path, cloud);
-      break;
-    case MapFormat::kPcdAscii:
-      rc = pcl::io::savePCDFileASCII(path, cloud);
-      break;
-  }
+  const int rc = pcl_plugin().write(path.c_str(), xyzi.data(), points.size(), format_code(format));
   if (rc != 0) throw InputError(path, 0, "cannot write the landmark map", "a writable output folder");
 }
 
 std::vector<MapPoint> read_landmark_map(const std::string& path) {
-  pcl::PointCloud<pcl::PointXYZI> cloud;
   const std::string ext = std::filesystem::path(path).extension().string();
   {
     // An empty map (written by hand above; PCL does not read zero-point files back).
@@ -79,11 +88,16 @@ std::vector<MapPoint> read_landmark_map(const std::string& path) {
     std::string head((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
     if (head.find("element vertex 0\n") != std::string::npos || head.find("\nPOINTS 0\n") != std::string::npos) return {};
   }
-  const int rc = ext == ".pcd" ? pcl::io::loadPCDFile(path, cloud) : pcl::io::loadPLYFile(path, cloud);
-  if (rc != 0) throw InputError(path, 0, "cannot read the landmark map", "a PLY or PCD file written by evio");
   std::vector<MapPoint> out;
-  out.reserve(cloud.size());
-  for (const auto& q : cloud) out.push_back({Eigen::Vector3d(q.x, q.y, q.z), q.intensity});
+  auto sink = [](void* ctx, const float* xyzi, size_t n) {
+    auto* v = static_cast<std::vector<MapPoint>*>(ctx);
+    v->reserve(n);
+    for (size_t i = 0; i < n; ++i) {
+      v->push_back({Eigen::Vector3d(xyzi[4 * i], xyzi[4 * i + 1], xyzi[4 * i + 2]), xyzi[4 * i + 3]});
+    }
+  };
+  const int rc = pcl_plugin().read(path.c_str(), ext == ".pcd" ? 1 : 0, sink, &out);
+  if (rc != 0) throw InputError(path, 0, "cannot read the landmark map", "a PLY or PCD file written by evio");
   return out;
 }
 

@@ -9,11 +9,11 @@
 #include <vector>
 
 #include <opencv2/core.hpp>
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "evio/calib/equirectangular.h"
 #include "evio/calib/error.h"
+#include "evio/sensors/image_io.h"
 
 namespace evio::mapping {
 namespace {
@@ -31,14 +31,11 @@ double nearest_rank(std::vector<double>* v, double percent) {
   return (*v)[k];
 }
 
-void write_image(const std::string& path, const cv::Mat& img, const std::vector<int>& params = {}) {
-  bool ok = false;
-  try {
-    ok = cv::imwrite(path, img, params);
-  } catch (const cv::Exception& e) {
-    throw InputError(path, 0, std::string("cannot write the image: ") + e.what(), "a writable path");
+// The image file, or an InputError naming it.
+void write_image_or_throw(const std::string& path, const cv::Mat& img, const std::vector<int>& params = {}) {
+  if (!evio::write_image(path, img, params)) {
+    throw InputError(path, 0, "cannot write the image", "a writable path with a .png/.tif extension");
   }
-  if (!ok) throw InputError(path, 0, "cannot write the image", "a writable path with a .png/.tif extension");
 }
 
 }  // namespace
@@ -125,19 +122,19 @@ cv::Mat display_image(const ImageF& L, const MaskU8* seen, const LogImageDisplay
 
 void write_log_image_png8(const std::string& path, const ImageF& L, const MaskU8* seen,
                           const LogImageDisplayOptions& options) {
-  write_image(path, display_image<uint8_t>(L, seen, options, CV_8U));
+  write_image_or_throw(path, display_image<uint8_t>(L, seen, options, CV_8U));
 }
 
 void write_log_image_png16(const std::string& path, const ImageF& L, const MaskU8* seen,
                            const LogImageDisplayOptions& options) {
-  write_image(path, display_image<uint16_t>(L, seen, options, CV_16U));
+  write_image_or_throw(path, display_image<uint16_t>(L, seen, options, CV_16U));
 }
 
 void write_mask_png(const std::string& path, const MaskU8& mask) {
   cv::Mat img(static_cast<int>(mask.rows()), static_cast<int>(mask.cols()), CV_8UC1);
   for (int j = 0; j < img.rows; ++j)
     for (int i = 0; i < img.cols; ++i) img.at<uint8_t>(j, i) = mask(j, i) != 0 ? 255 : 0;
-  write_image(path, img);
+  write_image_or_throw(path, img);
 }
 
 void write_log_image_tiff(const std::string& path, const ImageF& L, const MaskU8* seen) {
@@ -146,7 +143,7 @@ void write_log_image_tiff(const std::string& path, const ImageF& L, const MaskU8
   for (int j = 0; j < img.rows; ++j)
     for (int i = 0; i < img.cols; ++i)
       img.at<float>(j, i) = (!seen || (*seen)(j, i)) ? L(j, i) : std::numeric_limits<float>::quiet_NaN();
-  write_image(path, img);
+  write_image_or_throw(path, img);
 }
 
 ImageQuality compare_images(const ImageF& est, const ImageF& ref, const MaskU8* mask, const ImageQualityOptions& o) {

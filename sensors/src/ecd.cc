@@ -6,10 +6,10 @@
 #include <cstring>
 #include <filesystem>
 
-#include <opencv2/imgcodecs.hpp>
 
 #include "evio/calib/error.h"
 #include "evio/calib/log.h"
+#include "evio/sensors/image_io.h"
 #include "text_common.h"
 
 namespace evio {
@@ -391,7 +391,7 @@ void load_frame_image(Frame* frame) {
     throw InputError("", 0, "frame at " + format_seconds(frame->t_ns) + " s has neither an image nor a path",
                      "a frame read from a dataset");
   }
-  frame->image = cv::imread(frame->path, cv::IMREAD_UNCHANGED);
+  frame->image = read_image(frame->path, cv::IMREAD_UNCHANGED);
   if (frame->image.empty()) {
     throw InputError(frame->path, 0, "cannot decode image", "an image file OpenCV can read (PNG, JPEG, ...)");
   }
@@ -485,7 +485,7 @@ void write_ecd_images(const std::string& dir, const std::vector<Frame>& frames) 
     char name[64];
     std::snprintf(name, sizeof(name), "images/frame_%08zu.png", i);
     const std::string out = (fs::path(dir) / name).string();
-    if (!cv::imwrite(out, fr.image)) {
+    if (!write_image(out, fr.image)) {
       std::fclose(f);
       throw InputError(out, 0, "cannot write image", "a writable path");
     }

@@ -12,9 +12,9 @@
 #include <random>
 #include <stdexcept>
 
-#include <opencv2/imgcodecs.hpp>
 
 #include "evio/calib/error.h"
+#include "evio/sensors/image_io.h"
 
 namespace evio::simulator {
 namespace {
@@ -281,7 +281,7 @@ Texture Texture::load(const std::string& path, double min_intensity, double max_
                                 std::to_string(min_intensity) + ", " + std::to_string(max_intensity));
   cv::Mat img;
   try {
-    img = cv::imread(path, cv::IMREAD_ANYDEPTH | cv::IMREAD_GRAYSCALE);
+    img = read_image(path, cv::IMREAD_ANYDEPTH | cv::IMREAD_GRAYSCALE);
   } catch (const cv::Exception& e) {
     throw InputError(path, 0, std::string("cannot decode the image: ") + e.what(),
                      "an image file OpenCV can read (PNG, JPEG, TIFF, ...)");

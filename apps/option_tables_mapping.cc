@@ -1,0 +1,88 @@
+// Config tables of the mapping module's options structs (option_tables.h).
+#include "option_tables.h"
+
+namespace evio::apps {
+
+using yaml_config::Range;
+using yaml_config::Table;
+
+const Table<mapping::GradientMosaicOptions>& gradient_mosaic_table() {
+  using O = mapping::GradientMosaicOptions;
+  using mapping::PoissonBoundary;
+  using mapping::PoissonPreconditioner;
+  static const Table<O> t =
+      Table<O>("mosaic settings")
+          .integer("width", &O::width, 8, 1 << 15)
+          .integer("height", &O::height, 4, 1 << 14)
+          .number("contrast_threshold", &O::contrast_threshold, Range::kPositive, "log units")
+          .number("initial_gradient_std", &O::initial_gradient_std, Range::kPositive, "log units/px")
+          .number("measurement_std_abs", &O::measurement_std_abs, Range::kNonNegative, "1/s")
+          .number("measurement_relative_std", &O::measurement_relative_std, Range::kNonNegative, "")
+          .seconds_as_ms("min_tau_ms", &O::min_tau_s, Range::kPositive)
+          .number("min_speed_px_s", &O::min_speed_px_s, Range::kNonNegative, "px/s")
+          .number("min_gradient_std", &O::min_gradient_std, Range::kPositive, "log units/px")
+          .integer("seen_min_observations", &O::seen_min_observations, 1, 1000000)
+          .number("seen_max_gradient_std", &O::seen_max_gradient_std, Range::kNonNegative, "log units/px")
+          .number("max_path_px", &O::max_path_px, Range::kPositive, "mosaic px")
+          .boolean("map_viewed_texels", &O::map_viewed_texels)
+          .number("weight_reference_std", &O::weight_reference_std, Range::kPositive, "log units/px")
+          .number("viewed_edge_weight", &O::viewed_edge_weight, Range::kUnit, "")
+          .choice("poisson_boundary", [](O& o) -> PoissonBoundary& { return o.poisson.boundary; },
+                  {{"periodic_u", PoissonBoundary::kPeriodicU}, {"neumann", PoissonBoundary::kNeumann}})
+          .integer("poisson_max_region_side", [](O& o) -> int& { return o.poisson.max_region_side; }, 1, 1 << 15)
+          .number("weight_floor", [](O& o) -> double& { return o.weighted_poisson.weight_floor; }, Range::kUnit, "")
+          .number("pcg_tolerance", [](O& o) -> double& { return o.weighted_poisson.tolerance; }, Range::kUnit, "")
+          .integer("pcg_max_iterations", [](O& o) -> int& { return o.weighted_poisson.max_iterations; }, 0, 1000000)
+          .choice("pcg_preconditioner", [](O& o) -> PoissonPreconditioner& { return o.weighted_poisson.preconditioner; },
+                  {{"none", PoissonPreconditioner::kNone},
+                   {"jacobi", PoissonPreconditioner::kJacobi},
+                   {"spectral", PoissonPreconditioner::kSpectral},
+                   {"scaled_spectral", PoissonPreconditioner::kScaledSpectral}})
+          .validate();
+  return t;
+}
+
+const Table<mapping::RotationalCmaxOptions>& rotational_cmax_table() {
+  using O = mapping::RotationalCmaxOptions;
+  static const Table<O> t = Table<O>("contrast maximisation settings")
+                                .integer("width", &O::width, 1, 1 << 15)
+                                .integer("height", &O::height, 1, 1 << 15)
+                                .number("focal_px", &O::focal_px, Range::kPositive, "px")
+                                .number("blur_px", &O::blur_sigma_px, Range::kPositive, "px")
+                                .number("coarse_blur_factor", &O::coarse_blur_factor, Range::kPositive, ">= 1")
+                                .number("initial_step_radps", &O::initial_step_radps, Range::kPositive, "rad/s")
+                                .number("min_step_radps", &O::min_step_radps, Range::kPositive, "rad/s")
+                                .integer("max_evaluations", &O::max_evaluations, 10, 100000000)
+                                .validate();
+  return t;
+}
+
+const Table<mapping::RotationRelocalizationOptions>& relocalization_table() {
+  using O = mapping::RotationRelocalizationOptions;
+  static const Table<O> t = Table<O>("relocalisation settings")
+                                .number("axis_spacing_deg", &O::axis_spacing_deg, Range::kPositive, "deg")
+                                .number("roll_step_deg", &O::roll_step_deg, Range::kPositive, "deg")
+                                .integer("coarse_bearings", &O::coarse_bearings, 1, 1000000)
+                                .integer("fine_bearings", &O::fine_bearings, 1, 10000000)
+                                .number("coarse_blur_texels", &O::coarse_blur_texels, Range::kNonNegative, "texels")
+                                .number("fine_blur_texels", &O::fine_blur_texels, Range::kNonNegative, "texels")
+                                .integer("refine_candidates", &O::refine_candidates, 1, 100000)
+                                .number("refine_initial_step_deg", &O::refine_initial_step_deg, Range::kPositive, "deg")
+                                .number("refine_final_step_deg", &O::refine_final_step_deg, Range::kPositive, "deg")
+                                .validate();
+  return t;
+}
+
+const Table<mapping::LogImageDisplayOptions>& log_image_display_table() {
+  using O = mapping::LogImageDisplayOptions;
+  static const Table<O> t = Table<O>("display settings")
+                                .number("gamma", &O::gamma, Range::kPositive, "")
+                                .number("low_percentile", &O::low_percentile, Range::kNonNegative, "%")
+                                .number("high_percentile", &O::high_percentile, Range::kPositive, "%")
+                                .boolean("linear_intensity", &O::linear_intensity)
+                                .boolean("transparent_unseen", &O::transparent_unseen)
+                                .validate();
+  return t;
+}
+
+}  // namespace evio::apps
