@@ -184,6 +184,7 @@ std::string results_json(const EvalArgs& args, const std::vector<EstimateEvaluat
 
 std::vector<SummaryRow> summarize(const std::vector<EstimateEvaluation>& results) {
   std::vector<std::pair<std::string, const evaluation::EvaluationResult*>> runs;
+  runs.reserve(results.size());
   for (const auto& e : results) runs.emplace_back(e.label, &e.result);
   return evaluation::summarize_runs(runs);
 }

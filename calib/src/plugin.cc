@@ -42,8 +42,11 @@ void* open_plugin(const std::string& file) {
   }
   std::string tried;
   for (const std::string& dir : dirs) {
-    const std::string path = dir + "/" + file;
-    tried += (tried.empty() ? "" : ", ") + path;
+    std::string path = dir;
+    path += '/';
+    path += file;
+    if (!tried.empty()) tried += ", ";
+    tried += path;
     if (access(path.c_str(), R_OK) != 0) continue;
     void* h = dlopen(path.c_str(), RTLD_NOW | RTLD_LOCAL);
     if (h == nullptr) {
