@@ -1,10 +1,11 @@
 // evio convert: the command line of `evio convert` (run as evio-convert by the `evio` dispatcher).
+#include <cstdio>
 #include <iostream>
 
 #include "cli_common.h"
 #include "convert_command.h"
 
-int main(int argc, char** argv) {
+int main(int argc, char** argv) try {
   using evio::apps::ConvertTarget;
   evio::apps::CommandLine cli("convert");
   evio::apps::ConvertArgs conv;
@@ -51,4 +52,7 @@ int main(int argc, char** argv) {
     conv.progress = !cli.quiet();
     return evio::apps::run_convert(conv, std::cout);
   });
+} catch (const std::exception& e) {  // setting the options up failed (a programming error)
+  std::fprintf(stderr, "evio: internal error: %s\n", e.what());
+  return 3;
 }

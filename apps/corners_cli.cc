@@ -1,11 +1,12 @@
 // evio corners: the command line of `evio corners` (run as evio-corners by the `evio` dispatcher).
 #include <cmath>
+#include <cstdio>
 #include <iostream>
 
 #include "cli_common.h"
 #include "corners_command.h"
 
-int main(int argc, char** argv) {
+int main(int argc, char** argv) try {
   evio::apps::CommandLine cli("corners");
   evio::apps::CornersArgs corners;
   CLI::Option* dataset_opt = cli->add_option("DATASET", corners.dataset, "Dataset (any format evio reads)");
@@ -41,4 +42,7 @@ int main(int argc, char** argv) {
     corners.progress = !cli.quiet();
     return evio::apps::run_corners(corners, std::cout);
   });
+} catch (const std::exception& e) {  // setting the options up failed (a programming error)
+  std::fprintf(stderr, "evio: internal error: %s\n", e.what());
+  return 3;
 }

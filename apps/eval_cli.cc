@@ -1,5 +1,6 @@
 // evio eval: the command line of `evio eval` (run as evio-eval by the `evio` dispatcher).
 #include <cstdlib>
+#include <cstdio>
 #include <iostream>
 
 #include "cli_common.h"
@@ -32,7 +33,7 @@ void parse_rpe_lengths(const std::string& s, evio::evaluation::RelativeErrorOpti
 
 }  // namespace
 
-int main(int argc, char** argv) {
+int main(int argc, char** argv) try {
   evio::apps::CommandLine cli("eval");
   evio::apps::EvalArgs eval;
   cli->add_option("GT", eval.groundtruth,
@@ -102,4 +103,7 @@ int main(int argc, char** argv) {
       "Accept a time unit even when the first poses imply a rate outside 0.1 Hz..100 kHz");
   cli->add_option("--python", eval.python, "Python interpreter for --plot")->capture_default_str();
   return cli.run(argc, argv, [&] { return evio::apps::run_eval(eval, std::cout); });
+} catch (const std::exception& e) {  // setting the options up failed (a programming error)
+  std::fprintf(stderr, "evio: internal error: %s\n", e.what());
+  return 3;
 }

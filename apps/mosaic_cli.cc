@@ -1,10 +1,11 @@
 // evio mosaic: the command line of `evio mosaic` (run as evio-mosaic by the `evio` dispatcher).
+#include <cstdio>
 #include <iostream>
 
 #include "cli_common.h"
 #include "mosaic_command.h"
 
-int main(int argc, char** argv) {
+int main(int argc, char** argv) try {
   evio::apps::CommandLine cli("mosaic");
   evio::apps::MosaicArgs mosaic;
   CLI::Option* dataset_opt = cli->add_option("DATASET", mosaic.dataset, "Dataset with events (IMU for --use-imu; any format evio reads)");
@@ -57,4 +58,7 @@ int main(int argc, char** argv) {
     mosaic.progress = !cli.quiet();
     return evio::apps::run_mosaic(mosaic, std::cout);
   });
+} catch (const std::exception& e) {  // setting the options up failed (a programming error)
+  std::fprintf(stderr, "evio: internal error: %s\n", e.what());
+  return 3;
 }

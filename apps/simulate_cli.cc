@@ -1,10 +1,11 @@
 // evio simulate: the command line of `evio simulate` (run as evio-simulate by the `evio` dispatcher).
+#include <cstdio>
 #include <iostream>
 
 #include "cli_common.h"
 #include "simulate_command.h"
 
-int main(int argc, char** argv) {
+int main(int argc, char** argv) try {
   evio::apps::CommandLine cli("simulate");
   evio::apps::SimulateArgs simulate;
   cli->add_option("SCENE", simulate.scene, "Scene YAML (e.g. datasets/poster_6dof.yaml)")->required();
@@ -29,4 +30,7 @@ int main(int argc, char** argv) {
     simulate.progress = !cli.quiet();
     return evio::apps::run_simulate(simulate, std::cout);
   });
+} catch (const std::exception& e) {  // setting the options up failed (a programming error)
+  std::fprintf(stderr, "evio: internal error: %s\n", e.what());
+  return 3;
 }

@@ -1,10 +1,11 @@
 // evio vio: the command line of `evio vio` (run as evio-vio by the `evio` dispatcher).
+#include <cstdio>
 #include <iostream>
 
 #include "cli_common.h"
 #include "vio_command.h"
 
-int main(int argc, char** argv) {
+int main(int argc, char** argv) try {
   evio::apps::CommandLine cli("vio");
   evio::apps::VioArgs vio;
   CLI::Option* dataset_opt = cli->add_option("DATASET", vio.dataset, "Dataset with events and IMU (any format evio reads)");
@@ -57,4 +58,7 @@ int main(int argc, char** argv) {
     vio.progress = !cli.quiet();
     return evio::apps::run_vio(vio, std::cout);
   });
+} catch (const std::exception& e) {  // setting the options up failed (a programming error)
+  std::fprintf(stderr, "evio: internal error: %s\n", e.what());
+  return 3;
 }
