@@ -7,6 +7,8 @@ if(NOT LDD)
   return()
 endif()
 execute_process(COMMAND ${LDD} ${EVIO} OUTPUT_VARIABLE out RESULT_VARIABLE rc)
+# The sanitizer runtimes of an Asan build (libasan, libubsan and what they pull in) do not count.
+string(REGEX REPLACE "[^\n]*lib(asan|ubsan|lsan|tsan|gcc_s|m)\\.so[^\n]*\n?" "" out "${out}")
 string(REGEX MATCHALL "\n" lines "\n${out}")
 list(LENGTH lines n)
 if(n GREATER MAX_LIBS)
