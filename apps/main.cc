@@ -1,7 +1,8 @@
 // The `evio` command: a dispatcher in the style of git. It answers --version and --help itself and
 // runs each subcommand as its own program, evio-<name> (<name>_cli.cc), found next to this
 // executable (build tree) or in <prefix>/libexec/evio (installed). Each of those links only the
-// libraries its command uses, and this one links none beyond the C++ runtime, so `evio --version`
+// libraries its command uses, and this one links none beyond the C++ runtime (and calib's
+// executable_dir), so `evio --version`
 // and a mistyped subcommand cost a few milliseconds instead of loading OpenCV, Ceres, PCL and VTK.
 // Exit codes: 0 success, 1 bad input, 2 usage error, 3 internal error (as every subcommand).
 #include <unistd.h>
@@ -13,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "evio/calib/plugin.h"
 #include "subcommands.h"
 
 namespace {
@@ -49,16 +51,6 @@ void print_subcommands(FILE* f) {
   std::fprintf(f, "the subcommands are:");
   for (const auto& s : kSubcommands) std::fprintf(f, " %s", s.name);
   std::fprintf(f, "\nRun 'evio --help' or 'evio SUBCOMMAND --help' for more information.\n");
-}
-
-// The folder of this executable (from /proc/self/exe), or "" when unknown.
-std::string self_dir() {
-  std::vector<char> buf(4096);
-  const ssize_t n = readlink("/proc/self/exe", buf.data(), buf.size() - 1);
-  if (n <= 0) return {};
-  std::string path(buf.data(), static_cast<size_t>(n));
-  const size_t slash = path.rfind('/');
-  return slash == std::string::npos ? std::string() : path.substr(0, slash);
 }
 
 }  // namespace
@@ -109,7 +101,7 @@ int main(int argc, char** argv) {
     return 2;
   }
 
-  const std::string dir = self_dir();
+  const std::string dir = evio::executable_dir();
   const std::string program = "evio-" + name;
   std::vector<std::string> tried;
   const std::string beside = dir + "/" + program;                    // build tree

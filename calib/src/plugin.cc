@@ -10,8 +10,6 @@
 #include <vector>
 
 namespace evio {
-namespace {
-
 std::string executable_dir() {
   std::vector<char> buf(4096);
   const ssize_t n = readlink("/proc/self/exe", buf.data(), buf.size() - 1);
@@ -21,7 +19,6 @@ std::string executable_dir() {
   return slash == std::string::npos ? std::string() : path.substr(0, slash);
 }
 
-}  // namespace
 
 void* open_plugin(const std::string& file) {
   static std::mutex mutex;

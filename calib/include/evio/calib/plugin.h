@@ -16,6 +16,9 @@ namespace evio {
 // every place tried (or dlopen's message) when it cannot be opened.
 void* open_plugin(const std::string& file);
 
+// The folder of the running executable (from /proc/self/exe), or "" when unknown.
+std::string executable_dir();
+
 // The symbol `name` of a plugin opened by open_plugin; throws std::runtime_error when missing.
 void* plugin_symbol(void* handle, const std::string& file, const char* name);
 
