@@ -1,9 +1,9 @@
 // The `evio` command: a dispatcher in the style of git. It answers --version and --help itself and
 // runs each subcommand as its own program, evio-<name> (<name>_cli.cc), found next to this
 // executable (build tree) or in <prefix>/libexec/evio (installed). Each of those links only the
-// libraries its command uses, and this one links none beyond the C++ runtime (and calib's
-// executable_dir), so `evio --version`
-// and a mistyped subcommand cost a few milliseconds instead of loading OpenCV, Ceres, PCL and VTK.
+// libraries its command uses, and this one links no shared library beyond the C++ runtime (it
+// uses calib's executable_dir), so `evio --version` and a mistyped subcommand cost a few
+// milliseconds instead of loading OpenCV, Ceres, PCL and VTK.
 // Exit codes: 0 success, 1 bad input, 2 usage error, 3 internal error (as every subcommand).
 #include <unistd.h>
 
