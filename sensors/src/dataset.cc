@@ -61,9 +61,13 @@ DatasetFormat detect_dataset_format(const std::string& path) {
   std::error_code ec;
   if (!fs::exists(path, ec)) throw InputError(path, 0, "no such file or directory", "a dataset folder or file");
   if (fs::is_directory(path, ec)) {
-    if (fs::is_regular_file(fs::path(path) / "events.txt", ec)) return DatasetFormat::kEcdFolder;
-    throw InputError(path, 0, "folder of unknown layout (no events.txt)",
-                     "an Event Camera Dataset folder (events.txt [imu.txt groundtruth.txt images.txt calib.txt])");
+    if (fs::is_regular_file(fs::path(path) / "events.txt", ec) ||
+        fs::is_regular_file(fs::path(path) / "events_undistorted.txt", ec)) {
+      return DatasetFormat::kEcdFolder;
+    }
+    throw InputError(path, 0, "folder of unknown layout (no events.txt or events_undistorted.txt)",
+                     "an Event Camera Dataset folder (events.txt or events_undistorted.txt "
+                     "[imu.txt groundtruth.txt images.txt calib.txt])");
   }
   // Magic bytes first, extension second.
   char head[16] = {};
@@ -107,6 +111,14 @@ DatasetFormat detect_dataset_format(const std::string& path) {
                    "or name the format with --format");
 }
 
+size_t DatasetReader::read_subpixel_events(std::vector<SubpixelEvent>* out, size_t max_events) {
+  EventBuffer chunk;
+  const size_t n = read_events(&chunk, max_events);
+  out->reserve(out->size() + n);
+  for (const Event& e : chunk) out->push_back(to_subpixel(e));
+  return n;
+}
+
 namespace {
 
 // ECD folder, or a bare events file (then only events).
@@ -128,6 +140,9 @@ class EcdDatasetReader final : public DatasetReader {
   const std::string& path() const override { return path_; }
   SensorSize sensor_size() const override { return options_.text.sensor; }
   size_t read_events(EventBuffer* out, size_t max_events) override { return events_->read(out, max_events); }
+  size_t read_subpixel_events(std::vector<SubpixelEvent>* out, size_t max_events) override {
+    return events_->read_subpixel(out, max_events);
+  }
   double progress() const override { return events_->progress(); }
   const ReadReport& event_report() const override { return events_->report(); }
 

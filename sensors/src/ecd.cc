@@ -1,5 +1,6 @@
 #include "evio/sensors/ecd.h"
 
+#include <algorithm>
 #include <cerrno>
 #include <charconv>
 #include <cmath>
@@ -23,6 +24,26 @@ namespace {
 std::string event_form(const ReadReport& r) {
   return std::string("`t x y p`: time in ") + time_unit_name(r.time_unit) +
          ", integer pixel x and y, polarity 0/1 or -1/+1 (e.g. `0.003811000 96 133 0`)";
+}
+
+std::string subpixel_event_form(const ReadReport& r) {
+  return std::string("`t x y p`: time in ") + time_unit_name(r.time_unit) +
+         ", pixel x and y as finite integers or decimals (may be negative), polarity 0/1 or -1/+1 "
+         "(e.g. `0.003811000 96.25 -1.5 0`)";
+}
+
+// The integer path's message for a fractional coordinate.
+constexpr const char* kSubpixelHint =
+    "fractional pixel coordinate (the file holds sub-pixel coordinates, e.g. undistorted events, which the "
+    "integer event path does not take; they are read by the sub-pixel path, EcdEventReader::read_subpixel / "
+    "DatasetReader::read_subpixel_events, as `evio flow` and `evio segment` do)";
+
+// True when the token at p is a number with a decimal point, such as "-5.836659".
+bool is_decimal_number(const char* p, const char* end) {
+  const char* b = p;
+  double v = 0;
+  if (!detail::parse_double(p, end, &v) || (p < end && !is_space(*p))) return false;
+  return std::find(b, p, '.') != p;
 }
 
 // Parses an unsigned integer pixel coordinate; returns false when there is no digit.
@@ -115,9 +136,11 @@ EcdFolder find_ecd_folder(const std::string& dir) {
   f.dir = dir;
   const fs::path d(dir);
   f.events = existing(d / "events.txt");
+  if (f.events.empty()) f.events = existing(d / "events_undistorted.txt");  // sub-pixel events
   if (f.events.empty()) {
-    throw InputError(dir, 0, "no events.txt in this folder",
-                     "an Event Camera Dataset folder: events.txt [imu.txt groundtruth.txt images.txt calib.txt]");
+    throw InputError(dir, 0, "no events.txt (or events_undistorted.txt) in this folder",
+                     "an Event Camera Dataset folder: events.txt or events_undistorted.txt "
+                     "[imu.txt groundtruth.txt images.txt calib.txt]");
   }
   f.imu = existing(d / "imu.txt");
   f.groundtruth = existing(d / "groundtruth.txt");
@@ -143,7 +166,8 @@ double EcdEventReader::progress() const {
 
 void EcdEventReader::bad(const char* kind, std::string_view line, const std::string& problem) {
   detail::BadLineHandler(report_.path, options_.on_bad_line, &report_)
-      .bad(kind, lines_.line_number(), problem + " in " + quote_line(line), event_form(report_));
+      .bad(kind, lines_.line_number(), problem + " in " + quote_line(line),
+           subpixel_ ? subpixel_event_form(report_) : event_form(report_));
 }
 
 // The general record parser: any whitespace or commas, any time form, polarity 0/1 or -1/+1.
@@ -161,33 +185,39 @@ bool EcdEventReader::parse_general(std::string_view line, Event* e, uint32_t* x,
   // x then y: a non-negative integer followed by a separator.
   for (const auto& [coord, name] : {std::pair<uint32_t*, const char*>{x, "x"}, {y, "y"}}) {
     p = skip_space(p, end);
+    const char* token = p;
     const bool has = parse_coord(p, end, coord);
-    if (has && p < end && *p == '.') {
-      bad("malformed", line, "fractional pixel coordinate (undistorted events are not integer pixels)");
-      return false;
-    }
     if (!has || p == end || !is_space(*p)) {
+      if (is_decimal_number(token, end)) {
+        bad("malformed", line, kSubpixelHint);
+        return false;
+      }
       bad("malformed", line, "expected 4 columns, found " + std::to_string(detail::count_tokens(line)) +
                                  (has ? "" : std::string(" or ") + name + " is not a non-negative integer"));
       return false;
     }
   }
+  return parse_polarity(line, p, &e->polarity, conv);
+}
+
+bool EcdEventReader::parse_polarity(std::string_view line, const char* p, int8_t* polarity, PolarityConvention* conv) {
+  const char* end = line.data() + line.size();
   p = skip_space(p, end);
   // Polarity: 0/1 or -1/+1 (also "+1"); the two conventions may not mix within one file.
   bool polarity_ok = true;
   if (p < end && *p == '1') {
-    e->polarity = 1;
+    *polarity = 1;
     ++p;
   } else if (p < end && *p == '0') {
-    e->polarity = -1;
+    *polarity = -1;
     *conv = PolarityConvention::kZeroOne;
     ++p;
   } else if (end - p >= 2 && p[0] == '-' && p[1] == '1') {
-    e->polarity = -1;
+    *polarity = -1;
     *conv = PolarityConvention::kMinusPlusOne;
     p += 2;
   } else if (end - p >= 2 && p[0] == '+' && p[1] == '1') {
-    e->polarity = 1;
+    *polarity = 1;
     *conv = PolarityConvention::kMinusPlusOne;
     p += 2;
   } else {
@@ -205,7 +235,64 @@ bool EcdEventReader::parse_general(std::string_view line, Event* e, uint32_t* x,
   return true;
 }
 
+// Like parse_general, with x and y parsed as finite floats.
+bool EcdEventReader::parse_subpixel(std::string_view line, SubpixelEvent* e, PolarityConvention* conv) {
+  const char* p = line.data();
+  const char* end = p + line.size();
+  p = skip_space(p, end);
+  if (p == end || *p == '#' || *p == '%') return false;
+
+  if (!detail::parse_time(p, end, exponent_, &e->t_ns) || (p < end && !is_space(*p))) {
+    bad("malformed", line, "time is not a number");
+    return false;
+  }
+  for (const auto& [coord, name] : {std::pair<float*, const char*>{&e->x, "x"}, {&e->y, "y"}}) {
+    p = skip_space(p, end);
+    double v = 0;
+    const bool has = detail::parse_double(p, end, &v);
+    if (!has || p == end || !is_space(*p)) {
+      const int n = detail::count_tokens(line);
+      bad("malformed", line,
+          n != 4 ? "expected 4 columns, found " + std::to_string(n) : std::string(name) + " is not a number");
+      return false;
+    }
+    *coord = static_cast<float>(v);
+    if (!std::isfinite(*coord)) {
+      bad("non-finite", line, std::string(name) + " is not a finite float (nan, inf or beyond the float range)");
+      return false;
+    }
+  }
+  return parse_polarity(line, p, &e->polarity, conv);
+}
+
+bool EcdEventReader::accept_polarity_convention(std::string_view line, PolarityConvention conv) {
+  if (report_.polarity != PolarityConvention::kUnknown) {
+    bad("polarity", line,
+        std::string("polarity convention ") + polarity_convention_name(conv) + " mixed with " +
+            polarity_convention_name(report_.polarity) + " used earlier in the file");
+    return false;
+  }
+  report_.polarity = conv;
+  return true;
+}
+
+void EcdEventReader::bad_time_order(std::string_view line, int64_t t_ns) {
+  bad("time order", line,
+      "timestamp " + format_seconds(t_ns) + " s is earlier than the previous event's " + format_seconds(last_t_ns_) +
+          " s");
+}
+
+void EcdEventReader::end_chunk(size_t n) {
+  report_.records += static_cast<int64_t>(n);
+  report_.lines = lines_.line_number();
+  if (n == 0 && !finished_) {
+    finished_ = true;
+    detail::BadLineHandler(report_.path, options_.on_bad_line, &report_).finish();
+  }
+}
+
 size_t EcdEventReader::read(EventBuffer* out, size_t max_events) {
+  subpixel_ = false;
   std::vector<Event>& v = out->events();
   const size_t n0 = v.size();
   const uint32_t width = static_cast<uint32_t>(options_.sensor.width);
@@ -224,14 +311,8 @@ size_t EcdEventReader::read(EventBuffer* out, size_t max_events) {
     } else if (!parse_general(line, &e, &x, &y, &conv)) {
       continue;  // comment, blank or bad line (reported)
     }
-    if (conv != PolarityConvention::kUnknown && conv != report_.polarity) {
-      if (report_.polarity != PolarityConvention::kUnknown) {
-        bad("polarity", line,
-            std::string("polarity convention ") + polarity_convention_name(conv) + " mixed with " +
-                polarity_convention_name(report_.polarity) + " used earlier in the file");
-        continue;
-      }
-      report_.polarity = conv;
+    if (conv != PolarityConvention::kUnknown && conv != report_.polarity && !accept_polarity_convention(line, conv)) {
+      continue;
     }
     if (x > 65535 || y > 65535 || (bounded && (x >= width || y >= height))) {
       bad("outside sensor", line,
@@ -240,9 +321,7 @@ size_t EcdEventReader::read(EventBuffer* out, size_t max_events) {
       continue;
     }
     if (e.t_ns < last_t_ns_) {
-      bad("time order", line,
-          "timestamp " + format_seconds(e.t_ns) + " s is earlier than the previous event's " +
-              format_seconds(last_t_ns_) + " s");
+      bad_time_order(line, e.t_ns);
       continue;
     }
     last_t_ns_ = e.t_ns;
@@ -255,12 +334,30 @@ size_t EcdEventReader::read(EventBuffer* out, size_t max_events) {
     out_e.polarity = e.polarity;
     ++n;
   }
-  report_.records += static_cast<int64_t>(v.size() - n0);
-  report_.lines = lines_.line_number();
-  if (n == 0 && !finished_) {
-    finished_ = true;
-    detail::BadLineHandler(report_.path, options_.on_bad_line, &report_).finish();
+  end_chunk(v.size() - n0);
+  return n;
+}
+
+size_t EcdEventReader::read_subpixel(std::vector<SubpixelEvent>* out, size_t max_events) {
+  subpixel_ = true;
+  std::string_view line;
+  size_t n = 0;
+  while (n < max_events && lines_.next(&line)) {
+    SubpixelEvent e;
+    PolarityConvention conv = PolarityConvention::kUnknown;
+    if (!parse_subpixel(line, &e, &conv)) continue;  // comment, blank or bad line (reported)
+    if (conv != PolarityConvention::kUnknown && conv != report_.polarity && !accept_polarity_convention(line, conv)) {
+      continue;
+    }
+    if (e.t_ns < last_t_ns_) {
+      bad_time_order(line, e.t_ns);
+      continue;
+    }
+    last_t_ns_ = e.t_ns;
+    out->push_back(e);
+    ++n;
   }
+  end_chunk(n);
   return n;
 }
 
@@ -268,6 +365,16 @@ EventBuffer read_ecd_events(const std::string& path, const TextReadOptions& opti
   EcdEventReader reader(path, options);
   EventBuffer events;
   while (reader.read(&events, size_t{1} << 20) > 0) {
+  }
+  if (report != nullptr) *report = reader.report();
+  return events;
+}
+
+std::vector<SubpixelEvent> read_ecd_subpixel_events(const std::string& path, const TextReadOptions& options,
+                                                    ReadReport* report) {
+  EcdEventReader reader(path, options);
+  std::vector<SubpixelEvent> events;
+  while (reader.read_subpixel(&events, size_t{1} << 20) > 0) {
   }
   if (report != nullptr) *report = reader.report();
   return events;

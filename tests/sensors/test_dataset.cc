@@ -1,5 +1,8 @@
 #include "evio/sensors/dataset.h"
 
+#include <fstream>
+#include <sstream>
+
 #include <gtest/gtest.h>
 
 #include "evio/calib/error.h"
@@ -11,7 +14,7 @@ namespace {
 
 TEST(Dataset, DetectsFormats) {
   evio_test::TempDir dir;
-  EXPECT_THROW(detect_dataset_format(dir.path()), InputError);  // folder without events.txt
+  EXPECT_THROW(detect_dataset_format(dir.path()), InputError);  // folder without events(_undistorted).txt
   EXPECT_THROW(detect_dataset_format(dir.file("nope")), InputError);
   dir.write("x.bin", "abc");
   try {
@@ -63,6 +66,156 @@ TEST(Dataset, RejectsInvalidOptions) {
   DatasetOptions o;
   o.text.sensor = SensorSize{240, 0};
   EXPECT_THROW(open_dataset(dir.path(), o), InputError);
+}
+
+// Integer events only: exercises DatasetReader's default read_subpixel_events.
+class FakeIntegerReader final : public DatasetReader {
+ public:
+  explicit FakeIntegerReader(std::vector<Event> events) : events_(std::move(events)) {}
+  DatasetFormat format() const override { return DatasetFormat::kAedat2; }
+  const std::string& path() const override { return path_; }
+  SensorSize sensor_size() const override { return {}; }
+  size_t read_events(EventBuffer* out, size_t max_events) override {
+    size_t n = 0;
+    for (; n < max_events && next_ < events_.size(); ++n) out->push_back(events_[next_++]);
+    return n;
+  }
+  double progress() const override { return 0.0; }
+  const ReadReport& event_report() const override { return report_; }
+  std::vector<ImuSample> read_imu() override { return {}; }
+  std::vector<Frame> read_frames() override { return {}; }
+  std::optional<Trajectory> read_groundtruth() override { return std::nullopt; }
+  std::optional<calib::CameraCalibration> read_calibration() override { return std::nullopt; }
+
+ private:
+  std::vector<Event> events_;
+  size_t next_ = 0;
+  std::string path_ = "fake";
+  ReadReport report_;
+};
+
+TEST(DatasetSubpixel, DefaultConvertsIntegerEvents) {
+  FakeIntegerReader reader({Event{10, 1, 2, -1}, Event{20, 3, 4, 1}, Event{30, 65535, 0, 1}});
+  std::vector<SubpixelEvent> out;
+  EXPECT_EQ(reader.read_subpixel_events(&out, 2), 2u);
+  EXPECT_EQ(reader.read_subpixel_events(&out, 2), 1u);
+  EXPECT_EQ(reader.read_subpixel_events(&out, 2), 0u);
+  ASSERT_EQ(out.size(), 3u);
+  EXPECT_EQ(out[0].t_ns, 10);
+  EXPECT_EQ(out[0].x, 1.0f);
+  EXPECT_EQ(out[0].y, 2.0f);
+  EXPECT_EQ(out[0].polarity, -1);
+  EXPECT_EQ(out[2].x, 65535.0f);
+}
+
+TEST(DatasetSubpixel, EcdFileAndFolderReadSubpixelEvents) {
+  evio_test::TempDir dir;
+  const std::string text = "# t[us] x y p\n0.5 1.25 -2.5 0\n1.5 250.75 3 1\n";
+  const std::string file = dir.write("events_undistorted.txt", text);
+  EXPECT_EQ(detect_dataset_format(file), DatasetFormat::kEcdEvents);
+  EXPECT_EQ(detect_dataset_format(dir.path()), DatasetFormat::kEcdFolder);
+  for (const std::string& path : {file, dir.path()}) {
+    DatasetOptions o;
+    o.text.sensor = SensorSize{240, 180};
+    auto reader = open_dataset(path, o);
+    std::vector<SubpixelEvent> ev;
+    while (reader->read_subpixel_events(&ev, 1) > 0) {
+    }
+    ASSERT_EQ(ev.size(), 2u) << path;
+    EXPECT_EQ(ev[0].t_ns, 500);
+    EXPECT_FLOAT_EQ(ev[0].y, -2.5f);
+    EXPECT_FLOAT_EQ(ev[1].x, 250.75f);
+    EXPECT_EQ(reader->event_report().time_unit, TimeUnit::kMicroseconds);
+    // The integer path rejects the file and points to the sub-pixel one.
+    auto integer = open_dataset(path, o);
+    EventBuffer buf;
+    try {
+      integer->read_events(&buf, 10);
+      FAIL() << path;
+    } catch (const InputError& e) {
+      const std::string msg = e.what();
+      EXPECT_NE(msg.find(file + ":2:"), std::string::npos) << msg;
+      EXPECT_NE(msg.find("sub-pixel coordinates"), std::string::npos) << msg;
+      EXPECT_NE(msg.find("read_subpixel_events"), std::string::npos) << msg;
+    }
+  }
+}
+
+// The events of events_undistorted.txt as an independent plain-iostream parser sees them.
+struct PlainEvent {
+  double t_us = 0, x = 0, y = 0;
+  int p = 0;
+};
+std::vector<PlainEvent> parse_plain(const std::string& path) {
+  std::ifstream in(path);
+  std::vector<PlainEvent> out;
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream s(line);
+    PlainEvent e;
+    if (s >> e.t_us >> e.x >> e.y >> e.p) out.push_back(e);
+  }
+  return out;
+}
+
+TEST(DatasetRealData, EcdDynamicUndistortedSubpixelEvents) {
+  const auto dir = evio_test::real_data_dir("ecd_dynamic_10ms");
+  if (!dir) GTEST_SKIP() << "real data not found (../shared/data/real/ecd_dynamic_10ms)";
+  const std::string file = *dir + "/events_undistorted.txt";
+  const std::vector<PlainEvent> plain = parse_plain(file);
+  ASSERT_EQ(plain.size(), 18978u);
+  int64_t plain_outside = 0;
+  for (const PlainEvent& e : plain) plain_outside += (e.x < 0 || e.x >= 240 || e.y < 0 || e.y >= 180) ? 1 : 0;
+  ASSERT_GT(plain_outside, 0);  // the file is known to hold some
+
+  for (const std::string& path : {file, *dir}) {
+    auto reader = open_dataset(path);
+    EXPECT_EQ(reader->format(), path == file ? DatasetFormat::kEcdEvents : DatasetFormat::kEcdFolder);
+    std::vector<SubpixelEvent> ev;
+    while (reader->read_subpixel_events(&ev, 4096) > 0) {
+    }
+    const ReadReport& rep = reader->event_report();
+    ASSERT_EQ(ev.size(), 18978u) << path;
+    EXPECT_EQ(rep.records, 18978);
+    EXPECT_EQ(rep.skipped_total(), 0);
+    EXPECT_EQ(rep.time_unit, TimeUnit::kMicroseconds);
+    EXPECT_NE(rep.time_unit_reason.find("header comment in line 1"), std::string::npos) << rep.time_unit_reason;
+    EXPECT_EQ(rep.polarity, PolarityConvention::kZeroOne);
+    EXPECT_EQ(ev.front().t_ns, 0);
+    EXPECT_FLOAT_EQ(ev.front().x, 137.005638f);
+    EXPECT_FLOAT_EQ(ev.front().y, 120.010244f);
+    EXPECT_EQ(ev.front().polarity, -1);
+    EXPECT_EQ(ev.back().t_ns, 9996999);  // last line: `9996.999 130.968122 177.690311 1`
+    EXPECT_FLOAT_EQ(ev.back().x, 130.968122f);
+    EXPECT_FLOAT_EQ(ev.back().y, 177.690311f);
+    const PlainEvent& last = plain.back();
+    EXPECT_EQ(ev.back().t_ns, std::llround(last.t_us * 1000.0));
+    EXPECT_FLOAT_EQ(ev.back().x, static_cast<float>(last.x));
+    EXPECT_FLOAT_EQ(ev.back().y, static_cast<float>(last.y));
+    EXPECT_EQ(ev.back().polarity, last.p == 1 ? 1 : -1);
+    int64_t outside = 0;
+    for (const SubpixelEvent& e : ev) outside += (e.x < 0 || e.x >= 240 || e.y < 0 || e.y >= 180) ? 1 : 0;
+    EXPECT_EQ(outside, plain_outside);
+    for (size_t i = 1; i < ev.size(); ++i) ASSERT_LE(ev[i - 1].t_ns, ev[i].t_ns) << i;
+  }
+  // The integer path rejects the file at its first record and names the sub-pixel path.
+  try {
+    auto integer = open_dataset(file);
+    EventBuffer buf;
+    integer->read_events(&buf, 100);
+    FAIL() << "integer read accepted sub-pixel coordinates";
+  } catch (const InputError& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find(file + ":2:"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("sub-pixel coordinates"), std::string::npos) << msg;
+  }
+  // The folder's calib.txt is its camera.
+  auto folder = open_dataset(*dir);
+  const auto calib = folder->read_calibration();
+  ASSERT_TRUE(calib.has_value());
+  EXPECT_NEAR(calib->camera.intrinsics().fx, 199.092366542, 1e-9);
+  EXPECT_NEAR(calib->camera.intrinsics().cy, 110.712660011, 1e-9);
 }
 
 TEST(DatasetRealData, SliderDepthHeadSummary) {

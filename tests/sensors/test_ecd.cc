@@ -101,7 +101,9 @@ TEST(EcdEvents, MalformedInputNamesFileLineAndExpectedForm) {
   expect_event_error("0.1 1 2 0 5\n", {":1:", "expected 4 columns, found 5"});
   expect_event_error("0.1 1 2 0\nabc 1 2 0\n", {":2:", "time is not a number"});
   expect_event_error("0.1 -1 2 0\n", {":1:", "x is not a non-negative integer"});
-  expect_event_error("0.1 1.5 2 0\n", {":1:", "fractional pixel coordinate"});
+  expect_event_error("0.1 1.5 2 0\n", {":1:", "fractional pixel coordinate", "sub-pixel coordinates",
+                                        "read by the sub-pixel path", "read_subpixel"});
+  expect_event_error("0.1 3 -5.25 0\n", {":1:", "sub-pixel coordinates"});
   expect_event_error("0.1 1 2 2\n", {":1:", "polarity is not 0, 1, -1 or +1", "polarity 0/1 or -1/+1"});
   expect_event_error("0.1 1 2 0\n0.2 1 2 -1\n", {":2:", "polarity convention -1/+1 mixed with 0/1"});
 }
@@ -187,6 +189,112 @@ TEST(EcdEvents, TimeUnitThatDoesNotFitTheDataIsRejected) {
   EXPECT_EQ(read_ecd_events(dir.write("x.txt", integer_events(2000, 1)), opts).size(), 2000u);
 }
 
+// Expects read_ecd_subpixel_events to throw an InputError whose message contains every fragment.
+void expect_subpixel_error(const std::string& text, const std::vector<std::string>& fragments) {
+  TempDir dir;
+  const std::string path = dir.write("events_undistorted.txt", text);
+  try {
+    read_ecd_subpixel_events(path);
+    FAIL() << "no error for:\n" << text;
+  } catch (const InputError& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find(path), std::string::npos) << msg;
+    for (const std::string& f : fragments) EXPECT_NE(msg.find(f), std::string::npos) << "'" << f << "' not in: " << msg;
+  }
+}
+
+TEST(EcdSubpixelEvents, ReadsFractionalNegativeAndIntegerCoordinates) {
+  TempDir dir;
+  const std::string path = dir.write("ev.txt",
+                                     "# t[us] x y p\n"
+                                     "0.000 137.005638 120.010244 0\n"
+                                     "0.000 227.521278 -5.836659 0\n"
+                                     "0.999 -0.25 300.5 1\n"
+                                     "2 12 7 1\n"
+                                     "3.5\t1e2,+4.75 0\n");
+  TextReadOptions opts;
+  opts.sensor = SensorSize{240, 180};  // not applied to sub-pixel events
+  ReadReport rep;
+  const std::vector<SubpixelEvent> ev = read_ecd_subpixel_events(path, opts, &rep);
+  ASSERT_EQ(ev.size(), 5u);
+  EXPECT_EQ(rep.time_unit, TimeUnit::kMicroseconds);
+  EXPECT_NE(rep.time_unit_reason.find("header"), std::string::npos) << rep.time_unit_reason;
+  EXPECT_EQ(rep.polarity, PolarityConvention::kZeroOne);
+  EXPECT_EQ(rep.records, 5);
+  EXPECT_EQ(ev[0].t_ns, 0);
+  EXPECT_FLOAT_EQ(ev[0].x, 137.005638f);
+  EXPECT_FLOAT_EQ(ev[0].y, 120.010244f);
+  EXPECT_EQ(ev[0].polarity, -1);
+  EXPECT_FLOAT_EQ(ev[1].y, -5.836659f);
+  EXPECT_EQ(ev[2].t_ns, 999);
+  EXPECT_FLOAT_EQ(ev[2].x, -0.25f);
+  EXPECT_FLOAT_EQ(ev[2].y, 300.5f);
+  EXPECT_EQ(ev[2].polarity, 1);
+  EXPECT_EQ(ev[3].t_ns, 2000);
+  EXPECT_FLOAT_EQ(ev[3].x, 12.0f);
+  EXPECT_EQ(ev[4].t_ns, 3500);
+  EXPECT_FLOAT_EQ(ev[4].x, 100.0f);
+  EXPECT_FLOAT_EQ(ev[4].y, 4.75f);
+
+  // Integer files read the same through both paths.
+  const std::string ints = dir.write("int.txt", "0.1 1 2 0\n0.2 3 4 1\n");
+  const EventBuffer a = read_ecd_events(ints);
+  const std::vector<SubpixelEvent> b = read_ecd_subpixel_events(ints);
+  ASSERT_EQ(a.size(), b.size());
+  for (size_t i = 0; i < a.size(); ++i) {
+    const SubpixelEvent c = to_subpixel(a[i]);
+    EXPECT_EQ(b[i].t_ns, c.t_ns);
+    EXPECT_EQ(b[i].x, c.x);
+    EXPECT_EQ(b[i].y, c.y);
+    EXPECT_EQ(b[i].polarity, c.polarity);
+  }
+}
+
+TEST(EcdSubpixelEvents, StreamsInChunks) {
+  TempDir dir;
+  std::string text = "# t[us] x y p\n";
+  for (int i = 0; i < 3000; ++i) text += std::to_string(i) + ".5 " + std::to_string(i % 240) + ".25 -1.5 " + std::to_string(i % 2) + "\n";
+  EcdEventReader reader(dir.write("ev.txt", text));
+  std::vector<SubpixelEvent> ev;
+  size_t calls = 0;
+  while (reader.read_subpixel(&ev, 1000) > 0) ++calls;
+  EXPECT_EQ(calls, 3u);
+  ASSERT_EQ(ev.size(), 3000u);
+  EXPECT_EQ(ev[2999].t_ns, 2999500);
+  EXPECT_FLOAT_EQ(ev[2999].x, 119.25f);
+  EXPECT_EQ(reader.report().records, 3000);
+  EXPECT_DOUBLE_EQ(reader.progress(), 1.0);
+}
+
+TEST(EcdSubpixelEvents, BadLinesNameFileLineAndExpectedForm) {
+  expect_subpixel_error("0.1 1 2 0\n0.1 12.5x 3 1\n", {":2:", "x is not a number", "`t x y p`", "finite integers or decimals"});
+  expect_subpixel_error("0.1 1 nan 0\n", {":1:", "y is not a finite float"});
+  expect_subpixel_error("0.1 inf 2 0\n", {":1:", "x is not a finite float"});
+  expect_subpixel_error("0.1 1e300 2 0\n", {":1:", "beyond the float range"});
+  expect_subpixel_error("0.1 1.5 2\n", {":1:", "expected 4 columns, found 3"});
+  expect_subpixel_error("0.1 1.5 2 0 9\n", {":1:", "expected 4 columns, found 5"});
+  expect_subpixel_error("abc 1.5 2 0\n", {":1:", "time is not a number"});
+  expect_subpixel_error("0.1 1.5 2 2\n", {":1:", "polarity is not 0, 1, -1 or +1"});
+  expect_subpixel_error("0.1 1.5 2 0\n0.2 1.5 2 -1\n", {":2:", "polarity convention -1/+1 mixed with 0/1"});
+  expect_subpixel_error("0.2 1.5 2 0\n0.1 1.5 2 0\n", {":2:", "is earlier than the previous event's"});
+}
+
+TEST(EcdSubpixelEvents, WarnPolicySkipsAndCountsBadLines) {
+  TempDir dir;
+  TextReadOptions opts;
+  opts.on_bad_line = BadLinePolicy::kWarnAndSkip;
+  set_log_sink([](LogLevel, const std::string&) {});
+  ReadReport rep;
+  const auto ev = read_ecd_subpixel_events(
+      dir.write("ev.txt", "0.1 1.5 2 0\n0.2 nan 2 0\n0.3 12.5x 3 1\n0.05 1 1 1\n0.4 -3.5 2.5 1\n"), opts, &rep);
+  set_log_sink({});
+  ASSERT_EQ(ev.size(), 2u);
+  EXPECT_FLOAT_EQ(ev[1].x, -3.5f);
+  EXPECT_EQ(rep.skipped.at("non-finite").count, 1);
+  EXPECT_EQ(rep.skipped.at("malformed").first_line, 3);
+  EXPECT_EQ(rep.skipped.at("time order").count, 1);
+}
+
 TEST(EcdImu, ReadsAndValidates) {
   TempDir dir;
   std::string text;
@@ -248,6 +356,16 @@ TEST(EcdImages, ListsFramesAndRejectsMissingFiles) {
   EXPECT_THROW(load_frame_image(&bad), InputError);
   Frame no_path;
   EXPECT_THROW(load_frame_image(&no_path), InputError);
+}
+
+TEST(EcdFolder, AcceptsEventsUndistortedWithoutEventsTxt) {
+  TempDir dir;
+  dir.write("events_undistorted.txt", "");
+  dir.write("calib.txt", "");
+  EXPECT_EQ(find_ecd_folder(dir.path()).events, dir.file("events_undistorted.txt"));
+  EXPECT_EQ(find_ecd_folder(dir.path()).calib, dir.file("calib.txt"));
+  dir.write("events.txt", "");
+  EXPECT_EQ(find_ecd_folder(dir.path()).events, dir.file("events.txt"));  // events.txt wins
 }
 
 TEST(EcdFolder, FindsFilesAndRequiresEvents) {

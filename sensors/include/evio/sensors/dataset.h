@@ -22,8 +22,9 @@ namespace evio {
 
 enum class DatasetFormat {
   kAuto,
-  kEcdFolder,  // "ecd": folder with events.txt [imu.txt groundtruth.txt images.txt calib.txt]
-  kEcdEvents,  // "ecd-events": a single text file of `t x y p` lines
+  kEcdFolder,  // "ecd": folder with events.txt or, without it, events_undistorted.txt (sub-pixel);
+               // [imu.txt groundtruth.txt images.txt calib.txt]
+  kEcdEvents,  // "ecd-events": a single text file of `t x y p` lines (integer or sub-pixel x y)
   kHdf5,       // "h5": HDF5 events (DSEC/TUM-VIE layout or a configured layout)
   kAedat4,     // "aedat4": iniVation AEDAT 4.0
   kEvt2,       // "evt2": Prophesee RAW EVT 2.0
@@ -96,6 +97,11 @@ class DatasetReader {
 
   // Streams events in time order: appends up to max_events, returns how many, 0 at the end.
   virtual size_t read_events(EventBuffer* out, size_t max_events) = 0;
+  // The same stream as sub-pixel events; use one of read_events and read_subpixel_events per
+  // reader. The default converts read_events' integer events, so every format supports it; the
+  // ECD readers override it to take fractional, negative or out-of-sensor coordinates
+  // (events_undistorted.txt), which read_events rejects.
+  virtual size_t read_subpixel_events(std::vector<SubpixelEvent>* out, size_t max_events);
   // Fraction of the event stream consumed, in [0, 1].
   virtual double progress() const = 0;
   // Conventions the event reader applied (time unit, polarity mapping) and skipped lines.

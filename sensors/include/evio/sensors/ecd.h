@@ -2,6 +2,8 @@
 // IJRR 2017): events.txt `t x y p`, imu.txt `t ax ay az gx gy gz`, groundtruth.txt
 // `t px py pz qx qy qz qw` (TUM layout, see trajectory.h), images.txt `t path`, calib.txt.
 // Events are streamed in bounded memory; every line is validated (see text_read_options.h).
+// Integer pixel events go to EventBuffer (read); sub-pixel ones, e.g. the ECD's
+// events_undistorted.txt, to SubpixelEvent (read_subpixel).
 #pragma once
 
 #include <cstdio>
@@ -19,13 +21,15 @@ namespace evio {
 // Files of an ECD folder; optional ones are empty when absent.
 struct EcdFolder {
   std::string dir;
-  std::string events;       // events.txt (required)
+  std::string events;       // events.txt, or events_undistorted.txt when there is no events.txt
   std::string imu;          // imu.txt
   std::string groundtruth;  // groundtruth.txt
   std::string images;       // images.txt
   std::string calib;        // calib.txt
 };
-// Throws InputError when dir is not a folder or has no events.txt.
+// Throws InputError when dir is not a folder or has neither events.txt nor events_undistorted.txt.
+// events.txt wins when both exist. events_undistorted.txt holds sub-pixel coordinates: read it
+// with EcdEventReader::read_subpixel (read() rejects it, naming that path).
 EcdFolder find_ecd_folder(const std::string& dir);
 
 // Streaming reader of events.txt. The constructor opens the file, resolves the time unit
@@ -36,8 +40,16 @@ class EcdEventReader {
   explicit EcdEventReader(const std::string& path, const TextReadOptions& options = {});
 
   // Appends up to max_events events to *out and returns how many; 0 means end of file (the
-  // report is final then, and skipped-line counts have been logged).
+  // report is final then, and skipped-line counts have been logged). Pixel coordinates must be
+  // non-negative integers (inside TextReadOptions::sensor when it is known); a fractional one is a
+  // bad line whose message points to read_subpixel.
   size_t read(EventBuffer* out, size_t max_events);
+
+  // As read(), for sub-pixel events: x and y may be integers or decimals, negative or beyond the
+  // sensor (TextReadOptions::sensor is not applied), any finite float value; nan, inf and
+  // non-numbers are bad lines. Time unit, time-order and polarity handling as in read(). Use one
+  // of read() and read_subpixel() per reader.
+  size_t read_subpixel(std::vector<SubpixelEvent>* out, size_t max_events);
 
   const ReadReport& report() const { return report_; }
   TimeUnit time_unit() const { return report_.time_unit; }
@@ -47,6 +59,14 @@ class EcdEventReader {
  private:
   void bad(const char* kind, std::string_view line, const std::string& problem);
   bool parse_general(std::string_view line, Event* e, uint32_t* x, uint32_t* y, PolarityConvention* conv);
+  bool parse_subpixel(std::string_view line, SubpixelEvent* e, PolarityConvention* conv);
+  // Shared tail of a record: polarity token, then the end of the line.
+  bool parse_polarity(std::string_view line, const char* p, int8_t* polarity, PolarityConvention* conv);
+  // Slow paths shared by read() and read_subpixel(), called when a record's polarity convention
+  // differs from the report's (records it, or reports a mix: false) or its time goes back.
+  bool accept_polarity_convention(std::string_view line, PolarityConvention conv);
+  void bad_time_order(std::string_view line, int64_t t_ns);
+  void end_chunk(size_t n);
 
   TextReadOptions options_;
   LineReader lines_;
@@ -54,11 +74,15 @@ class EcdEventReader {
   int exponent_ = 9;
   int64_t last_t_ns_ = INT64_MIN;
   bool finished_ = false;
+  bool subpixel_ = false;  // the last call was read_subpixel (for the expected form in messages)
 };
 
 // Whole-file convenience wrappers.
 EventBuffer read_ecd_events(const std::string& path, const TextReadOptions& options = {},
                             ReadReport* report = nullptr);
+// Sub-pixel events of a whole file (e.g. events_undistorted.txt), see read_subpixel.
+std::vector<SubpixelEvent> read_ecd_subpixel_events(const std::string& path, const TextReadOptions& options = {},
+                                                    ReadReport* report = nullptr);
 std::vector<ImuSample> read_ecd_imu(const std::string& path, const TextReadOptions& options = {},
                                     ReadReport* report = nullptr);
 // Frames with t_ns and absolute path; images are not decoded (see load_frame_image). A listed

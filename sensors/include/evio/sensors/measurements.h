@@ -23,6 +23,19 @@ inline bool operator==(const Event& a, const Event& b) {
   return a.t_ns == b.t_ns && a.x == b.x && a.y == b.y && a.polarity == b.polarity;
 }
 
+// An event at a sub-pixel (float) position: pixel coordinates with (0,0) the top-left pixel centre,
+// x to the right, y down. They may be fractional, negative or beyond the sensor size, e.g. for
+// undistorted events (ECD events_undistorted.txt) or events warped by a motion model.
+struct SubpixelEvent {
+  int64_t t_ns = 0;
+  float x = 0, y = 0;
+  int8_t polarity = 1;  // +1 (ON) or -1 (OFF)
+};
+
+inline SubpixelEvent to_subpixel(const Event& e) {
+  return SubpixelEvent{e.t_ns, static_cast<float>(e.x), static_cast<float>(e.y), e.polarity};
+}
+
 // How a file wrote polarity; readers report it, writers can reproduce it.
 enum class PolarityConvention { kUnknown, kZeroOne, kMinusPlusOne };
 const char* polarity_convention_name(PolarityConvention c);  // "unknown", "0/1", "-1/+1"
