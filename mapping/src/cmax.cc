@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 #include <stdexcept>
+#include <type_traits>
 
 #include <Eigen/Dense>
 
@@ -312,6 +313,28 @@ void CmaxEvents::clear() {
   dt_min_ = dt_max_ = 0;
 }
 
+void CmaxEvents::dither(uint64_t seed) {
+  // splitmix64 of (seed, index): independent of the order of calls, the same on every platform.
+  auto mix = [](uint64_t z) {
+    z += 0x9e3779b97f4a7c15ULL;
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+    return z ^ (z >> 31);
+  };
+  for (size_t k = 0; k < x.size(); ++k) {
+    const uint64_t h = mix(seed * 0x100000001b3ULL + k);
+    x[k] += static_cast<float>(static_cast<double>(h >> 40) / static_cast<double>(1ULL << 24) - 0.5);
+    y[k] += static_cast<float>(static_cast<double>(h & 0xFFFFFFULL) / static_cast<double>(1ULL << 24) - 0.5);
+    const double bx = (x[k] - geometry_.cx) / geometry_.fx, by = (y[k] - geometry_.cy) / geometry_.fy;
+    xn[k] = static_cast<float>(bx);
+    yn[k] = static_cast<float>(by);
+    if (geometry_.plane_distance_m > 0) {
+      const Eigen::Vector3d n = geometry_.plane_normal_c.normalized();
+      rho[k] = static_cast<float>(std::max(0.0, n.dot(Eigen::Vector3d(bx, by, 1.0)) / geometry_.plane_distance_m));
+    }
+  }
+}
+
 void CmaxEvents::push_back(float px, float py, int64_t t_ns, int polarity) {
   const double dt = static_cast<double>(t_ns - t_ref_ns_) * 1e-9;
   if (x.empty()) {
@@ -356,6 +379,31 @@ bool warp_event(WarpModel m, const CmaxEvents& ev, size_t k, const Eigen::Vector
     for (int i = 0; i < d; ++i) (*J)(0, i) = Ju[i], (*J)(1, i) = Jv[i];
   }
   return true;
+}
+
+void sample_at_warped(const ImageF& img, WarpModel m, const CmaxEvents& ev, const Eigen::VectorXd& p,
+                      std::vector<float>* out) {
+  if (p.size() != warp_dof(m)) throw std::invalid_argument("sample_at_warped: parameter vector has the wrong size");
+  out->assign(ev.size(), 0.0f);
+  const int w = static_cast<int>(img.cols()), h = static_cast<int>(img.rows());
+  auto run = [&](auto tag) {
+    constexpr WarpModel M = decltype(tag)::value;
+    for (size_t k = 0; k < ev.size(); ++k) {
+      double u, v;
+      if (!warp_k<M>(ev, k, p.data(), 0.0, &u, &v, nullptr, nullptr)) continue;
+      if (!(u > -1.0 && v > -1.0 && u < w && v < h)) continue;
+      const int i = static_cast<int>(u + 1.0) - 1, j = static_cast<int>(v + 1.0) - 1;
+      const float a = static_cast<float>(u - i), b = static_cast<float>(v - j);
+      auto at = [&](int ii, int jj) { return (ii >= 0 && jj >= 0 && ii < w && jj < h) ? img(jj, ii) : 0.0f; };
+      (*out)[k] = (1 - a) * (1 - b) * at(i, j) + a * (1 - b) * at(i + 1, j) + (1 - a) * b * at(i, j + 1) + a * b * at(i + 1, j + 1);
+    }
+  };
+  switch (m) {
+    case WarpModel::kFlow: run(std::integral_constant<WarpModel, WarpModel::kFlow>()); break;
+    case WarpModel::kSimilarity: run(std::integral_constant<WarpModel, WarpModel::kSimilarity>()); break;
+    case WarpModel::kRotation: run(std::integral_constant<WarpModel, WarpModel::kRotation>()); break;
+    case WarpModel::kSixDof: run(std::integral_constant<WarpModel, WarpModel::kSixDof>()); break;
+  }
 }
 
 bool CmaxOptions::Validate(std::string* why) const {
@@ -423,12 +471,20 @@ double ContrastMaximizer::evaluate(const CmaxEvents& ev, const Eigen::VectorXd& 
   if (gradient) gradient->setZero(warp_dof(options_.model));
   if (objective_ != CmaxObjective::kNormalizedGradientMagnitude)
     return plain_objective(ev, p, level, weights, stride, 0.0, gradient);
-  // Both ends of the window, each normalised by the unwarped IWE's value.
+  // Both ends of the window: the geometric mean of their objectives, normalised by the unwarped
+  // IWE's value. A warp that contracts the events towards one end expands them towards the other,
+  // and the product of the two ends' sharpness does not reward that.
+  Eigen::VectorXd g1;
+  if (gradient) g1.setZero(gradient->size());
   const double f0 = plain_objective(ev, p, level, weights, stride, ev.dt_min_s(), gradient);
-  const double f1 = plain_objective(ev, p, level, weights, stride, ev.dt_max_s(), gradient);
-  const double c = 0.5 / reference_value;
-  if (gradient) *gradient *= c;
-  return (f0 + f1) * c;
+  const double f1 = plain_objective(ev, p, level, weights, stride, ev.dt_max_s(), gradient ? &g1 : nullptr);
+  if (!(f0 > 0 && f1 > 0)) {
+    if (gradient) gradient->setZero();
+    return 0.0;
+  }
+  const double F = std::sqrt(f0 * f1) / reference_value;
+  if (gradient) *gradient = 0.5 * F * (*gradient / f0 + g1 / f1);
+  return F;
 }
 
 double ContrastMaximizer::objective(const CmaxEvents& ev, const Eigen::VectorXd& p, int level, const float* weights,

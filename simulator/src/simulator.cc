@@ -224,6 +224,8 @@ SimulationStats Simulator::run(SimulationSink* sink, const std::function<void(do
 
   std::vector<Event> events;
   std::vector<uint16_t> labels;
+  cv::Mat previous_label, motion_label;
+  if (need_labels) view.label.copyTo(previous_label);
   int64_t t = t_begin_;
   int64_t last_dt = 0;
   int64_t next_progress = t_begin_;
@@ -256,7 +258,14 @@ SimulationStats Simulator::run(SimulationSink* sink, const std::function<void(do
     labels.clear();
     const auto e0 = Clock::now();
     if (need_labels) {
-      generator.step(view.intensity, t_next - shift, &events, &view.label, &labels);
+      // The object whose motion caused an event: where an occlusion boundary crossed the pixel
+      // during the step (label changed), the front object, which has the larger label (sprites
+      // are drawn in label order over the background, 0); elsewhere the pixel's label. Labelling
+      // by the end label alone would give a sprite's trailing-edge events to the background
+      // uncovered behind it, although they move with the sprite.
+      cv::max(previous_label, view.label, motion_label);
+      generator.step(view.intensity, t_next - shift, &events, &motion_label, &labels);
+      view.label.copyTo(previous_label);
     } else {
       generator.step(view.intensity, t_next - shift, &events);
     }

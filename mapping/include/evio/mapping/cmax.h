@@ -64,6 +64,12 @@ class CmaxEvents {
   // x, y in px (any finite value, outside the image too), polarity +1/-1.
   void push_back(float x, float y, int64_t t_ns, int polarity);
   void clear();
+  // Moves every event by a deterministic pseudo-random offset, uniform in [-0.5, 0.5) px per
+  // axis (seeded by `seed` and the event's index). For events on integer pixels: a pixel
+  // integrates over its area, and without the dither every event votes exactly on a pixel centre
+  // at zero motion, a spurious sharpness peak at v = 0 (and along the axes) that pulls small
+  // motions to zero. Sub-pixel input (undistorted events) needs none.
+  void dither(uint64_t seed = 1);
 
   size_t size() const { return x.size(); }
   bool empty() const { return x.empty(); }
@@ -89,6 +95,11 @@ class CmaxEvents {
 // d(x', y')/dp, 2 x dof. Returns false when the event does not vote (warped depth below 0.2).
 bool warp_event(WarpModel m, const CmaxEvents& ev, size_t k, const Eigen::VectorXd& p, Eigen::Vector2d* warped,
                 Eigen::Matrix<double, 2, Eigen::Dynamic>* J = nullptr, double dt_shift_s = 0.0);
+
+// Bilinear samples of img (a level-0 IWE, H x W) at each event's warped position under (m, p);
+// 0 where the position is outside the image or the event does not vote. out is resized to ev.size().
+void sample_at_warped(const ImageF& img, WarpModel m, const CmaxEvents& ev, const Eigen::VectorXd& p,
+                      std::vector<float>* out);
 
 enum class CmaxObjective {
   // Variance for flow and rotation, whose warps cannot collapse events (flow keeps areas; a

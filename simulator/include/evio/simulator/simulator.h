@@ -61,7 +61,10 @@ struct SimulatorOptions {
   SteppingOptions stepping;
   EventSimOptions events;
   ApsOptions frames;
-  bool event_labels = false;             // give each event the object label of its pixel
+  // Give each event the label of the object whose motion caused it: its pixel's label, or, where
+  // an occlusion boundary crossed the pixel during the step, the front object's (the larger
+  // label: sprites are drawn in label order over the background, 0).
+  bool event_labels = false;
   std::vector<int64_t> ground_truth_times_ns;  // body clock; views handed to the sink (sorted)
   bool ground_truth_flow = true;         // include flow in the ground-truth views
   bool Validate(std::string* why) const;
