@@ -335,6 +335,26 @@ void CmaxEvents::dither(uint64_t seed) {
   }
 }
 
+CmaxEvents CmaxEvents::select(const std::vector<uint32_t>& indices) const {
+  CmaxEvents out(t_ref_ns_, geometry_);
+  out.reserve(indices.size());
+  bool first = true;
+  for (uint32_t k : indices) {
+    out.x.push_back(x[k]);
+    out.y.push_back(y[k]);
+    out.dt_s.push_back(dt_s[k]);
+    out.pol.push_back(pol[k]);
+    out.xn.push_back(xn[k]);
+    out.yn.push_back(yn[k]);
+    out.rho.push_back(rho[k]);
+    const double dt = dt_s[k];
+    out.dt_min_ = first ? dt : std::min(out.dt_min_, dt);
+    out.dt_max_ = first ? dt : std::max(out.dt_max_, dt);
+    first = false;
+  }
+  return out;
+}
+
 void CmaxEvents::push_back(float px, float py, int64_t t_ns, int polarity) {
   const double dt = static_cast<double>(t_ns - t_ref_ns_) * 1e-9;
   if (x.empty()) {

@@ -70,6 +70,8 @@ class CmaxEvents {
   // at zero motion, a spurious sharpness peak at v = 0 (and along the axes) that pulls small
   // motions to zero. Sub-pixel input (undistorted events) needs none.
   void dither(uint64_t seed = 1);
+  // The events at the given indices (in that order), same t_ref and geometry.
+  CmaxEvents select(const std::vector<uint32_t>& indices) const;
 
   size_t size() const { return x.size(); }
   bool empty() const { return x.empty(); }
