@@ -313,26 +313,15 @@ void CmaxEvents::clear() {
   dt_min_ = dt_max_ = 0;
 }
 
-void CmaxEvents::dither(uint64_t seed) {
-  // splitmix64 of (seed, index): independent of the order of calls, the same on every platform.
-  auto mix = [](uint64_t z) {
-    z += 0x9e3779b97f4a7c15ULL;
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
-    return z ^ (z >> 31);
-  };
-  for (size_t k = 0; k < x.size(); ++k) {
-    const uint64_t h = mix(seed * 0x100000001b3ULL + k);
-    x[k] += static_cast<float>(static_cast<double>(h >> 40) / static_cast<double>(1ULL << 24) - 0.5);
-    y[k] += static_cast<float>(static_cast<double>(h & 0xFFFFFFULL) / static_cast<double>(1ULL << 24) - 0.5);
-    const double bx = (x[k] - geometry_.cx) / geometry_.fx, by = (y[k] - geometry_.cy) / geometry_.fy;
-    xn[k] = static_cast<float>(bx);
-    yn[k] = static_cast<float>(by);
-    if (geometry_.plane_distance_m > 0) {
-      const Eigen::Vector3d n = geometry_.plane_normal_c.normalized();
-      rho[k] = static_cast<float>(std::max(0.0, n.dot(Eigen::Vector3d(bx, by, 1.0)) / geometry_.plane_distance_m));
-    }
-  }
+void pixel_dither(int64_t t_ns, float x, float y, float* ox, float* oy) {
+  uint64_t z = static_cast<uint64_t>(t_ns) * 0x9E3779B97F4A7C15ULL ^
+               (static_cast<uint64_t>(static_cast<uint32_t>(static_cast<int32_t>(x))) << 32 |
+                static_cast<uint32_t>(static_cast<int32_t>(y)));
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+  z ^= z >> 31;
+  *ox = static_cast<float>(static_cast<double>(z >> 40) * 0x1.0p-24 - 0.5);
+  *oy = static_cast<float>(static_cast<double>((z >> 16) & 0xFFFFFF) * 0x1.0p-24 - 0.5);
 }
 
 CmaxEvents CmaxEvents::select(const std::vector<uint32_t>& indices) const {

@@ -3,7 +3,8 @@
 // per-event label accuracy at windows where the objects move >= 4 px, the automatic cluster
 // count, and labels that persist across windows. Also synthetic two-motion windows and the
 // extremes. Instrument knobs (environment, for exploring; the defaults are what is asserted):
-// SEG_WINDOW=N events per window, SEG_MS=ms time windows, SEG_TRACE=1 debug log of every stage.
+// SEG_WINDOW=N events per window, SEG_MS=ms time windows, SEG_TRACE=1 debug log of every stage,
+// SEG_NOISE / SEG_GAIN: noise_support / min_cluster_gain.
 #include "evio/mapping/cmax_segmentation.h"
 
 #include <algorithm>
@@ -62,6 +63,13 @@ const Recording& dynamic_3objects() {
     return r;
   }();
   return rec;
+}
+
+// Integer pixels with their dither, as the CMax pipelines add them.
+void push_dithered(CmaxEvents* ev, const evio::Event& e) {
+  float ox, oy;
+  evio::mapping::pixel_dither(e.t_ns, e.x, e.y, &ox, &oy);
+  ev->push_back(e.x + ox, e.y + oy, e.t_ns, e.polarity);
 }
 
 struct WindowScore {
@@ -134,6 +142,10 @@ TEST(CmaxSegmentation, DynamicThreeObjects) {
   g.fx = rec.camera.fx, g.fy = rec.camera.fy, g.cx = rec.camera.cx, g.cy = rec.camera.cy;
   SegmentationOptions o;
   o.cmax.width = rec.camera.width, o.cmax.height = rec.camera.height, o.cmax.geometry = g;
+  if (getenv("SEG_NOISE")) o.noise_support = std::stod(getenv("SEG_NOISE"));
+  if (getenv("SEG_GREEDY")) o.init = evio::mapping::SegmentationInit::kGreedy;
+  if (getenv("SEG_MAXC")) o.max_clusters = std::stoi(getenv("SEG_MAXC"));
+  if (getenv("SEG_GAIN")) o.min_cluster_gain = std::stod(getenv("SEG_GAIN"));
   MotionSegmenter seg(o);
   // ~0.1 s windows: long enough for the slow objects to move 2-5 px, short enough for the
   // sinusoidally moving ones to keep a constant velocity within about a pixel.
@@ -160,8 +172,7 @@ TEST(CmaxSegmentation, DynamicThreeObjects) {
     const int64_t t0 = rec.events[first].t_ns, t1 = rec.events[first + window - 1].t_ns;
     CmaxEvents ev((t0 + t1) / 2, g);
     ev.reserve(window);
-    for (size_t k = first; k < first + window; ++k) ev.push_back(rec.events[k].x, rec.events[k].y, rec.events[k].t_ns, rec.events[k].polarity);
-    ev.dither();
+    for (size_t k = first; k < first + window; ++k) push_dithered(&ev, rec.events[k]);
     const auto start = std::chrono::steady_clock::now();
     const auto r = seg.segment(ev, prev.empty() ? nullptr : &prev, &next_id);
     const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
@@ -321,8 +332,7 @@ TEST(CmaxSegmentation, OracleAssociations) {
   for (size_t first = 0; first + window <= rec.events.size(); first += 4 * window) {
     const int64_t t0 = rec.events[first].t_ns, t1 = rec.events[first + window - 1].t_ns;
     CmaxEvents ev((t0 + t1) / 2, g);
-    for (size_t k = first; k < first + window; ++k) ev.push_back(rec.events[k].x, rec.events[k].y, rec.events[k].t_ns, rec.events[k].polarity);
-    ev.dither();
+    for (size_t k = first; k < first + window; ++k) push_dithered(&ev, rec.events[k]);
     std::map<int, int> count;
     for (size_t k = first; k < first + window; ++k) ++count[rec.labels[k]];
     std::vector<evio::mapping::SegmentCluster> cl;

@@ -64,12 +64,6 @@ class CmaxEvents {
   // x, y in px (any finite value, outside the image too), polarity +1/-1.
   void push_back(float x, float y, int64_t t_ns, int polarity);
   void clear();
-  // Moves every event by a deterministic pseudo-random offset, uniform in [-0.5, 0.5) px per
-  // axis (seeded by `seed` and the event's index). For events on integer pixels: a pixel
-  // integrates over its area, and without the dither every event votes exactly on a pixel centre
-  // at zero motion, a spurious sharpness peak at v = 0 (and along the axes) that pulls small
-  // motions to zero. Sub-pixel input (undistorted events) needs none.
-  void dither(uint64_t seed = 1);
   // The events at the given indices (in that order), same t_ref and geometry.
   CmaxEvents select(const std::vector<uint32_t>& indices) const;
 
@@ -92,6 +86,13 @@ class CmaxEvents {
   WarpGeometry geometry_;
   double dt_min_ = 0, dt_max_ = 0;
 };
+
+// Dither for events on integer pixels: two offsets uniform in [-0.5, 0.5) from a hash
+// (splitmix64) of the event's stamp and pixel, so the same event gets the same offset whatever
+// window it falls in. A pixel integrates over its area; without a dither every event votes exactly
+// on a pixel centre at zero motion, a spurious sharpness peak at v = 0 (and along the axes) that
+// pulls small motions to zero. Sub-pixel input (undistorted events) needs none.
+void pixel_dither(int64_t t_ns, float x, float y, float* ox, float* oy);
 
 // Warps event k with parameters p (size warp_dof(m)) to t_ref + dt_shift_s. *J (optional) gets
 // d(x', y')/dp, 2 x dof. Returns false when the event does not vote (warped depth below 0.2).

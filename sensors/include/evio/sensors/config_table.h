@@ -190,6 +190,55 @@ class Table {
     });
   }
 
+  // A list of names from a fixed set, each standing for a value (a std::vector of an enum): a YAML
+  // sequence ([flow, similarity]) or one comma-separated string ("flow,similarity"); at least one,
+  // no repeats.
+  template <class G>
+  Table& choice_list(const std::string& key, G get, std::vector<std::pair<std::string, typename Field<G>::value_type>> names) {
+    using V = typename Field<G>::value_type;
+    std::string list;
+    for (const auto& n : names) list += (list.empty() ? "" : " | ") + n.first;
+    const std::string expected = "a list of " + list + " (YAML sequence or comma-separated)";
+    auto table = std::make_shared<const std::vector<std::pair<std::string, V>>>(std::move(names));
+    return add(key, expected, [get, table, expected](const Section& s, const std::string& k, T& t) {
+      const YAML::Node n = s.get(k);
+      std::vector<std::string> words;
+      if (n.IsSequence()) {
+        for (const YAML::Node& e : n) words.push_back(e.IsScalar() ? e.Scalar() : std::string());
+      } else if (n.IsScalar()) {
+        std::string w;
+        for (char c : n.Scalar() + ",") {
+          if (c == ',') {
+            words.push_back(w), w.clear();
+          } else if (c != ' ') {
+            w += c;
+          }
+        }
+      }
+      std::vector<V> out;
+      for (const std::string& w : words) {
+        bool found = false;
+        for (const auto& [name, value] : *table) {
+          if (w == name) {
+            if (std::find(out.begin(), out.end(), value) != out.end())
+              s.parser().fail(n, s.key_path(k), "'" + w + "' is listed twice", expected);
+            out.push_back(value);
+            found = true;
+          }
+        }
+        if (!found) s.parser().fail(n, s.key_path(k), "'" + w + "' is not allowed", expected);
+      }
+      if (out.empty()) s.parser().fail(n, s.key_path(k), "is empty", expected);
+      std::invoke(get, t) = out;
+    }, [get, table](const T& t) {
+      std::string text;
+      for (const V& v : std::invoke(get, const_cast<T&>(t)))
+        for (const auto& [name, value] : *table)
+          if (value == v) text += (text.empty() ? "" : ", ") + name;
+      return "[" + text + "]";
+    });
+  }
+
   // Three numbers, e.g. a vector in m/s^2.
   template <class G>
   Table& vector3(const std::string& key, G get, const std::string& unit) {
