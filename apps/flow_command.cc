@@ -55,6 +55,8 @@ const Table<C>& flow_config_table() {
                  {"lut", pipeline::CmaxUndistortion::kLut}})
         .note("undistortion",
               "auto: sub-pixel input as is, integer pixels of a distorted camera through the lookup table")
+        .number("dither_px", &C::dither_px, Range::kNonNegative, "px")
+        .note("dither_px", "integer-pixel input: each event moved by a deterministic offset within this square; 0: off")
         .section("cmax", cmax, self)
         .ignored("description")
         .validate();

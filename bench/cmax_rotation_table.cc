@@ -7,7 +7,7 @@
 //
 //   cmax_rotation_table DATASET --gt groundtruth.txt [--calib FILE] [--t-start S] [--t-end S]
 //       [--windows 5000,10000,20000] [--levels 1,2,3] [--warm-levels 0] [--blur PX] [--tolerance PX]
-//       [--max-window-ms MS]
+//       [--max-window-ms MS] [--dither PX] [--objective NAME]
 //       [--diagnose] [--csv OUT.csv] [--label NAME]
 //
 // --warm-levels: pyramid levels of warm-started windows (0: the same as cold ones). --diagnose adds,
@@ -60,7 +60,8 @@ int main(int argc, char** argv) {
   std::string dataset, gt_path, calib, csv, label = "events";
   std::vector<int64_t> windows = {5000, 10000, 20000, 40000}, levels = {1, 2, 3};
   int warm_levels = 0;
-  double blur = -1, tolerance = -1;
+  double blur = -1, tolerance = -1, dither = -1;
+  std::string objective = "auto";
   int64_t max_window_ns = 0;
   bool diagnose = false;
   int64_t t_start = INT64_MIN, t_end = INT64_MAX;
@@ -83,6 +84,8 @@ int main(int argc, char** argv) {
     else if (a == "--blur") blur = std::stod(next());
     else if (a == "--max-window-ms") max_window_ns = seconds_ns(next()) / 1000;
     else if (a == "--tolerance") tolerance = std::stod(next());
+    else if (a == "--dither") dither = std::stod(next());
+    else if (a == "--objective") objective = next();
     else if (a == "--diagnose") diagnose = true;
     else if (a == "--csv") csv = next();
     else if (a == "--label") label = next();
@@ -94,7 +97,7 @@ int main(int argc, char** argv) {
   }
   if (dataset.empty() || gt_path.empty()) {
     std::fprintf(stderr, "usage: cmax_rotation_table DATASET --gt FILE [--calib FILE] [--t-start S] [--t-end S] "
-                         "[--windows N,...] [--levels L,...] [--warm-levels L] [--blur PX] [--tolerance PX] [--max-window-ms MS] "
+                         "[--windows N,...] [--levels L,...] [--warm-levels L] [--blur PX] [--tolerance PX] [--max-window-ms MS] [--dither PX] [--objective NAME] "
                          "[--diagnose] [--csv OUT] [--label NAME]\n");
     return 2;
   }
@@ -138,6 +141,9 @@ int main(int argc, char** argv) {
         if (blur >= 0) o.cmax.blur_sigma_px = blur;
         if (tolerance > 0) o.cmax.tolerance_px = tolerance;
         o.max_window_ns = max_window_ns;
+        if (dither >= 0) o.dither_px = dither;
+        if (!evio::mapping::cmax_objective_from_name(objective)) throw std::runtime_error("unknown objective " + objective);
+        o.cmax.objective = *evio::mapping::cmax_objective_from_name(objective);
         o.window_events = W;
         o.warm_pyramid_levels = warm_levels;
         evio::pipeline::CmaxMotionPipeline p(o, 0, 0, found.camera->camera);
@@ -221,8 +227,9 @@ int main(int argc, char** argv) {
     }
 
     const evio::mapping::CmaxOptions d;
-    std::printf("\n%s: %zu events over %.2f s, rotation model, one core; blur %g px, tolerance %g px, max window %s\n\n",
-                label.c_str(), events.size(), span_s, blur >= 0 ? blur : d.blur_sigma_px, tolerance > 0 ? tolerance : d.tolerance_px,
+    std::printf("\n%s: %zu events over %.2f s, rotation model, one core; objective %s, blur %g px, tolerance %g px, dither %g px, max window %s\n\n",
+                label.c_str(), events.size(), span_s, objective.c_str(), blur >= 0 ? blur : d.blur_sigma_px,
+                tolerance > 0 ? tolerance : d.tolerance_px, dither >= 0 ? dither : evio::pipeline::CmaxMotionPipelineOptions{}.dither_px,
                 max_window_ns > 0 ? (std::to_string(static_cast<double>(max_window_ns) * 1e-6) + " ms").c_str() : "none");
     std::printf("| events/window | window ms | levels (cold/warm) | windows | RMS error deg/s | median | max | rel. RMS %% | us/event | ms/window | iterations | resets |%s\n",
                 diagnose ? " from-truth RMS deg/s | est. > truth |" : "");

@@ -36,6 +36,7 @@ bool CmaxMotionPipelineOptions::Validate(std::string* why) const {
   if (max_window_ns < 0) return fail("max_window_ns must be >= 0 (0: no limit)");
   if (min_window_events < 1) return fail("min_window_events must be >= 1");
   if (warm_pyramid_levels < 0 || warm_pyramid_levels > 8) return fail("warm_pyramid_levels must be in [0, 8] (0: cmax.pyramid_levels)");
+  if (!(dither_px >= 0 && dither_px <= 4)) return fail("dither_px must be in [0, 4] px");
   return true;
 }
 
@@ -53,6 +54,18 @@ const CmaxMotionPipelineOptions& checked(const CmaxMotionPipelineOptions& o, int
   if (o.undistortion == CmaxUndistortion::kLut && !camera)
     throw std::invalid_argument("CmaxMotionPipeline: undistortion 'lut' needs a camera calibration");
   return o;
+}
+
+// Two numbers uniform in [-0.5, 0.5) from an event's stamp and pixel (splitmix64).
+inline void event_hash_offsets(int64_t t_ns, float x, float y, float* ox, float* oy) {
+  uint64_t z = static_cast<uint64_t>(t_ns) * 0x9E3779B97F4A7C15ull ^
+               (static_cast<uint64_t>(static_cast<uint32_t>(static_cast<int32_t>(x))) << 32 |
+                static_cast<uint32_t>(static_cast<int32_t>(y)));
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+  z ^= z >> 31;
+  *ox = static_cast<float>(static_cast<double>(z >> 40) * 0x1.0p-24 - 0.5);
+  *oy = static_cast<float>(static_cast<double>((z >> 16) & 0xFFFFFF) * 0x1.0p-24 - 0.5);
 }
 
 bool has_distortion(const calib::PinholeCamera& c) {
@@ -149,6 +162,12 @@ std::vector<CmaxMotionWindow> CmaxMotionPipeline::take_windows() {
   return out;
 }
 
+bool CmaxMotionPipeline::integer_window() const {
+  for (const SubpixelEvent& e : buf_)
+    if (e.x != std::floor(e.x) || e.y != std::floor(e.y)) return false;
+  return true;
+}
+
 void CmaxMotionPipeline::decide_undistortion() {
   if (!undistorter_) {
     undistortion_ = CmaxUndistortion::kNone;
@@ -185,9 +204,14 @@ void CmaxMotionPipeline::close_window(int64_t t_start_ns, int64_t t_end_ns) {
     return;
   }
   if (undistortion_ == CmaxUndistortion::kAuto) decide_undistortion();
+  if (!input_checked_) {  // integer or sub-pixel input, decided on the first window
+    integer_input_ = integer_window();
+    input_checked_ = true;
+  }
   using clock = std::chrono::steady_clock;
   const auto c0 = clock::now();
   const int64_t t_ref = t_start_ns + (t_end_ns - t_start_ns) / 2;
+  const float dither = static_cast<float>(o_.dither_px);
   mapping::CmaxEvents ev(t_ref, cold_->options().geometry);
   ev.reserve(buf_.size());
   if (undistortion_ == CmaxUndistortion::kLut) {
@@ -203,7 +227,13 @@ void CmaxMotionPipeline::close_window(int64_t t_start_ns, int64_t t_end_ns) {
         continue;
       }
       const Eigen::Vector2f& u = undistorter_->undistorted(xi, yi);
-      ev.push_back(u.x(), u.y(), e.t_ns, e.polarity);
+      if (dither > 0) {
+        float ox, oy;
+        event_hash_offsets(e.t_ns, rx, ry, &ox, &oy);
+        ev.push_back(u.x() + dither * ox, u.y() + dither * oy, e.t_ns, e.polarity);
+      } else {
+        ev.push_back(u.x(), u.y(), e.t_ns, e.polarity);
+      }
     }
   } else {
     for (const SubpixelEvent& e : buf_) {
@@ -211,7 +241,13 @@ void CmaxMotionPipeline::close_window(int64_t t_start_ns, int64_t t_end_ns) {
         ++stats_.events_dropped;
         continue;
       }
-      ev.push_back(e.x, e.y, e.t_ns, e.polarity);
+      if (integer_input_ && dither > 0) {
+        float ox, oy;
+        event_hash_offsets(e.t_ns, e.x, e.y, &ox, &oy);
+        ev.push_back(e.x + dither * ox, e.y + dither * oy, e.t_ns, e.polarity);
+      } else {
+        ev.push_back(e.x, e.y, e.t_ns, e.polarity);
+      }
     }
   }
   buf_.clear();

@@ -108,6 +108,7 @@ TEST(FlowCommand, FlowModelOutputs) {
   a.out = dir.file("out");
   a.model = "flow";
   a.window_events = 2000;
+  a.set = {"window.max_duration_ms=0"};  // 2000 events span 40 ms here
   a.png = true;
   a.png_every = 2;
   a.progress = false;
@@ -176,6 +177,7 @@ TEST(FlowCommand, RotationWithGroundTruth) {
   a.out = dir.file("out");
   a.model = "rotation";
   a.window_events = 3000;
+  a.set = {"window.max_duration_ms=0"};  // 3000 events span 60 ms here
   a.progress = false;
   std::ostringstream out;
   ASSERT_EQ(run_flow(a, out), 0);

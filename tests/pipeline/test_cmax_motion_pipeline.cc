@@ -57,6 +57,14 @@ std::vector<CmaxMotionWindow> run(CmaxMotionPipeline& p, const std::vector<Subpi
   return out;
 }
 
+// Windows of n events without the 25 ms cap (the synthetic streams are slow: 20 us per event).
+CmaxMotionPipelineOptions event_windows(int64_t n) {
+  CmaxMotionPipelineOptions o;
+  o.window_events = n;
+  o.max_window_ns = 0;
+  return o;
+}
+
 calib::PinholeCamera distorted_camera() {
   calib::CameraIntrinsics in = test_camera().camera.intrinsics();
   in.model = calib::DistortionModel::kRadtan;
@@ -111,8 +119,7 @@ TEST(CmaxMotionPipeline, ConstructionErrors) {
 
 TEST(CmaxMotionPipeline, EventWindowsRecoverAConstantFlowWithWarmStarts) {
   const Eigen::Vector2d v(300, -150);
-  CmaxMotionPipelineOptions o;
-  o.window_events = 3000;
+  CmaxMotionPipelineOptions o = event_windows(3000);
   CmaxMotionPipeline p(o, 240, 180, test_camera().camera);
   const auto ev = moving_dots(v, 10'500);
   const auto w = run(p, ev);
@@ -166,8 +173,7 @@ TEST(CmaxMotionPipeline, TimeWindowsSkipSparseAndEmptyOnes) {
 }
 
 TEST(CmaxMotionPipeline, ATailShorterThanHalfAWindowIsDroppedUnlessItIsTheOnlyOne) {
-  CmaxMotionPipelineOptions o;
-  o.window_events = 3000;
+  CmaxMotionPipelineOptions o = event_windows(3000);
   {
     CmaxMotionPipeline p(o, 240, 180, std::nullopt);
     EXPECT_EQ(run(p, moving_dots(Eigen::Vector2d(100, 0), 4400)).size(), 1u);  // tail of 1400 < 1500
@@ -190,8 +196,7 @@ TEST(CmaxMotionPipeline, ATailShorterThanHalfAWindowIsDroppedUnlessItIsTheOnlyOn
 }
 
 TEST(CmaxMotionPipeline, WarmStartIsResetWhenZeroMotionScoresHigher) {
-  CmaxMotionPipelineOptions o;
-  o.window_events = 3000;
+  CmaxMotionPipelineOptions o = event_windows(3000);
   CmaxMotionPipeline p(o, 240, 180, test_camera().camera);
   auto ev = moving_dots(Eigen::Vector2d(800, 400), 3000);
   auto still = moving_dots(Eigen::Vector2d(0, 0), 3000, ev.back().t_ns + 20'000);
@@ -205,8 +210,7 @@ TEST(CmaxMotionPipeline, WarmStartIsResetWhenZeroMotionScoresHigher) {
 }
 
 TEST(CmaxMotionPipeline, UndistortionAutoChoosesByInput) {
-  CmaxMotionPipelineOptions o;
-  o.window_events = 2000;
+  CmaxMotionPipelineOptions o = event_windows(2000);
   {
     CmaxMotionPipeline p(o, 240, 180, distorted_camera());
     run(p, moving_dots(Eigen::Vector2d(100, 50), 2000));
@@ -235,9 +239,33 @@ TEST(CmaxMotionPipeline, UndistortionAutoChoosesByInput) {
   }
 }
 
+TEST(CmaxMotionPipeline, DitherMovesIntegerInputOnlyAndIsDeterministic) {
+  CmaxMotionPipelineOptions o = event_windows(2000);
+  o.keep_iwe = true;
+  auto estimate = [&](double dither, bool subpixel) {
+    o.dither_px = dither;
+    CmaxMotionPipeline p(o, 240, 180, distorted_camera());
+    return run(p, moving_dots(Eigen::Vector2d(200, -80), 4000, 0, subpixel));
+  };
+  for (bool subpixel : {false, true}) {
+    const auto a = estimate(1.0, subpixel), b = estimate(1.0, subpixel), plain = estimate(0.0, subpixel);
+    ASSERT_EQ(a.size(), 2u);
+    for (size_t k = 0; k < a.size(); ++k) {
+      EXPECT_EQ(a[k].params, b[k].params);  // the offsets come from the events, not from a stream
+      if (subpixel) {
+        EXPECT_EQ(a[k].params, plain[k].params);
+      } else {
+        EXPECT_NE(a[k].params, plain[k].params);
+        EXPECT_LT((a[k].params - Eigen::Vector2d(200, -80)).norm(), 20.0);  // radtan: undistorted px/s
+      }
+    }
+  }
+  o.dither_px = -1;
+  testing::expect_rejected(o, "dither_px");
+}
+
 TEST(CmaxMotionPipeline, ExtremesGiveFiniteResultsOrNone) {
-  CmaxMotionPipelineOptions o;
-  o.window_events = 1000;
+  CmaxMotionPipelineOptions o = event_windows(1000);
   o.min_window_events = 1;
   o.keep_iwe = true;
   {  // no events
@@ -331,7 +359,7 @@ TEST(CmaxMotionPipelineSimulated, PosterRotationAngularVelocity) {
   CmaxMotionPipeline p(o, 0, 0, s.camera.camera);
   const auto w = run(p, s.events);
   EXPECT_EQ(p.undistortion(), CmaxUndistortion::kLut);
-  ASSERT_GT(w.size(), 50u);
+  ASSERT_GE(w.size(), 20u);  // 25 ms windows (the cap) over 0.6 s
   double s2 = 0, r2 = 0;
   for (const auto& x : w) {
     const Eigen::Vector3d e = (x.params - true_rate(s, x.t_start_ns, x.t_end_ns)) * 180 / M_PI;
@@ -343,7 +371,7 @@ TEST(CmaxMotionPipelineSimulated, PosterRotationAngularVelocity) {
   std::printf("poster_rotation 0.6 s: %zu windows, angular velocity error RMS %.3f deg/s (true rate RMS %.1f deg/s), %lld resets\n",
               w.size(), rms, rate_rms, static_cast<long long>(p.stats().resets));
   EXPECT_GT(rate_rms, 100.0);
-  EXPECT_LT(rms, 1000.0);
+  EXPECT_LT(rms, 2.0);  // measured 1.49 deg/s (the simulation and the pipeline are deterministic)
 }
 
 }  // namespace

@@ -44,17 +44,27 @@ struct CmaxMotionPipelineOptions {
   // 6-DoF depth (m) or plane. width, height and geometry fx fy cx cy are the camera's (set by the
   // pipeline from the camera, or the sensor size without one).
   mapping::CmaxOptions cmax;
-  int64_t window_events = 15000;   // events per window (> 0), used when window_ns is 0
+  // Defaults from the simulated poster_rotation / boxes_rotation (DAVIS240C, 3 and 6 M events/s,
+  // up to ~250 deg/s; README, `evio flow`): a window needs several pixels of motion (15k events,
+  // ~5 ms: 19 deg/s RMS; 120k events or 25 ms: 1.5 and 2.7 deg/s), and no more than ~25 ms of it
+  // under 17 rad/s^2 (longer windows at slow motion went 8-11 deg/s off).
+  int64_t window_events = 120000;  // events per window (> 0), used when window_ns is 0
   int64_t window_ns = 0;           // window duration, ns (>= 0; > 0: windows of this duration instead)
   // Event windows also close when they span this long, ns (0: no limit): slow motion then does not
   // stretch a window over a change of velocity the constant-velocity warp cannot follow.
-  int64_t max_window_ns = 0;
+  int64_t max_window_ns = 25'000'000;
   int64_t min_window_events = 50;  // windows with fewer events are not estimated (>= 1)
   bool warm_start = true;          // start each window from the previous window's parameters
   // Pyramid levels of a warm-started window (0: cmax.pyramid_levels; 1 .. 8). A warm start is
-  // already near the optimum, so the coarse levels that give a cold start its reach can go.
-  int warm_pyramid_levels = 0;
+  // already near the optimum, so the coarse levels that give a cold start its reach can go (boxes,
+  // 10 s, 120k events: 1 level 2.7 deg/s, 3 levels 4.3 deg/s and 1.7x the time).
+  int warm_pyramid_levels = 1;
   CmaxUndistortion undistortion = CmaxUndistortion::kAuto;
+  // Integer-pixel input only: each event is moved by an offset uniform in [-dither_px/2,
+  // dither_px/2]^2 (px, >= 0; 0: off), drawn from a hash of its stamp and pixel (deterministic,
+  // whatever the windows). Without it the events of one pixel stack exactly at zero motion, which
+  // pulls the estimate towards zero where the motion is small (the roll about the optical axis).
+  double dither_px = 1.0;
   bool keep_iwe = false;           // each window carries its IWE before and after warping (unblurred)
 
   bool Validate(std::string* why) const;
@@ -122,6 +132,7 @@ class CmaxMotionPipeline {
  private:
   void close_window(int64_t t_start_ns, int64_t t_end_ns);
   void decide_undistortion();
+  bool integer_window() const;  // every coordinate of the open window is an integer
 
   CmaxMotionPipelineOptions o_;
   int width_, height_;
@@ -130,6 +141,7 @@ class CmaxMotionPipeline {
   std::string distortion_name_;
   CmaxUndistortion undistortion_ = CmaxUndistortion::kAuto;
   std::string undistortion_reason_;
+  bool input_checked_ = false, integer_input_ = false;
   std::unique_ptr<mapping::ContrastMaximizer> cold_, warm_;
   std::vector<SubpixelEvent> buf_;  // the open window's events
   bool started_ = false;
