@@ -146,29 +146,45 @@ int main(int argc, char** argv) {
         o.cmax.objective = *evio::mapping::cmax_objective_from_name(objective);
         o.window_events = W;
         o.warm_pyramid_levels = warm_levels;
+        o.keep_events = diagnose;
         evio::pipeline::CmaxMotionPipeline p(o, 0, 0, found.camera->camera);
-        std::vector<evio::pipeline::CmaxMotionWindow> w;
-        for (const auto& e : events) {
-          if (p.process(e))
-            for (auto& x : p.take_windows()) w.push_back(std::move(x));
-        }
-        p.finish();
-        for (auto& x : p.take_windows()) w.push_back(std::move(x));
-        std::vector<Eigen::Vector3d> est, ref;
+        // --diagnose, per window as it comes (its events are dropped after): the maximiser on the
+        // same prepared events started from the true rate, and the objective there and at the estimate.
+        evio::mapping::CmaxOptions co = p.cmax_options();
+        co.pyramid_levels = 1;
+        evio::mapping::ContrastMaximizer m(co);
+        std::vector<Eigen::Vector3d> est, ref, from_truth;
+        size_t above = 0, compared = 0, n_windows = 0;
         double span_ms = 0;
-        for (const auto& x : w) {
-          est.push_back(x.params);
-          ref.push_back(evio::evaluation::trajectory_angular_velocity(gt, x.t_start_ns, x.t_end_ns, b2c)
-                            .value_or(Eigen::Vector3d::Constant(NAN)));
-          span_ms += static_cast<double>(x.t_end_ns - x.t_start_ns) * 1e-6;
-        }
+        auto take = [&]() {
+          for (auto& x : p.take_windows()) {
+            ++n_windows;
+            const Eigen::Vector3d g = evio::evaluation::trajectory_angular_velocity(gt, x.t_start_ns, x.t_end_ns, b2c)
+                                          .value_or(Eigen::Vector3d::Constant(NAN));
+            est.push_back(x.params);
+            ref.push_back(g);
+            span_ms += static_cast<double>(x.t_end_ns - x.t_start_ns) * 1e-6;
+            if (!diagnose) continue;
+            if (!g.allFinite()) {
+              from_truth.push_back(Eigen::Vector3d::Constant(NAN));
+              continue;
+            }
+            from_truth.push_back(m.maximize(x.prepared, g).params);
+            above += m.objective(x.prepared, x.params, 0) > m.objective(x.prepared, g, 0);
+            ++compared;
+          }
+        };
+        for (const auto& e : events)
+          if (p.process(e)) take();
+        p.finish();
+        take();
         const auto e = evio::evaluation::angular_velocity_errors(est, ref);
         const auto& st = p.stats();
         Row r;
         r.window_events = W;
         r.levels = static_cast<int>(L);
         r.warm_levels = warm_levels > 0 ? warm_levels : static_cast<int>(L);
-        r.windows = w.size();
+        r.windows = n_windows;
         r.rms_degps = e.rms_degps;
         r.median_degps = e.median_degps;
         r.max_degps = e.max_degps;
@@ -177,46 +193,9 @@ int main(int argc, char** argv) {
         r.ms_per_window = st.windows > 0 ? st.time_ms / static_cast<double>(st.windows) : 0;
         r.iterations = st.windows > 0 ? static_cast<double>(st.iterations) / static_cast<double>(st.windows) : 0;
         r.resets = st.resets;
-        r.mean_window_ms_span = w.empty() ? 0 : span_ms / static_cast<double>(w.size());
+        r.mean_window_ms_span = n_windows == 0 ? 0 : span_ms / static_cast<double>(n_windows);
         if (diagnose) {
-          // Rebuild every window as the pipeline did (events -> undistorted pinhole, t_ref = middle)
-          // and maximise from the true rate; compare the objective at the truth and at the estimate.
-          evio::mapping::CmaxOptions co = p.cmax_options();
-          co.pyramid_levels = 1;
-          evio::mapping::ContrastMaximizer m(co);
-          std::vector<Eigen::Vector3d> from_truth, truth;
-          size_t above = 0, compared = 0, k = 0;
-          const bool lut = p.undistortion() == evio::pipeline::CmaxUndistortion::kLut;
-          evio::calib::UndistortionLut lutab(found.camera->camera);
-          const auto& K = found.camera->camera.intrinsics();
-          for (size_t i = 0; i < w.size(); ++i) {
-            const auto& x = w[i];
-            while (k < events.size() && events[k].t_ns < x.t_start_ns) ++k;
-            evio::mapping::CmaxEvents ev(x.t_ref_ns, co.geometry);
-            for (size_t j = k; j < events.size() && events[j].t_ns <= x.t_end_ns && static_cast<int64_t>(ev.size()) < x.events; ++j) {
-              const auto& s = events[j];
-              if (lut) {
-                const int xi = static_cast<int>(std::lround(s.x)), yi = static_cast<int>(std::lround(s.y));
-                if (xi < 0 || yi < 0 || xi >= K.width || yi >= K.height || !lutab.valid(xi, yi)) continue;
-                const Eigen::Vector2f n = lutab.normalized(xi, yi);
-                ev.push_back(static_cast<float>(K.fx * n.x() + K.cx), static_cast<float>(K.fy * n.y() + K.cy), s.t_ns, s.polarity);
-              } else {
-                ev.push_back(s.x, s.y, s.t_ns, s.polarity);
-              }
-            }
-            if (!ref[i].allFinite()) {
-              from_truth.push_back(Eigen::Vector3d::Constant(NAN));
-              truth.push_back(ref[i]);
-              continue;
-            }
-            const evio::mapping::CmaxResult r2 = m.maximize(ev, ref[i]);
-            from_truth.push_back(r2.params);
-            truth.push_back(ref[i]);
-            const double f_est = m.objective(ev, x.params, 0), f_true = m.objective(ev, ref[i], 0);
-            above += f_est > f_true;
-            ++compared;
-          }
-          r.from_truth_rms_degps = evio::evaluation::angular_velocity_errors(from_truth, truth).rms_degps;
+          r.from_truth_rms_degps = evio::evaluation::angular_velocity_errors(from_truth, ref).rms_degps;
           r.estimate_above_truth = compared ? static_cast<double>(above) / static_cast<double>(compared) : NAN;
         }
         rows.push_back(r);

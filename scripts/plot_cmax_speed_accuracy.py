@@ -1,8 +1,8 @@
 #!/usr/bin/python3
 """Speed-accuracy curves of the CMax angular-velocity front-end from the csv files written by
 bench/cmax_rotation_table (one or more, e.g. one per scene): time per event (us, x) against the
-RMS angular-velocity error (deg/s, y), one curve per scene and pyramid-level count, each point one
-events-per-window setting (labelled). Dashed lines: the targets (0.5 us/event, 2 deg/s).
+RMS angular-velocity error (deg/s, y), one curve per csv label (colour) and pyramid-level count
+(marker and line style), each point one events-per-window setting (labelled). Dashed lines: the targets (0.5 us/event, 2 deg/s).
 
     scripts/plot_cmax_speed_accuracy.py poster.csv boxes.csv -o speed_accuracy.png
 
@@ -39,7 +39,8 @@ def main():
     fig, ax = plt.subplots(figsize=(8, 5.5))
     markers = "osD^vP*X"
     labels = sorted({k[0] for k in curves})
-    styles = ["-", "--", ":", "-."]
+    styles = ["-", "--", ":", "-.", (0, (5, 1))]
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for (label, levels, warm), pts in sorted(curves.items()):
         pts.sort(key=lambda p: p[2])
         xs = [p[0] for p in pts]
@@ -47,7 +48,9 @@ def main():
         name = "%s, %d level%s" % (label, levels, "" if levels == 1 else "s")
         if warm != levels:
             name += " (warm %d)" % warm
-        ax.plot(xs, ys, styles[labels.index(label) % len(styles)], marker=markers[(levels - 1) % len(markers)], label=name)
+        # colour: the csv label (scene, objective); marker and line: the pyramid levels
+        ax.plot(xs, ys, linestyle=styles[(levels - 1) % len(styles)], marker=markers[(levels - 1) % len(markers)],
+                color=colours[labels.index(label) % len(colours)], label=name)
         for x, y, n in pts:
             ax.annotate("%gk" % (n / 1000.0), (x, y), textcoords="offset points", xytext=(4, 4), fontsize=7)
     ax.axvline(0.5, color="grey", linestyle="--", linewidth=0.8)

@@ -291,6 +291,7 @@ void CmaxMotionPipeline::close_window(int64_t t_start_ns, int64_t t_end_ns) {
     w.iwe_zero = cold_->iwe(ev, Eigen::VectorXd::Zero(mapping::warp_dof(w.model)), nullptr, false);
     w.iwe = cold_->iwe(ev, w.params, nullptr, false);
   }
+  if (o_.keep_events) w.prepared = std::move(ev);
   ++stats_.windows;
   stats_.events_used += w.events;
   stats_.warm_starts += warm ? 1 : 0;

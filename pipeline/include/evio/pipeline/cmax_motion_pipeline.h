@@ -66,6 +66,7 @@ struct CmaxMotionPipelineOptions {
   // pulls the estimate towards zero where the motion is small (the roll about the optical axis).
   double dither_px = 1.0;
   bool keep_iwe = false;           // each window carries its IWE before and after warping (unblurred)
+  bool keep_events = false;        // each window carries its prepared events (diagnostics)
 
   bool Validate(std::string* why) const;
 };
@@ -88,6 +89,7 @@ struct CmaxMotionWindow {
   std::string stop;               // mapping::CmaxResult::stop of the kept run
   double time_ms = 0;             // wall time of this window (preparation + maximisation), ms
   mapping::ImageF iwe_zero, iwe;  // with keep_iwe: IWE at zero motion and at params
+  mapping::CmaxEvents prepared;   // with keep_events: the events as maximised (undistorted, dithered)
 };
 
 struct CmaxMotionStats {
