@@ -15,6 +15,7 @@
 #include "evio/frontend/event_frame.h"
 #include "evio/frontend/feature_tracker.h"
 #include "evio/frontend/rotation_particle_filter.h"
+#include "evio/mapping/cmax.h"
 #include "evio/mapping/contrast_maximization.h"
 #include "evio/mapping/gradient_mosaic.h"
 #include "evio/mapping/mosaic_image.h"
@@ -43,6 +44,8 @@ const yaml_config::Table<backend::VisualInertialInitOptions>& visual_inertial_in
 // GradientMosaicOptions with its Poisson solvers' keys (weight_floor, pcg_*, poisson_boundary, ...).
 const yaml_config::Table<mapping::GradientMosaicOptions>& gradient_mosaic_table();
 const yaml_config::Table<mapping::RotationalCmaxOptions>& rotational_cmax_table();
+// CmaxOptions (mapping/cmax.h): model, objective, IWE size, blur, pyramid, BFGS stopping, pinhole, 6dof depth/plane.
+const yaml_config::Table<mapping::CmaxOptions>& cmax_table();
 const yaml_config::Table<mapping::RotationRelocalizationOptions>& relocalization_table();
 const yaml_config::Table<mapping::LogImageDisplayOptions>& log_image_display_table();
 

@@ -57,6 +57,45 @@ const Table<mapping::RotationalCmaxOptions>& rotational_cmax_table() {
   return t;
 }
 
+const Table<mapping::CmaxOptions>& cmax_table() {
+  using O = mapping::CmaxOptions;
+  using mapping::CmaxObjective;
+  using mapping::WarpModel;
+  static const Table<O> t =
+      Table<O>("contrast maximisation settings")
+          .choice("model", &O::model,
+                  {{"flow", WarpModel::kFlow},
+                   {"similarity", WarpModel::kSimilarity},
+                   {"rotation", WarpModel::kRotation},
+                   {"6dof", WarpModel::kSixDof}})
+          .choice("objective", &O::objective,
+                  {{"auto", CmaxObjective::kAuto},
+                   {"variance", CmaxObjective::kVariance},
+                   {"mean_square", CmaxObjective::kMeanSquare},
+                   {"gradient_magnitude", CmaxObjective::kGradientMagnitude},
+                   {"normalized_gradient_magnitude", CmaxObjective::kNormalizedGradientMagnitude}})
+          .note("objective", "auto: variance for flow and rotation, normalized_gradient_magnitude for similarity and 6dof")
+          .integer("width", &O::width, 1, 100000)
+          .integer("height", &O::height, 1, 100000)
+          .number("blur_sigma_px", &O::blur_sigma_px, Range::kNonNegative, "px of each pyramid level")
+          .boolean("use_polarity", &O::use_polarity)
+          .integer("pyramid_levels", &O::pyramid_levels, 1, 8)
+          .integer("max_iterations", &O::max_iterations, 1, 1000000)
+          .number("tolerance_px", &O::tolerance_px, Range::kPositive, "px")
+          .integer("max_events_coarse", &O::max_events_coarse, 0, 1000000000)
+          .note("max_events_coarse", "0: all events on every level")
+          .number("fx", [](O& o) -> double& { return o.geometry.fx; }, Range::kPositive, "px")
+          .number("fy", [](O& o) -> double& { return o.geometry.fy; }, Range::kPositive, "px")
+          .number("cx", [](O& o) -> double& { return o.geometry.cx; }, Range::kAny, "px")
+          .number("cy", [](O& o) -> double& { return o.geometry.cy; }, Range::kAny, "px")
+          .number("depth_m", [](O& o) -> double& { return o.geometry.depth_m; }, Range::kPositive, "m")
+          .vector3("plane_normal", [](O& o) -> Eigen::Vector3d& { return o.geometry.plane_normal_c; }, "camera frame")
+          .number("plane_distance_m", [](O& o) -> double& { return o.geometry.plane_distance_m; }, Range::kNonNegative, "m")
+          .note("plane_distance_m", "6dof: > 0 uses the plane n.X = distance instead of depth_m")
+          .validate();
+  return t;
+}
+
 const Table<mapping::RotationRelocalizationOptions>& relocalization_table() {
   using O = mapping::RotationRelocalizationOptions;
   static const Table<O> t = Table<O>("relocalisation settings")

@@ -44,6 +44,10 @@ inline constexpr SubcommandInfo kSubcommands[] = {
     {"mosaic",
      "Rotational tracking and panorama mosaicing (particle filter on SO(3), gradient EKF, Poisson): events -> "
      "rotation.tum, panorama.png, stats.json (and eval.json with --gt)"},
+    {"flow",
+     "Motion per event window by contrast maximisation (optical flow, rotation, similarity or 6-DoF; Gallego et al. "
+     "CVPR 2018): motion.csv, stats.json, optional IWE PNGs, and with --gt for rotation the angular-velocity error "
+     "(motion_eval.csv)"},
 };
 
 // The summary of a subcommand, or nullptr for an unknown name.

@@ -1,0 +1,429 @@
+#include "flow_command.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <ostream>
+#include <sstream>
+
+#include <opencv2/core.hpp>
+
+#include "evio/calib/error.h"
+#include "evio/calib/log.h"
+#include "evio/evaluation/angular_velocity.h"
+#include "evio/sensors/config_table.h"
+#include "evio/sensors/dataset_calibration.h"
+#include "evio/sensors/image_io.h"
+#include "evio/sensors/time.h"
+#include "evio/sensors/trajectory.h"
+#include "json_util.h"
+#include "option_tables.h"
+#include "progress.h"
+
+namespace evio::apps {
+namespace {
+
+namespace fs = std::filesystem;
+using yaml_config::Range;
+using yaml_config::Table;
+using C = FlowConfig;
+
+// The table of `--config` and `--set`: the window, the undistortion and the maximiser's options
+// (cmax_table without the keys the camera gives).
+const Table<C>& flow_config_table() {
+  static const Table<C> table = [] {
+    auto self = [](C& c) -> C& { return c; };
+    Table<C> window("window settings");
+    window.integer("events", &C::window_events, 1, 1000000000)
+        .duration_ms("duration_ms", &C::window_ns, Range::kNonNegative)
+        .note("duration_ms", "0: windows of `events` events; > 0: windows of this duration instead")
+        .duration_ms("max_duration_ms", &C::max_window_ns, Range::kNonNegative)
+        .note("max_duration_ms", "event windows also close when they span this long; 0: no limit")
+        .integer("min_events", &C::min_window_events, 1, 1000000000)
+        .boolean("warm_start", &C::warm_start)
+        .integer("warm_pyramid_levels", &C::warm_pyramid_levels, 0, 8)
+        .note("warm_pyramid_levels", "0: cmax.pyramid_levels");
+    Table<C> cmax("contrast maximisation settings");
+    cmax.include(cmax_table(), &C::cmax, {"width", "height", "fx", "fy", "cx", "cy"});  // those: the camera's
+    Table<C> top("flow settings");
+    top.section("window", window, self)
+        .choice("undistortion", &C::undistortion,
+                {{"auto", pipeline::CmaxUndistortion::kAuto},
+                 {"none", pipeline::CmaxUndistortion::kNone},
+                 {"lut", pipeline::CmaxUndistortion::kLut}})
+        .note("undistortion",
+              "auto: sub-pixel input as is, integer pixels of a distorted camera through the lookup table")
+        .number("dither_px", &C::dither_px, Range::kNonNegative, "px")
+        .note("dither_px", "integer-pixel input: each event moved by a deterministic offset within this square; 0: off")
+        .section("cmax", cmax, self)
+        .ignored("description")
+        .validate();
+    return top;
+  }();
+  return table;
+}
+
+// Writes with a check at close: a full disk is an error naming the file, not a short file.
+class TextOut {
+ public:
+  explicit TextOut(const std::string& path) : path_(path), f_(std::fopen(path.c_str(), "wb")) {
+    if (!f_) throw InputError(path, 0, "cannot create the file", "a writable output folder");
+  }
+  ~TextOut() {
+    if (f_) std::fclose(f_);
+  }
+  TextOut(const TextOut&) = delete;
+  TextOut& operator=(const TextOut&) = delete;
+  std::FILE* get() { return f_; }
+  void close() {
+    const bool ok = std::ferror(f_) == 0;
+    const bool closed = std::fclose(f_) == 0;
+    f_ = nullptr;
+    if (!ok || !closed) throw InputError(path_, 0, "write failed (disk full?)", "a writable output folder");
+  }
+
+ private:
+  std::string path_;
+  std::FILE* f_;
+};
+
+std::string num(double v) { return json_number(v, 9); }
+std::string str(const std::string& s) { return "\"" + json_escape(s) + "\""; }
+std::string vec3(const Eigen::Vector3d& v) { return "[" + num(v.x()) + ", " + num(v.y()) + ", " + num(v.z()) + "]"; }
+
+// The display scale of an IWE pair: the 99th percentile of the warped IWE's non-zero magnitudes
+// (a few hot pixels do not set the range), at least 1 event.
+double robust_scale(const mapping::ImageF& img) {
+  std::vector<float> v;
+  v.reserve(static_cast<size_t>(img.size()));
+  for (Eigen::Index i = 0; i < img.size(); ++i)
+    if (img.data()[i] != 0.0f) v.push_back(std::fabs(img.data()[i]));
+  if (v.empty()) return 1.0;
+  const size_t k = std::min(v.size() - 1, static_cast<size_t>(0.99 * static_cast<double>(v.size())));
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
+  return std::max(1.0, static_cast<double>(v[k]));
+}
+
+// 8-bit grey PNG: counts 0 .. scale -> 0 .. 255 (clipped); signed (polarity) IWEs around 128.
+void write_iwe_png(const std::string& path, const mapping::ImageF& img, double scale, bool is_signed) {
+  cv::Mat m(static_cast<int>(img.rows()), static_cast<int>(img.cols()), CV_8UC1);
+  for (int j = 0; j < m.rows; ++j) {
+    for (int i = 0; i < m.cols; ++i) {
+      const double v = img(j, i) / scale;
+      const double g = is_signed ? 127.5 + 127.5 * v : 255.0 * v;
+      m.at<uint8_t>(j, i) = static_cast<uint8_t>(std::clamp(std::lround(g), 0L, 255L));
+    }
+  }
+  if (!write_image(path, m)) throw InputError(path, 0, "cannot write the PNG", "a writable output folder");
+}
+
+struct WindowRecord {
+  int64_t t0 = 0, t1 = 0;
+  Eigen::VectorXd params;
+  double time_ms = 0;
+  int iterations = 0;
+};
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  const size_t n = v.size();
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+}  // namespace
+
+FlowConfig load_flow_config(const std::string& path, const std::vector<std::string>& sets) {
+  return yaml_config::read_config(flow_config_table(), FlowConfig{}, path, sets,
+                                  "a flow config YAML (see README.md, `evio flow`)");
+}
+
+std::string flow_config_text(const FlowConfig& c) {
+  return yaml_config::config_text(flow_config_table(), c,
+                                  "# evio flow configuration, resolved: every key with the value used (comments: unit "
+                                  "and range).\n# Readable by `evio flow --config`. cmax.width/height/fx/fy/cx/cy: the "
+                                  "camera's.\n");
+}
+
+FlowConfig resolve_flow_config(const FlowArgs& args) {
+  FlowConfig cfg = load_flow_config(args.config, args.set);
+  if (!args.model.empty()) {
+    const auto m = mapping::warp_model_from_name(args.model);
+    if (!m) throw InputError("--model", 0, "unknown model '" + args.model + "'", "flow, rotation, similarity or 6dof");
+    cfg.cmax.model = *m;
+  }
+  if (!args.objective.empty()) {
+    const auto o = mapping::cmax_objective_from_name(args.objective);
+    if (!o) throw InputError("--objective", 0, "unknown objective '" + args.objective + "'",
+                             "auto, variance, mean_square, gradient_magnitude or normalized_gradient_magnitude");
+    cfg.cmax.objective = *o;
+  }
+  if (args.window_events > 0) {
+    cfg.window_events = args.window_events;
+    cfg.window_ns = 0;
+  }
+  if (args.window_ns > 0) cfg.window_ns = args.window_ns;
+  if (args.pyramid_levels > 0) cfg.cmax.pyramid_levels = args.pyramid_levels;
+  {
+    std::string why;
+    if (!cfg.Validate(&why)) throw InputError(args.config.empty() ? "the flags" : args.config, 0, why, "valid flow settings");
+  }
+  return cfg;
+}
+
+int run_flow(const FlowArgs& args, std::ostream& out) {
+  FlowConfig cfg = resolve_flow_config(args);
+  if (args.t_start_ns && args.t_end_ns && *args.t_end_ns <= *args.t_start_ns)
+    throw InputError("--t-end", 0, "--t-end must be after --t-start", "--t-start S --t-end S with S in seconds");
+  if (args.png_every < 1) throw InputError("--png-every", 0, "must be >= 1", "a positive window count");
+  const mapping::WarpModel model = cfg.cmax.model;
+  const bool rotation = model == mapping::WarpModel::kRotation;
+
+  auto reader = open_dataset(args.dataset, args.dataset_options);
+  const DatasetCalibration found = find_dataset_calibration(args.dataset, args.calib, *reader);
+  std::optional<calib::PinholeCamera> camera;
+  if (found.camera) camera = found.camera->camera;
+  SensorSize sensor = reader->sensor_size();
+  if (camera) sensor = {camera->width(), camera->height()};
+  if (!sensor.known())
+    throw InputError(args.dataset, 0, "the sensor size is unknown (no calibration in the dataset)",
+                     "--calib FILE (Kalibr camchain YAML or ECD calib.txt) or --sensor WxH");
+  const bool three_d = rotation || model == mapping::WarpModel::kSixDof;
+  if (three_d && !camera)
+    throw InputError(args.dataset, 0, std::string("no camera calibration (the ") + mapping::warp_model_name(model) +
+                     " model needs the pinhole)", "--calib FILE (Kalibr camchain YAML or ECD calib.txt)");
+
+  cfg.keep_iwe = args.png;
+  pipeline::CmaxMotionPipeline pipe(cfg, sensor.width, sensor.height, camera);
+  // The resolved config holds the camera's size and pinhole as used.
+  FlowConfig resolved = cfg;
+  resolved.cmax = pipe.cmax_options();
+  fs::create_directories(args.out);
+  {
+    TextOut f((fs::path(args.out) / "flow_config.yaml").string());
+    std::fputs(flow_config_text(resolved).c_str(), f.get());
+    f.close();
+  }
+  const std::string iwe_dir = (fs::path(args.out) / "iwe").string();
+  if (args.png) fs::create_directories(iwe_dir);
+
+  // motion.csv: the header as documented in flow_command.h (p0.. per model).
+  const int dof = mapping::warp_dof(model);
+  TextOut csv((fs::path(args.out) / "motion.csv").string());
+  {
+    std::string h = "t_start_s,t_end_s,model";
+    for (int i = 0; i < dof; ++i) h += ",p" + std::to_string(i);
+    h += ",contrast_zero,contrast_final,iterations,time_ms\n";
+    std::fputs(h.c_str(), csv.get());
+  }
+
+  std::vector<WindowRecord> records;
+  int64_t pngs = 0;
+  const bool signed_iwe = cfg.cmax.use_polarity;
+  auto handle = [&](std::vector<pipeline::CmaxMotionWindow> windows) {
+    char t0[32], t1[32];
+    for (pipeline::CmaxMotionWindow& w : windows) {
+      *format_seconds(w.t_start_ns, t0) = '\0';
+      *format_seconds(w.t_end_ns, t1) = '\0';
+      std::fprintf(csv.get(), "%s,%s,%s", t0, t1, mapping::warp_model_name(w.model));
+      for (int i = 0; i < dof; ++i) std::fprintf(csv.get(), ",%.9g", w.params[i]);
+      std::fprintf(csv.get(), ",%.9g,%.9g,%d,%.3f\n", w.objective_zero, w.objective, w.iterations, w.time_ms);
+      if (args.png && w.index % args.png_every == 0) {
+        const double scale = robust_scale(w.iwe);
+        char name[64];
+        std::snprintf(name, sizeof(name), "window_%06lld_before.png", static_cast<long long>(w.index));
+        write_iwe_png((fs::path(iwe_dir) / name).string(), w.iwe_zero, scale, signed_iwe);
+        std::snprintf(name, sizeof(name), "window_%06lld_after.png", static_cast<long long>(w.index));
+        write_iwe_png((fs::path(iwe_dir) / name).string(), w.iwe, scale, signed_iwe);
+        pngs += 2;
+      }
+      records.push_back({w.t_start_ns, w.t_end_ns, w.params, w.time_ms, w.iterations});
+    }
+  };
+
+  // ---- the event stream -------------------------------------------------------------------------
+  Progress progress("evio flow", args.progress, "events");
+  if (args.t_start_ns) reader->seek_events(*args.t_start_ns);
+  std::vector<SubpixelEvent> chunk;
+  int64_t events = 0, t_first = 0, t_last = 0;
+  double process_s = 0;
+  bool done = false;
+  using clock = std::chrono::steady_clock;
+  while (!done) {
+    chunk.clear();
+    if (reader->read_subpixel_events(&chunk, size_t{1} << 16) == 0) break;
+    auto c0 = clock::now();
+    for (const SubpixelEvent& e : chunk) {
+      if (args.t_start_ns && e.t_ns < *args.t_start_ns) continue;
+      if (args.t_end_ns && e.t_ns >= *args.t_end_ns) {
+        done = true;
+        break;
+      }
+      if (events == 0) t_first = e.t_ns;
+      t_last = e.t_ns;
+      ++events;
+      if (pipe.process(e)) {
+        process_s += std::chrono::duration<double>(clock::now() - c0).count();
+        handle(pipe.take_windows());
+        // Output time is not processing time: restart the clock after writing.
+        c0 = clock::now();
+      }
+    }
+    process_s += std::chrono::duration<double>(clock::now() - c0).count();
+    progress.update(reader->progress(), events, std::to_string(pipe.stats().windows) + " windows");
+  }
+  {
+    const auto c0 = clock::now();
+    pipe.finish();
+    process_s += std::chrono::duration<double>(clock::now() - c0).count();
+  }
+  handle(pipe.take_windows());
+  csv.close();
+  const pipeline::CmaxMotionStats& st = pipe.stats();
+
+  // ---- rotation: ground truth and gyro per window -----------------------------------------------
+  std::string eval_json;
+  std::ostringstream eval_text;
+  if (rotation) {
+    std::optional<Trajectory> gt;
+    std::string gt_source;
+    if (!args.gt.empty()) {
+      gt = read_trajectory(args.gt);
+      gt_source = args.gt;
+    } else if (auto own = reader->read_groundtruth(); own && own->size() >= 3) {
+      gt = std::move(own);
+      gt_source = "the dataset's ground truth";
+    }
+    std::vector<ImuSample> imu = reader->read_imu();
+    evaluation::BodyToCamera b2c;
+    std::string convention;
+    if (found.camera && found.camera->has_T_c_b) {
+      b2c.R_c_b = found.camera->T_c_b.rotation.toRotationMatrix();
+      b2c.time_shift_ns = found.camera->time_shift_ns;
+      convention = "body (IMU) poses and gyro rates, turned into the camera frame with R_c_b of T_c_b from " +
+                   found.camera->source + " and read at t_cam + " + std::to_string(b2c.time_shift_ns) + " ns";
+    } else {
+      convention = "no camera-IMU extrinsics in the calibration: the ground truth is taken as the camera's pose (T_w_c) "
+                   "and the gyro as measured in the camera frame (R_c_b = identity, no time shift)";
+    }
+    if (gt || imu.size() >= 2) {
+      log_info("evio flow: reference angular velocities: " + convention);
+      TextOut f((fs::path(args.out) / "motion_eval.csv").string());
+      std::string h = "t_start_s,t_end_s,wx_radps,wy_radps,wz_radps";
+      if (gt) h += ",gt_wx_radps,gt_wy_radps,gt_wz_radps,error_degps";
+      if (imu.size() >= 2) h += ",gyro_wx_radps,gyro_wy_radps,gyro_wz_radps,events_vs_gyro_degps";
+      if (gt && imu.size() >= 2) h += ",gyro_vs_gt_degps";
+      std::fputs((h + "\n").c_str(), f.get());
+      const Eigen::Vector3d nan3 = Eigen::Vector3d::Constant(std::nan(""));
+      std::vector<Eigen::Vector3d> est, ref, gyr;
+      char t0[32], t1[32];
+      for (const WindowRecord& r : records) {
+        const Eigen::Vector3d w = r.params.head<3>();
+        const Eigen::Vector3d g = gt ? evaluation::trajectory_angular_velocity(*gt, r.t0, r.t1, b2c).value_or(nan3) : nan3;
+        const Eigen::Vector3d y = imu.size() >= 2 ? evaluation::mean_gyro(imu, r.t0, r.t1, b2c).value_or(nan3) : nan3;
+        est.push_back(w);
+        ref.push_back(g);
+        gyr.push_back(y);
+        *format_seconds(r.t0, t0) = '\0';
+        *format_seconds(r.t1, t1) = '\0';
+        std::fprintf(f.get(), "%s,%s,%.9g,%.9g,%.9g", t0, t1, w.x(), w.y(), w.z());
+        const double deg = 180.0 / M_PI;
+        if (gt) std::fprintf(f.get(), ",%.9g,%.9g,%.9g,%.6g", g.x(), g.y(), g.z(), (w - g).norm() * deg);
+        if (imu.size() >= 2) std::fprintf(f.get(), ",%.9g,%.9g,%.9g,%.6g", y.x(), y.y(), y.z(), (w - y).norm() * deg);
+        if (gt && imu.size() >= 2) std::fprintf(f.get(), ",%.6g", (y - g).norm() * deg);
+        std::fputc('\n', f.get());
+      }
+      f.close();
+      std::ostringstream j;
+      j << ",\n  \"reference_convention\": " << str(convention);
+      if (gt) {
+        const evaluation::AngularVelocityErrors e = evaluation::angular_velocity_errors(est, ref);
+        j << ",\n  \"groundtruth\": {\"source\": " << str(gt_source) << ", \"windows\": " << e.count
+          << ", \"rms_error_degps\": " << num(e.rms_degps) << ", \"rms_error_axis_degps\": " << vec3(e.rms_axis_degps)
+          << ", \"median_error_degps\": " << num(e.median_degps) << ", \"max_error_degps\": " << num(e.max_degps)
+          << ", \"groundtruth_rms_degps\": " << num(e.reference_rms_degps) << ", \"relative_rms_error\": " << num(e.relative_rms) << "}";
+        eval_text << "ground truth  " << e.count << " windows (" << gt_source << "): angular velocity error RMS "
+                  << num(e.rms_degps) << " deg/s (per axis " << num(e.rms_axis_degps.x()) << ", " << num(e.rms_axis_degps.y()) << ", "
+                  << num(e.rms_axis_degps.z()) << "), median " << num(e.median_degps) << ", max " << num(e.max_degps)
+                  << "; " << num(100 * e.relative_rms) << "% of the true rate's RMS " << num(e.reference_rms_degps) << " deg/s\n";
+      }
+      if (imu.size() >= 2) {
+        const evaluation::AngularVelocityErrors e = evaluation::angular_velocity_errors(est, gyr);
+        j << ",\n  \"gyro\": {\"samples\": " << imu.size() << ", \"windows\": " << e.count
+          << ", \"events_vs_gyro_rms_degps\": " << num(e.rms_degps) << ", \"events_vs_gyro_median_degps\": " << num(e.median_degps);
+        eval_text << "gyro          " << e.count << " windows: events vs gyro RMS " << num(e.rms_degps) << " deg/s";
+        if (gt) {
+          const evaluation::AngularVelocityErrors eg = evaluation::angular_velocity_errors(gyr, ref);
+          j << ", \"gyro_vs_groundtruth_rms_degps\": " << num(eg.rms_degps);
+          eval_text << ", gyro vs ground truth RMS " << num(eg.rms_degps) << " deg/s";
+        }
+        j << "}";
+        eval_text << "\n";
+      }
+      eval_text << "references    " << convention << "\n";
+      eval_json = j.str();
+    }
+  } else if (!args.gt.empty()) {
+    out << "note          --gt is evaluated with the rotation model only; ignored for " << mapping::warp_model_name(model) << "\n";
+  }
+
+  // ---- stats.json and the summary -----------------------------------------------------------------
+  std::vector<double> times;
+  for (const WindowRecord& r : records) times.push_back(r.time_ms);
+  const double duration_s = events > 1 ? static_cast<double>(t_last - t_first) * 1e-9 : 0.0;
+  const double windows = static_cast<double>(st.windows);
+  const double mean_ms = st.windows > 0 ? st.time_ms / windows : 0.0;
+  const double max_ms = times.empty() ? 0.0 : *std::max_element(times.begin(), times.end());
+  const double us_per_event = st.events_used > 0 ? 1e3 * st.time_ms / static_cast<double>(st.events_used) : 0.0;
+  const double us_per_event_all = events > 0 ? 1e6 * process_s / static_cast<double>(events) : 0.0;
+  const char* objective = mapping::cmax_objective_name(pipe.objective());
+  {
+    TextOut f((fs::path(args.out) / "stats.json").string());
+    std::ostringstream j;
+    j << "{\n  \"dataset\": " << str(args.dataset) << ",\n  \"model\": " << str(mapping::warp_model_name(model))
+      << ",\n  \"parameters\": [";
+    const auto names = mapping::warp_parameter_names(model);
+    for (size_t i = 0; i < names.size(); ++i) j << (i ? ", " : "") << str(names[i]);
+    j << "],\n  \"objective\": " << str(objective) << ",\n  \"sensor\": [" << sensor.width << ", " << sensor.height
+      << "],\n  \"undistortion\": {\"option\": " << str(pipeline::cmax_undistortion_name(cfg.undistortion))
+      << ", \"used\": " << str(pipeline::cmax_undistortion_name(pipe.undistortion())) << ", \"reason\": "
+      << str(pipe.undistortion_reason()) << "},\n  \"window\": {\"events_per_window\": " << (cfg.window_ns > 0 ? 0 : cfg.window_events)
+      << ", \"duration_ms\": " << num(static_cast<double>(cfg.window_ns) * 1e-6)
+      << ", \"max_duration_ms\": " << num(static_cast<double>(cfg.max_window_ns) * 1e-6) << ", \"min_events\": " << cfg.min_window_events
+      << ", \"warm_start\": " << (cfg.warm_start ? "true" : "false") << "},\n  \"pyramid_levels\": " << cfg.cmax.pyramid_levels
+      << ",\n  \"warm_pyramid_levels\": " << (cfg.warm_pyramid_levels > 0 ? cfg.warm_pyramid_levels : cfg.cmax.pyramid_levels)
+      << ",\n  \"events\": " << events << ",\n  \"events_used\": " << st.events_used
+      << ",\n  \"events_dropped\": " << st.events_dropped << ",\n  \"duration_s\": " << num(duration_s)
+      << ",\n  \"windows\": " << st.windows << ",\n  \"windows_skipped\": " << st.windows_skipped
+      << ",\n  \"warm_starts\": " << st.warm_starts << ",\n  \"resets\": " << st.resets
+      << ",\n  \"iterations\": " << st.iterations << ",\n  \"iterations_per_window\": " << num(st.windows > 0 ? static_cast<double>(st.iterations) / windows : 0.0)
+      << ",\n  \"evaluations\": " << st.evaluations
+      << ",\n  \"time_per_window_ms\": {\"mean\": " << num(mean_ms) << ", \"median\": " << num(median(times))
+      << ", \"max\": " << num(max_ms) << "},\n  \"time_per_event_us\": " << num(us_per_event)
+      << ",\n  \"processing_time_s\": " << num(process_s) << ",\n  \"processing_time_per_event_us\": " << num(us_per_event_all)
+      << ",\n  \"events_per_s\": " << num(process_s > 0 ? static_cast<double>(events) / process_s : 0.0)
+      << ",\n  \"pngs\": " << pngs << eval_json << "\n}\n";
+    std::fputs(j.str().c_str(), f.get());
+    f.close();
+  }
+
+  out << "events        " << events << " over " << num(duration_s) << " s, " << st.windows << " windows ("
+      << st.windows_skipped << " skipped with fewer than " << cfg.min_window_events << " events)\n";
+  out << "model         " << mapping::warp_model_name(model) << ", objective " << objective << ", pyramid "
+      << cfg.cmax.pyramid_levels << " levels (warm starts: " << (cfg.warm_pyramid_levels > 0 ? cfg.warm_pyramid_levels : cfg.cmax.pyramid_levels)
+      << "), " << st.warm_starts << " warm starts, " << st.resets << " resets\n";
+  out << "undistortion  " << pipeline::cmax_undistortion_name(pipe.undistortion()) << ": " << pipe.undistortion_reason() << "\n";
+  out << "speed         " << num(mean_ms) << " ms per window (median " << num(median(times)) << ", max " << num(max_ms)
+      << "), " << num(us_per_event) << " us per event, " << num(st.windows > 0 ? static_cast<double>(st.iterations) / windows : 0.0)
+      << " iterations per window (one core; reading excluded)\n";
+  out << eval_text.str();
+  out << "wrote " << args.out << "/motion.csv" << (eval_json.empty() ? "" : ", motion_eval.csv")
+      << ", stats.json, flow_config.yaml";
+  if (args.png) out << ", iwe/ (" << pngs << " PNG)";
+  out << "\n";
+  return 0;
+}
+
+}  // namespace evio::apps
