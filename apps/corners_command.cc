@@ -22,32 +22,11 @@
 #include "progress.h"
 #include "evio/sensors/config_table.h"
 #include "option_tables.h"
+#include "output_files.h"
 
 namespace evio::apps {
 namespace {
 namespace fs = std::filesystem;
-
-// Writes with a check at close: a full disk is an error naming the file, not a short file.
-class TextOut {
- public:
-  explicit TextOut(const std::string& path) : path_(path), f_(std::fopen(path.c_str(), "wb")) {
-    if (!f_) throw InputError(path, 0, "cannot create the file", "a writable output folder");
-  }
-  ~TextOut() {
-    if (f_) std::fclose(f_);
-  }
-  std::FILE* get() { return f_; }
-  void close() {
-    const bool ok = std::ferror(f_) == 0;
-    const bool closed = std::fclose(f_) == 0;
-    f_ = nullptr;
-    if (!ok || !closed) throw InputError(path_, 0, "write failed (disk full?)", "a writable output folder");
-  }
-
- private:
-  std::string path_;
-  std::FILE* f_;
-};
 
 struct TrackLengths {
   size_t count = 0;

@@ -19,6 +19,7 @@
 #include "evio/sensors/time.h"
 #include "evio/sensors/trajectory.h"
 #include "json_util.h"
+#include "output_files.h"
 #include "option_tables.h"
 #include "progress.h"
 
@@ -36,12 +37,7 @@ const Table<C>& flow_config_table() {
   static const Table<C> table = [] {
     auto self = [](C& c) -> C& { return c; };
     Table<C> window("window settings");
-    window.integer("events", &C::window_events, 1, 1000000000)
-        .duration_ms("duration_ms", &C::window_ns, Range::kNonNegative)
-        .note("duration_ms", "0: windows of `events` events; > 0: windows of this duration instead")
-        .duration_ms("max_duration_ms", &C::max_window_ns, Range::kNonNegative)
-        .note("max_duration_ms", "event windows also close when they span this long; 0: no limit")
-        .integer("min_events", &C::min_window_events, 1, 1000000000)
+    window.include(cmax_window_table(), &C::window, {"undistortion", "dither_px"})
         .boolean("warm_start", &C::warm_start)
         .integer("warm_pyramid_levels", &C::warm_pyramid_levels, 0, 8)
         .note("warm_pyramid_levels", "0: cmax.pyramid_levels");
@@ -49,14 +45,8 @@ const Table<C>& flow_config_table() {
     cmax.include(cmax_table(), &C::cmax, {"width", "height", "fx", "fy", "cx", "cy"});  // those: the camera's
     Table<C> top("flow settings");
     top.section("window", window, self)
-        .choice("undistortion", &C::undistortion,
-                {{"auto", pipeline::CmaxUndistortion::kAuto},
-                 {"none", pipeline::CmaxUndistortion::kNone},
-                 {"lut", pipeline::CmaxUndistortion::kLut}})
-        .note("undistortion",
-              "auto: sub-pixel input as is, integer pixels of a distorted camera through the lookup table")
-        .number("dither_px", &C::dither_px, Range::kNonNegative, "px")
-        .note("dither_px", "integer-pixel input: each event moved by a deterministic offset within this square; 0: off")
+        .include(cmax_window_table(), &C::window,
+                 {"events", "duration_ms", "max_duration_ms", "min_events"})  // the top-level keys
         .section("cmax", cmax, self)
         .ignored("description")
         .validate();
@@ -65,59 +55,9 @@ const Table<C>& flow_config_table() {
   return table;
 }
 
-// Writes with a check at close: a full disk is an error naming the file, not a short file.
-class TextOut {
- public:
-  explicit TextOut(const std::string& path) : path_(path), f_(std::fopen(path.c_str(), "wb")) {
-    if (!f_) throw InputError(path, 0, "cannot create the file", "a writable output folder");
-  }
-  ~TextOut() {
-    if (f_) std::fclose(f_);
-  }
-  TextOut(const TextOut&) = delete;
-  TextOut& operator=(const TextOut&) = delete;
-  std::FILE* get() { return f_; }
-  void close() {
-    const bool ok = std::ferror(f_) == 0;
-    const bool closed = std::fclose(f_) == 0;
-    f_ = nullptr;
-    if (!ok || !closed) throw InputError(path_, 0, "write failed (disk full?)", "a writable output folder");
-  }
-
- private:
-  std::string path_;
-  std::FILE* f_;
-};
-
 std::string num(double v) { return json_number(v, 9); }
 std::string str(const std::string& s) { return "\"" + json_escape(s) + "\""; }
 std::string vec3(const Eigen::Vector3d& v) { return "[" + num(v.x()) + ", " + num(v.y()) + ", " + num(v.z()) + "]"; }
-
-// The display scale of an IWE pair: the 99th percentile of the warped IWE's non-zero magnitudes
-// (a few hot pixels do not set the range), at least 1 event.
-double robust_scale(const mapping::ImageF& img) {
-  std::vector<float> v;
-  v.reserve(static_cast<size_t>(img.size()));
-  for (Eigen::Index i = 0; i < img.size(); ++i)
-    if (img.data()[i] != 0.0f) v.push_back(std::fabs(img.data()[i]));
-  if (v.empty()) return 1.0;
-  const size_t k = std::min(v.size() - 1, static_cast<size_t>(0.99 * static_cast<double>(v.size())));
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
-  return std::max(1.0, static_cast<double>(v[k]));
-}
-
-// 8-bit grey PNG: counts 0 .. scale -> 0 .. 255 (clipped); signed (polarity) IWEs around 128.
-void write_iwe_png(const std::string& path, const mapping::ImageF& img, double scale, bool is_signed) {
-  cv::Mat m(static_cast<int>(img.rows()), static_cast<int>(img.cols()), CV_8UC1);
-  for (int j = 0; j < m.rows; ++j) {
-    for (int i = 0; i < m.cols; ++i) {
-      const double v = img(j, i) / scale;
-      const double g = is_signed ? 127.5 + 127.5 * v : 255.0 * v;
-      m.at<uint8_t>(j, i) = static_cast<uint8_t>(std::clamp(std::lround(g), 0L, 255L));
-    }
-  }
-  if (!write_image(path, m)) throw InputError(path, 0, "cannot write the PNG", "a writable output folder");
-}
 
 struct WindowRecord {
   int64_t t0 = 0, t1 = 0;
@@ -161,10 +101,10 @@ FlowConfig resolve_flow_config(const FlowArgs& args) {
     cfg.cmax.objective = *o;
   }
   if (args.window_events > 0) {
-    cfg.window_events = args.window_events;
-    cfg.window_ns = 0;
+    cfg.window.window_events = args.window_events;
+    cfg.window.window_ns = 0;
   }
-  if (args.window_ns > 0) cfg.window_ns = args.window_ns;
+  if (args.window_ns > 0) cfg.window.window_ns = args.window_ns;
   if (args.pyramid_levels > 0) cfg.cmax.pyramid_levels = args.pyramid_levels;
   {
     std::string why;
@@ -387,11 +327,11 @@ int run_flow(const FlowArgs& args, std::ostream& out) {
     const auto names = mapping::warp_parameter_names(model);
     for (size_t i = 0; i < names.size(); ++i) j << (i ? ", " : "") << str(names[i]);
     j << "],\n  \"objective\": " << str(objective) << ",\n  \"sensor\": [" << sensor.width << ", " << sensor.height
-      << "],\n  \"undistortion\": {\"option\": " << str(pipeline::cmax_undistortion_name(cfg.undistortion))
+      << "],\n  \"undistortion\": {\"option\": " << str(pipeline::cmax_undistortion_name(cfg.window.undistortion))
       << ", \"used\": " << str(pipeline::cmax_undistortion_name(pipe.undistortion())) << ", \"reason\": "
-      << str(pipe.undistortion_reason()) << "},\n  \"window\": {\"events_per_window\": " << (cfg.window_ns > 0 ? 0 : cfg.window_events)
-      << ", \"duration_ms\": " << num(static_cast<double>(cfg.window_ns) * 1e-6)
-      << ", \"max_duration_ms\": " << num(static_cast<double>(cfg.max_window_ns) * 1e-6) << ", \"min_events\": " << cfg.min_window_events
+      << str(pipe.undistortion_reason()) << "},\n  \"window\": {\"events_per_window\": " << (cfg.window.window_ns > 0 ? 0 : cfg.window.window_events)
+      << ", \"duration_ms\": " << num(static_cast<double>(cfg.window.window_ns) * 1e-6)
+      << ", \"max_duration_ms\": " << num(static_cast<double>(cfg.window.max_window_ns) * 1e-6) << ", \"min_events\": " << cfg.window.min_window_events
       << ", \"warm_start\": " << (cfg.warm_start ? "true" : "false") << "},\n  \"pyramid_levels\": " << cfg.cmax.pyramid_levels
       << ",\n  \"warm_pyramid_levels\": " << (cfg.warm_pyramid_levels > 0 ? cfg.warm_pyramid_levels : cfg.cmax.pyramid_levels)
       << ",\n  \"events\": " << events << ",\n  \"events_used\": " << st.events_used
@@ -410,7 +350,7 @@ int run_flow(const FlowArgs& args, std::ostream& out) {
   }
 
   out << "events        " << events << " over " << num(duration_s) << " s, " << st.windows << " windows ("
-      << st.windows_skipped << " skipped with fewer than " << cfg.min_window_events << " events)\n";
+      << st.windows_skipped << " skipped with fewer than " << cfg.window.min_window_events << " events)\n";
   out << "model         " << mapping::warp_model_name(model) << ", objective " << objective << ", pyramid "
       << cfg.cmax.pyramid_levels << " levels (warm starts: " << (cfg.warm_pyramid_levels > 0 ? cfg.warm_pyramid_levels : cfg.cmax.pyramid_levels)
       << "), " << st.warm_starts << " warm starts, " << st.resets << " resets\n";

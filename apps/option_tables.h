@@ -20,6 +20,7 @@
 #include "evio/mapping/gradient_mosaic.h"
 #include "evio/mapping/mosaic_image.h"
 #include "evio/mapping/rotation_relocalization.h"
+#include "evio/pipeline/cmax_windows.h"
 #include "evio/sensors/config_table.h"
 
 namespace evio::apps {
@@ -46,6 +47,8 @@ const yaml_config::Table<mapping::GradientMosaicOptions>& gradient_mosaic_table(
 const yaml_config::Table<mapping::RotationalCmaxOptions>& rotational_cmax_table();
 // CmaxOptions (mapping/cmax.h): model, objective, IWE size, blur, pyramid, BFGS stopping, pinhole, 6dof depth/plane.
 const yaml_config::Table<mapping::CmaxOptions>& cmax_table();
+// events, duration_ms, max_duration_ms, min_events, undistortion, dither_px
+const yaml_config::Table<pipeline::CmaxWindowOptions>& cmax_window_table();
 const yaml_config::Table<mapping::RotationRelocalizationOptions>& relocalization_table();
 const yaml_config::Table<mapping::LogImageDisplayOptions>& log_image_display_table();
 

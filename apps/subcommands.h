@@ -48,6 +48,10 @@ inline constexpr SubcommandInfo kSubcommands[] = {
      "Motion per event window by contrast maximisation (optical flow, rotation, similarity or 6-DoF; Gallego et al. "
      "CVPR 2018): motion.csv, stats.json, optional IWE PNGs, and with --gt for rotation the angular-velocity error "
      "(motion_eval.csv)"},
+    {"segment",
+     "Motion segmentation by contrast maximisation (Stoffregen et al. ICCV 2019): clusters of events that share a "
+     "motion, their number and warp models chosen per window, labels that persist across windows: labels.txt, "
+     "segments.json, coloured IWE PNGs, stats.json"},
 };
 
 // The summary of a subcommand, or nullptr for an unknown name.

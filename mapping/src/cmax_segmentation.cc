@@ -504,7 +504,10 @@ SegmentationResult MotionSegmenter::segment(const CmaxEvents& ev, const std::vec
       step.removed_params = s.cl[worst].params;
       out.count_steps.push_back(step);
       if (debug) log_debug(describe("gains before a removal", s.cl));
-      remove_cluster(&s, worst, s.best_other[worst]);
+      // A proposal that absorbs a live cluster takes over its label (it is the same object).
+      const int into = s.best_other[worst];
+      if (into >= 0 && s.cl[into].id < 0 && s.cl[worst].id >= 0) s.cl[into].id = s.cl[worst].id;
+      remove_cluster(&s, worst, into);
       update_associations(ev, &s);
       alternate(ev, &s, std::max(2, options_.iterations / 2));
     }

@@ -244,12 +244,13 @@ TEST(CmaxSegmentation, DynamicThreeObjects) {
   for (const auto& [l, n] : last_id) std::printf(" %d: %d", l, switches[l]);
   std::printf("\n");
   ASSERT_GT(windows, 5);
-  // Measured (1.6 s, 70k-event windows): 0.952 over all windows; objects 1 and 3 at 0.97-1.00,
-  // the background 0-0.83 (slow: 2-4 px per window; its sparse events go to the dense object 1
-  // and to the noise rule), object 2 (1% of the events) found in 4 of 11 windows.
-  EXPECT_GE(all_sum / windows, 0.94);
+  // Measured (1.6 s, 70k-event windows): 0.937 over all windows with the stamp-and-pixel dither
+  // (0.952 with an index-based one: the dither alone moves it by 1.5 points); objects 1 and 3 at
+  // 0.97-1.00, the background 0-0.83 (slow: 2-4 px per window; its sparse events go to the dense
+  // object 1 and to the noise rule), object 2 (1% of the events) found in 4 of 11 windows.
+  EXPECT_GE(all_sum / windows, 0.92);
   if (scored > 0) {
-    EXPECT_GE(acc_sum / scored, 0.93);  // measured 0.944 (2 windows)
+    EXPECT_GE(acc_sum / scored, 0.93);  // measured 0.944 and 0.959 (2 windows)
   }
   // Labels persist: the two large objects keep theirs except around an over-segmented window
   // (measured: 3 and 2 switches over 11 windows).

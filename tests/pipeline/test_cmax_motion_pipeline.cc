@@ -60,8 +60,8 @@ std::vector<CmaxMotionWindow> run(CmaxMotionPipeline& p, const std::vector<Subpi
 // Windows of n events without the 25 ms cap (the synthetic streams are slow: 20 us per event).
 CmaxMotionPipelineOptions event_windows(int64_t n) {
   CmaxMotionPipelineOptions o;
-  o.window_events = n;
-  o.max_window_ns = 0;
+  o.window.window_events = n;
+  o.window.max_window_ns = 0;
   return o;
 }
 
@@ -76,16 +76,16 @@ TEST(CmaxMotionPipelineOptions, DefaultsAreValidAndBadValuesAreRejectedWithAReas
   std::string why;
   EXPECT_TRUE(CmaxMotionPipelineOptions{}.Validate(&why)) << why;
   CmaxMotionPipelineOptions o;
-  o.window_events = 0;
+  o.window.window_events = 0;
   testing::expect_rejected(o, "window_events");
   o = {};
-  o.window_ns = -1;
+  o.window.window_ns = -1;
   testing::expect_rejected(o, "window_ns");
   o = {};
-  o.min_window_events = 0;
+  o.window.min_window_events = 0;
   testing::expect_rejected(o, "min_window_events");
   o = {};
-  o.max_window_ns = -1;
+  o.window.max_window_ns = -1;
   testing::expect_rejected(o, "max_window_ns");
   o = {};
   o.warm_pyramid_levels = 9;
@@ -105,10 +105,10 @@ TEST(CmaxMotionPipeline, ConstructionErrors) {
   EXPECT_THROW(CmaxMotionPipeline(o, 240, 180, std::nullopt), std::invalid_argument);  // rotation needs the pinhole
   o.cmax.model = mapping::WarpModel::kFlow;
   EXPECT_THROW(CmaxMotionPipeline(o, 0, 180, std::nullopt), std::invalid_argument);
-  o.undistortion = CmaxUndistortion::kLut;
+  o.window.undistortion = CmaxUndistortion::kLut;
   EXPECT_THROW(CmaxMotionPipeline(o, 240, 180, std::nullopt), std::invalid_argument);
   o = {};
-  o.window_events = -5;
+  o.window.window_events = -5;
   EXPECT_THROW(CmaxMotionPipeline(o, 240, 180, std::nullopt), std::invalid_argument);
   // The camera's size and pinhole replace the options'.
   o = {};
@@ -146,8 +146,8 @@ TEST(CmaxMotionPipeline, EventWindowsRecoverAConstantFlowWithWarmStarts) {
 
 TEST(CmaxMotionPipeline, TimeWindowsSkipSparseAndEmptyOnes) {
   CmaxMotionPipelineOptions o;
-  o.window_ns = 10 * kMs;
-  o.min_window_events = 100;
+  o.window.window_ns = 10 * kMs;
+  o.window.min_window_events = 100;
   CmaxMotionPipeline p(o, 240, 180, std::nullopt);
   auto ev = moving_dots(Eigen::Vector2d(100, 0), 1500, 1'000'000'000);  // 30 ms of events
   // A gap of 45 ms, then 10 events (a sparse window), then another 1500 events.
@@ -186,7 +186,7 @@ TEST(CmaxMotionPipeline, ATailShorterThanHalfAWindowIsDroppedUnlessItIsTheOnlyOn
   }
   {
     // max_window_ns closes event windows early; the tail counts against half of it in time.
-    o.max_window_ns = 20 * kMs;  // 1000 events of the 20 us stream
+    o.window.max_window_ns = 20 * kMs;  // 1000 events of the 20 us stream
     CmaxMotionPipeline p(o, 240, 180, std::nullopt);
     const auto w = run(p, moving_dots(Eigen::Vector2d(100, 0), 2600));
     ASSERT_EQ(w.size(), 3u);  // 1000 + 1000 + a tail of 600 (12 ms)
@@ -225,7 +225,7 @@ TEST(CmaxMotionPipeline, UndistortionAutoChoosesByInput) {
   }
   {
     // lut forced: events outside the sensor are dropped and counted.
-    o.undistortion = CmaxUndistortion::kLut;
+    o.window.undistortion = CmaxUndistortion::kLut;
     CmaxMotionPipeline p(o, 240, 180, distorted_camera());
     auto ev = moving_dots(Eigen::Vector2d(100, 50), 2000);
     ev[10].x = -3.0f;
@@ -243,7 +243,7 @@ TEST(CmaxMotionPipeline, DitherMovesIntegerInputOnlyAndIsDeterministic) {
   CmaxMotionPipelineOptions o = event_windows(2000);
   o.keep_iwe = true;
   auto estimate = [&](double dither, bool subpixel) {
-    o.dither_px = dither;
+    o.window.dither_px = dither;
     CmaxMotionPipeline p(o, 240, 180, distorted_camera());
     return run(p, moving_dots(Eigen::Vector2d(200, -80), 4000, 0, subpixel));
   };
@@ -260,13 +260,13 @@ TEST(CmaxMotionPipeline, DitherMovesIntegerInputOnlyAndIsDeterministic) {
       }
     }
   }
-  o.dither_px = -1;
+  o.window.dither_px = -1;
   testing::expect_rejected(o, "dither_px");
 }
 
 TEST(CmaxMotionPipeline, ExtremesGiveFiniteResultsOrNone) {
   CmaxMotionPipelineOptions o = event_windows(1000);
-  o.min_window_events = 1;
+  o.window.min_window_events = 1;
   o.keep_iwe = true;
   {  // no events
     CmaxMotionPipeline p(o, 240, 180, test_camera().camera);
@@ -294,8 +294,8 @@ TEST(CmaxMotionPipeline, ExtremesGiveFiniteResultsOrNone) {
   }
   {  // time windows at stamps near INT64_MAX do not overflow
     CmaxMotionPipelineOptions t;
-    t.window_ns = 1'000'000'000'000'000'000;
-    t.min_window_events = 1;
+    t.window.window_ns = 1'000'000'000'000'000'000;
+    t.window.min_window_events = 1;
     CmaxMotionPipeline p(t, 240, 180, std::nullopt);
     const auto w = run(p, {{INT64_MAX - 10, 1.0f, 1.0f, 1}, {INT64_MAX - 1, 2.0f, 1.0f, 1}});
     ASSERT_EQ(w.size(), 1u);

@@ -16,7 +16,8 @@
 // - Cluster count (clusters = 0: automatic), decided with every cluster on the richest candidate
 //   model (a rotating object is one similarity cluster but several flow ones). Start from
 //   max_clusters proposals and, while the least useful cluster's gain is below min_cluster_gain,
-//   merge it into the cluster whose motion explains its events best, and re-optimise. A cluster's
+//   merge it into the cluster whose motion explains its events best (a new proposal that absorbs a
+//   cluster of the last window takes over its label), and re-optimise. A cluster's
 //   gain is how much sharper its events are under its own motion than under the best other
 //   cluster's: objective_j(own) / max_i objective_j(theta_i) - 1, with objective_j the objective of
 //   the IWE of the events assigned to j (those whose most likely cluster it is).
@@ -125,6 +126,9 @@ class MotionSegmenter {
   // Throws std::invalid_argument with the Validate() message for invalid options.
   explicit MotionSegmenter(const SegmentationOptions& options);
   const SegmentationOptions& options() const { return options_; }
+  // The objective in use (options().cmax.objective with kAuto resolved: the normalised gradient
+  // magnitude, comparable across models and clusters).
+  CmaxObjective objective() const { return cm_options_.objective; }
 
   // Segments one window. previous (optional): clusters of the previous window (ids, models,
   // params) to start from; new clusters get ids from *next_id (incremented), which the caller

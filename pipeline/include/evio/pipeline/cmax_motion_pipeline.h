@@ -17,54 +17,27 @@
 #include "evio/calib/camera.h"
 #include "evio/mapping/cmax.h"
 #include "evio/mapping/image.h"
+#include "evio/pipeline/cmax_windows.h"
 #include "evio/sensors/measurements.h"
 
-namespace evio::frontend {
-class EventUndistorter;
-}
-
 namespace evio::pipeline {
-
-// Where the window's pixel coordinates come from. The warps work on the undistorted pinhole of the
-// camera's fx, fy, cx, cy.
-enum class CmaxUndistortion {
-  // As is when the input is sub-pixel (undistorted files such as ECD's events_undistorted.txt: a
-  // fractional or out-of-sensor coordinate among the first window's events) or the camera has no
-  // distortion; through the lookup table otherwise (integer pixels of a distorted camera).
-  kAuto,
-  kNone,  // "none": the coordinates are already undistorted pinhole pixels; used as they are
-  kLut,   // "lut": integer pixels of the distorted camera (sub-pixel ones rounded), undistorted
-          // through calib::UndistortionLut; pixels outside the sensor or not undistortable dropped
-};
-const char* cmax_undistortion_name(CmaxUndistortion u);  // "auto", "none", "lut"
-std::optional<CmaxUndistortion> cmax_undistortion_from_name(const std::string& name);
 
 struct CmaxMotionPipelineOptions {
   // The maximiser's options: model, objective, blur (px), pyramid levels, iterations, tolerance (px),
   // 6-DoF depth (m) or plane. width, height and geometry fx fy cx cy are the camera's (set by the
   // pipeline from the camera, or the sensor size without one).
   mapping::CmaxOptions cmax;
-  // Defaults from the simulated poster_rotation / boxes_rotation (DAVIS240C, 3 and 6 M events/s,
-  // up to ~250 deg/s; README, `evio flow`): a window needs several pixels of motion (15k events,
-  // ~5 ms: 19 deg/s RMS; 120k events or 25 ms: 1.5 and 2.7 deg/s), and no more than ~25 ms of it
-  // under 17 rad/s^2 (longer windows at slow motion went 8-11 deg/s off).
-  int64_t window_events = 120000;  // events per window (> 0), used when window_ns is 0
-  int64_t window_ns = 0;           // window duration, ns (>= 0; > 0: windows of this duration instead)
-  // Event windows also close when they span this long, ns (0: no limit): slow motion then does not
-  // stretch a window over a change of velocity the constant-velocity warp cannot follow.
-  int64_t max_window_ns = 25'000'000;
-  int64_t min_window_events = 50;  // windows with fewer events are not estimated (>= 1)
+  // Windows: the defaults (CmaxWindowOptions) come from the simulated poster_rotation /
+  // boxes_rotation (DAVIS240C, 3 and 6 M events/s, up to ~250 deg/s; README, `evio flow`): a window
+  // needs several pixels of motion (15k events, ~5 ms: 19 deg/s RMS; 120k events or 25 ms: 1.5
+  // and 2.7 deg/s), and no more than ~25 ms of it under 17 rad/s^2 (longer windows at slow motion
+  // went 8-11 deg/s off); undistortion auto; 1 px dither of integer pixels.
+  CmaxWindowOptions window;
   bool warm_start = true;          // start each window from the previous window's parameters
   // Pyramid levels of a warm-started window (0: cmax.pyramid_levels; 1 .. 8). A warm start is
   // already near the optimum, so the coarse levels that give a cold start its reach can go (boxes,
   // 10 s, 120k events: 1 level 2.7 deg/s, 3 levels 4.3 deg/s and 1.7x the time).
   int warm_pyramid_levels = 1;
-  CmaxUndistortion undistortion = CmaxUndistortion::kAuto;
-  // Integer-pixel input only: each event is moved by an offset uniform in [-dither_px/2,
-  // dither_px/2]^2 (px, >= 0; 0: off), drawn from a hash of its stamp and pixel (deterministic,
-  // whatever the windows). Without it the events of one pixel stack exactly at zero motion, which
-  // pulls the estimate towards zero where the motion is small (the roll about the optical axis).
-  double dither_px = 1.0;
   bool keep_iwe = false;           // each window carries its IWE before and after warping (unblurred)
   bool keep_events = false;        // each window carries its prepared events (diagnostics)
 
@@ -87,7 +60,7 @@ struct CmaxMotionWindow {
   bool warm_started = false;      // started from the previous window's parameters
   bool reset = false;             // the warm start scored below zero motion: re-run from zero
   std::string stop;               // mapping::CmaxResult::stop of the kept run
-  double time_ms = 0;             // wall time of this window (preparation + maximisation), ms
+  double time_ms = 0;             // wall time of this window's maximisation, ms
   mapping::ImageF iwe_zero, iwe;  // with keep_iwe: IWE at zero motion and at params
   mapping::CmaxEvents prepared;   // with keep_events: the events as maximised (undistorted, dithered)
 };
@@ -123,34 +96,23 @@ class CmaxMotionPipeline {
   std::vector<CmaxMotionWindow> take_windows();
 
   // The undistortion in use: kNone or kLut once the first window decided it (kAuto before), and why.
-  CmaxUndistortion undistortion() const { return undistortion_; }
-  const std::string& undistortion_reason() const { return undistortion_reason_; }
+  CmaxUndistortion undistortion() const { return windower_->undistortion(); }
+  const std::string& undistortion_reason() const { return windower_->undistortion_reason(); }
   // The maximiser's options as used (camera size and pinhole filled in, objective as given).
   const mapping::CmaxOptions& cmax_options() const { return cold_->options(); }
   mapping::CmaxObjective objective() const { return mapping::resolve_objective(o_.cmax.objective, o_.cmax.model); }
-  const CmaxMotionStats& stats() const { return stats_; }
+  const CmaxMotionStats& stats() const;
   const CmaxMotionPipelineOptions& options() const { return o_; }
 
  private:
-  void close_window(int64_t t_start_ns, int64_t t_end_ns);
-  void decide_undistortion();
-  bool integer_window() const;  // every coordinate of the open window is an integer
+  void estimate(std::vector<CmaxWindow> windows);
 
   CmaxMotionPipelineOptions o_;
-  int width_, height_;
-  std::unique_ptr<frontend::EventUndistorter> undistorter_;
-  bool distorted_ = false;  // the camera has lens distortion
-  std::string distortion_name_;
-  CmaxUndistortion undistortion_ = CmaxUndistortion::kAuto;
-  std::string undistortion_reason_;
-  bool input_checked_ = false, integer_input_ = false;
+  std::unique_ptr<CmaxWindower> windower_;
   std::unique_ptr<mapping::ContrastMaximizer> cold_, warm_;
-  std::vector<SubpixelEvent> buf_;  // the open window's events
-  bool started_ = false;
-  int64_t window_start_ns_ = 0;     // time windows: start of the open window
   std::optional<Eigen::VectorXd> previous_;  // last estimated window's parameters
   std::vector<CmaxMotionWindow> done_;
-  CmaxMotionStats stats_;
+  mutable CmaxMotionStats stats_;  // the window counts are the windower's, copied in stats()
 };
 
 }  // namespace evio::pipeline

@@ -76,6 +76,7 @@ class SegmentationPipeline {
   const SegmentationStats& stats() const { return stats_; }
   const SegmentationPipelineOptions& options() const { return options_; }
   const mapping::SegmentationOptions& segmentation_options() const { return segmenter_->options(); }
+  mapping::CmaxObjective objective() const { return segmenter_->objective(); }
 
  private:
   void run(std::vector<CmaxWindow> windows);

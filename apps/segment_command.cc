@@ -1,0 +1,364 @@
+#include "segment_command.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <deque>
+#include <filesystem>
+#include <map>
+#include <ostream>
+#include <set>
+#include <sstream>
+
+#include <opencv2/core.hpp>
+
+#include "evio/calib/error.h"
+#include "evio/sensors/config_table.h"
+#include "evio/sensors/dataset_calibration.h"
+#include "evio/sensors/image_io.h"
+#include "evio/sensors/time.h"
+#include "json_util.h"
+#include "option_tables.h"
+#include "output_files.h"
+#include "progress.h"
+
+namespace evio::apps {
+namespace {
+
+namespace fs = std::filesystem;
+using yaml_config::Range;
+using yaml_config::Table;
+using C = SegmentConfig;
+using S = mapping::SegmentationOptions;
+
+const std::vector<std::pair<std::string, mapping::WarpModel>>& model_names() {
+  static const std::vector<std::pair<std::string, mapping::WarpModel>> names = {
+      {"flow", mapping::WarpModel::kFlow},
+      {"similarity", mapping::WarpModel::kSimilarity},
+      {"rotation", mapping::WarpModel::kRotation},
+      {"6dof", mapping::WarpModel::kSixDof}};
+  return names;
+}
+
+const Table<C>& segment_config_table() {
+  static const Table<C> table = [] {
+    auto self = [](C& c) -> C& { return c; };
+    Table<C> window("window settings");
+    window.include(cmax_window_table(), &C::window, {"undistortion", "dither_px"})
+        .boolean("warm_start", &C::warm_start)
+        .note("warm_start", "start from the previous window's clusters: labels persist");
+    Table<S> seg("segmentation settings");
+    seg.integer("clusters", &S::clusters, 0, 16)
+        .note("clusters", "0: automatic, up to max_clusters")
+        .integer("max_clusters", &S::max_clusters, 1, 16)
+        .choice_list("models", &S::models, model_names())
+        .note("models", "the count is decided on the richest; each cluster takes the simplest good enough")
+        .choice("init", &S::init, {{"kmeans", mapping::SegmentationInit::kKmeans}, {"greedy", mapping::SegmentationInit::kGreedy}})
+        .integer("tile_px", &S::tile_px, 8, 10000)
+        .integer("min_tile_events", &S::min_tile_events, 5, 1000000000)
+        .integer("iterations", &S::iterations, 1, 1000)
+        .integer("motion_iterations", &S::motion_iterations, 1, 1000)
+        .number("association_tolerance", &S::association_tolerance, Range::kNonNegative, "")
+        .number("min_cluster_share", &S::min_cluster_share, Range::kNonNegative, "")
+        .note("min_cluster_share", "share of the window's events below which a cluster dies")
+        .number("min_cluster_gain", &S::min_cluster_gain, Range::kPositive, "")
+        .note("min_cluster_gain", "relative sharpness a cluster's events must gain under its own motion")
+        .number("model_gain_per_parameter", &S::model_gain_per_parameter, Range::kNonNegative, "")
+        .number("noise_support", &S::noise_support, Range::kNonNegative, "lone votes")
+        .number("new_motion_px", &S::new_motion_px, Range::kNonNegative, "px")
+        .integer("footprint_radius_px", &S::footprint_radius_px, 0, 100)
+        .seed("seed", &S::seed)
+        .validate();
+    Table<mapping::CmaxOptions> cmax("contrast maximisation settings");
+    cmax.include(cmax_table(), [](mapping::CmaxOptions& o) -> mapping::CmaxOptions& { return o; },
+                 {"model", "width", "height", "fx", "fy", "cx", "cy", "pyramid_levels"});
+    Table<C> top("segment settings");
+    top.section("window", window, self)
+        .include(cmax_window_table(), &C::window, {"events", "duration_ms", "max_duration_ms", "min_events"})
+        .section("segmentation", seg, [](C& c) -> S& { return c.segmentation; })
+        .section("cmax", cmax, [](C& c) -> mapping::CmaxOptions& { return c.segmentation.cmax; })
+        .ignored("description")
+        .validate();
+    return top;
+  }();
+  return table;
+}
+
+std::string num(double v) { return json_number(v, 9); }
+std::string str(const std::string& s) { return "\"" + json_escape(s) + "\""; }
+
+// A colour per label (BGR), well apart for the first few; -1 (noise) grey.
+cv::Vec3b label_colour(int id) {
+  static const cv::Vec3b palette[] = {{60, 76, 231}, {113, 204, 46}, {219, 152, 52}, {15, 196, 241},
+                                      {182, 89, 155}, {34, 126, 230}, {160, 160, 22}, {94, 73, 52},
+                                      {133, 160, 243}, {0, 84, 211}};
+  if (id < 0) return {128, 128, 128};
+  return palette[static_cast<size_t>(id) % (sizeof(palette) / sizeof(palette[0]))];
+}
+
+// The clusters' IWEs (each its own events, warped by its motion) in their colours, added.
+void write_colour_iwe(const std::string& path, const pipeline::SegmentationWindow& w) {
+  if (w.iwe.empty()) return;
+  const int rows = static_cast<int>(w.iwe[0].rows()), cols = static_cast<int>(w.iwe[0].cols());
+  cv::Mat acc(rows, cols, CV_32FC3, cv::Scalar(0, 0, 0));
+  for (size_t j = 0; j < w.iwe.size(); ++j) {
+    const double scale = robust_scale(w.iwe[j]);
+    const cv::Vec3b c = label_colour(w.clusters[j].id);
+    for (int y = 0; y < rows; ++y)
+      for (int x = 0; x < cols; ++x) {
+        const float v = std::min(1.0f, std::fabs(w.iwe[j](y, x)) / static_cast<float>(scale));
+        if (v > 0) acc.at<cv::Vec3f>(y, x) += cv::Vec3f(c[0] * v, c[1] * v, c[2] * v);
+      }
+  }
+  cv::Mat out;
+  acc.convertTo(out, CV_8UC3);  // saturating
+  if (!write_image(path, out)) throw InputError(path, 0, "cannot write the PNG", "a writable output folder");
+}
+
+}  // namespace
+
+SegmentConfig load_segment_config(const std::string& path, const std::vector<std::string>& sets) {
+  return yaml_config::read_config(segment_config_table(), SegmentConfig{}, path, sets,
+                                  "a segment config YAML (see README.md, `evio segment`)");
+}
+
+std::string segment_config_text(const SegmentConfig& c) {
+  return yaml_config::config_text(segment_config_table(), c,
+                                  "# evio segment configuration, resolved: every key with the value used (comments: "
+                                  "unit and range).\n# Readable by `evio segment --config`. The pinhole and image size "
+                                  "are the camera's.\n");
+}
+
+SegmentConfig resolve_segment_config(const SegmentArgs& args) {
+  SegmentConfig cfg = load_segment_config(args.config, args.set);
+  if (args.window_events > 0) {
+    cfg.window.window_events = args.window_events;
+    cfg.window.window_ns = 0;
+  }
+  if (args.window_ns > 0) cfg.window.window_ns = args.window_ns;
+  if (!args.clusters.empty()) {
+    if (args.clusters == "auto") {
+      cfg.segmentation.clusters = 0;
+    } else {
+      char* end = nullptr;
+      const long n = std::strtol(args.clusters.c_str(), &end, 10);
+      if (end == args.clusters.c_str() || *end != '\0' || n < 1 || n > 16)
+        throw InputError("--clusters", 0, "'" + args.clusters + "' is not a cluster count", "auto or an integer in [1, 16]");
+      cfg.segmentation.clusters = static_cast<int>(n);
+    }
+  }
+  if (!args.models.empty()) {
+    std::vector<mapping::WarpModel> models;
+    std::string word;
+    for (char c : args.models + ",") {
+      if (c != ',') {
+        word += c;
+        continue;
+      }
+      const auto m = mapping::warp_model_from_name(word);
+      if (!m) throw InputError("--models", 0, "unknown model '" + word + "'", "a comma-separated list of flow, similarity, rotation, 6dof");
+      if (std::find(models.begin(), models.end(), *m) == models.end()) models.push_back(*m);
+      word.clear();
+    }
+    cfg.segmentation.models = models;
+  }
+  std::string why;
+  if (!cfg.Validate(&why)) throw InputError(args.config.empty() ? "the flags" : args.config, 0, why, "valid segment settings");
+  return cfg;
+}
+
+int run_segment(const SegmentArgs& args, std::ostream& out) {
+  SegmentConfig cfg = resolve_segment_config(args);
+  if (args.t_start_ns && args.t_end_ns && *args.t_end_ns <= *args.t_start_ns)
+    throw InputError("--t-end", 0, "--t-end must be after --t-start", "--t-start S --t-end S with S in seconds");
+  if (args.png_every < 1) throw InputError("--png-every", 0, "must be >= 1", "a positive window count");
+
+  auto reader = open_dataset(args.dataset, args.dataset_options);
+  const DatasetCalibration found = find_dataset_calibration(args.dataset, args.calib, *reader);
+  std::optional<calib::PinholeCamera> camera;
+  if (found.camera) camera = found.camera->camera;
+  SensorSize sensor = reader->sensor_size();
+  if (camera) sensor = {camera->width(), camera->height()};
+  if (!sensor.known())
+    throw InputError(args.dataset, 0, "the sensor size is unknown (no calibration in the dataset)",
+                     "--calib FILE (Kalibr camchain YAML or ECD calib.txt) or --sensor WxH");
+  for (mapping::WarpModel m : cfg.segmentation.models)
+    if ((m == mapping::WarpModel::kRotation || m == mapping::WarpModel::kSixDof) && !camera)
+      throw InputError(args.dataset, 0, std::string("no camera calibration (the ") + mapping::warp_model_name(m) +
+                       " model needs the pinhole)", "--calib FILE (Kalibr camchain YAML or ECD calib.txt)");
+
+  cfg.keep_iwe = args.png;
+  pipeline::SegmentationPipeline pipe(cfg, sensor.width, sensor.height, camera);
+  SegmentConfig resolved = cfg;
+  resolved.segmentation = pipe.segmentation_options();
+  fs::create_directories(args.out);
+  {
+    TextOut f((fs::path(args.out) / "segment_config.yaml").string());
+    std::fputs(segment_config_text(resolved).c_str(), f.get());
+    f.close();
+  }
+  const std::string img_dir = (fs::path(args.out) / "images").string();
+  if (args.png) fs::create_directories(img_dir);
+
+  // labels.txt in input order: the events wait in `pending` until their window is segmented.
+  TextOut labels_file((fs::path(args.out) / "labels.txt").string());
+  std::deque<SubpixelEvent> pending;
+  int64_t pending_first = 0;  // stream index of pending.front()
+  int64_t noise_written = 0, unsegmented = 0;
+  std::map<int, int64_t> per_label;
+  auto write_line = [&](const SubpixelEvent& e, int label) {
+    char t[32];
+    *format_seconds(e.t_ns, t) = '\0';
+    const bool integer = e.x == std::floor(e.x) && e.y == std::floor(e.y);
+    if (integer) {
+      std::fprintf(labels_file.get(), "%s %d %d %d %d\n", t, static_cast<int>(e.x), static_cast<int>(e.y), e.polarity > 0 ? 1 : 0, label);
+    } else {
+      std::fprintf(labels_file.get(), "%s %.6f %.6f %d %d\n", t, e.x, e.y, e.polarity > 0 ? 1 : 0, label);
+    }
+    if (label < 0) ++noise_written;
+    ++per_label[label];
+  };
+  // Writes the pending events up to stream index `end` (exclusive), labels from the window.
+  auto flush_until = [&](int64_t end, const pipeline::SegmentationWindow* w) {
+    size_t wi = 0;
+    while (pending_first < end && !pending.empty()) {
+      int label = -1;
+      if (w) {
+        while (wi < w->input_index.size() && w->input_index[wi] < pending_first) ++wi;
+        if (wi < w->input_index.size() && w->input_index[wi] == pending_first) label = w->labels[wi];
+      }
+      if (!w || pending_first < w->input_begin) ++unsegmented;
+      write_line(pending.front(), label);
+      pending.pop_front();
+      ++pending_first;
+    }
+  };
+
+  TextOut seg_json((fs::path(args.out) / "segments.json").string());
+  std::fputs("{\n  \"windows\": [", seg_json.get());
+  int64_t windows = 0, pngs = 0;
+  std::vector<double> window_ms;
+  std::set<int> ids_used;
+  auto handle = [&](std::vector<pipeline::SegmentationWindow> ws) {
+    for (const pipeline::SegmentationWindow& w : ws) {
+      flush_until(w.input_begin, nullptr);  // skipped windows before this one: no label
+      flush_until(w.input_end, &w);
+      window_ms.push_back(w.time_ms);
+      std::ostringstream j;
+      j << (windows ? "," : "") << "\n    {\"index\": " << w.index << ", \"t_start_s\": " << num(w.t_start_ns * 1e-9)
+        << ", \"t_end_s\": " << num(w.t_end_ns * 1e-9) << ", \"events\": " << w.events << ", \"time_ms\": " << num(w.time_ms)
+        << ", \"alternations\": " << w.alternations << ", \"evaluations\": " << w.evaluations << ",\n     \"clusters\": [";
+      for (size_t c = 0; c < w.clusters.size(); ++c) {
+        const mapping::SegmentCluster& k = w.clusters[c];
+        ids_used.insert(k.id);
+        const std::vector<std::string> names = mapping::warp_parameter_names(k.model);
+        j << (c ? "," : "") << "\n       {\"id\": " << k.id << ", \"model\": " << str(mapping::warp_model_name(k.model))
+          << ", \"params\": {";
+        for (size_t i = 0; i < names.size(); ++i) j << (i ? ", " : "") << str(names[i]) << ": " << num(k.params[static_cast<Eigen::Index>(i)]);
+        j << "}, \"events\": " << num(k.events) << ", \"objective\": " << num(k.objective)
+          << ", \"objective_best_other\": " << num(k.objective_other) << ", \"gain\": " << num(k.gain)
+          << ", \"centroid_px\": [" << num(k.centroid.x()) << ", " << num(k.centroid.y()) << "], \"models_tried\": [";
+        for (size_t m = 0; m < k.models.size(); ++m)
+          j << (m ? ", " : "") << "{\"model\": " << str(mapping::warp_model_name(k.models[m].model))
+            << ", \"objective\": " << num(k.models[m].objective) << ", \"gain_over_simplest\": " << num(k.models[m].gain)
+            << ", \"chosen\": " << (k.models[m].chosen ? "true" : "false") << "}";
+        j << "]}";
+      }
+      j << "],\n     \"count_steps\": [";
+      for (size_t s = 0; s < w.count_steps.size(); ++s) {
+        const mapping::CountStep& st = w.count_steps[s];
+        j << (s ? ", " : "") << "{\"clusters\": " << st.clusters << ", \"smallest_gain\": " << num(st.smallest_gain)
+          << ", \"removed\": " << (st.removed ? "true" : "false") << "}";
+      }
+      j << "]}";
+      std::fputs(j.str().c_str(), seg_json.get());
+      if (args.png && w.index % args.png_every == 0) {
+        char name[80];
+        std::snprintf(name, sizeof(name), "window_%06lld.png", static_cast<long long>(w.index));
+        write_colour_iwe((fs::path(img_dir) / name).string(), w);
+        ++pngs;
+        for (size_t c = 0; c < w.clusters.size(); ++c) {
+          std::snprintf(name, sizeof(name), "window_%06lld_cluster_%d.png", static_cast<long long>(w.index), w.clusters[c].id);
+          write_iwe_png((fs::path(img_dir) / name).string(), w.iwe[c], robust_scale(w.iwe[c]), false);
+          ++pngs;
+        }
+      }
+      ++windows;
+    }
+  };
+
+  Progress progress("evio segment", args.progress, "events");
+  if (args.t_start_ns) reader->seek_events(*args.t_start_ns);
+  std::vector<SubpixelEvent> chunk;
+  int64_t events = 0;
+  double process_s = 0;
+  bool done = false;
+  using clock = std::chrono::steady_clock;
+  while (!done) {
+    chunk.clear();
+    if (reader->read_subpixel_events(&chunk, size_t{1} << 16) == 0) break;
+    auto c0 = clock::now();
+    for (const SubpixelEvent& e : chunk) {
+      if (args.t_start_ns && e.t_ns < *args.t_start_ns) continue;
+      if (args.t_end_ns && e.t_ns >= *args.t_end_ns) {
+        done = true;
+        break;
+      }
+      ++events;
+      pending.push_back(e);
+      if (pipe.process(e)) {
+        process_s += std::chrono::duration<double>(clock::now() - c0).count();
+        handle(pipe.take_windows());
+        c0 = clock::now();
+      }
+    }
+    process_s += std::chrono::duration<double>(clock::now() - c0).count();
+    progress.update(reader->progress(), events, std::to_string(pipe.stats().windows) + " windows");
+  }
+  {
+    const auto c0 = clock::now();
+    pipe.finish();
+    process_s += std::chrono::duration<double>(clock::now() - c0).count();
+  }
+  handle(pipe.take_windows());
+  flush_until(pending_first + static_cast<int64_t>(pending.size()), nullptr);
+  labels_file.close();
+  std::fputs("\n  ]\n}\n", seg_json.get());
+  seg_json.close();
+
+  const pipeline::SegmentationStats& st = pipe.stats();
+  const pipeline::CmaxWindowStats& ws = pipe.windows().stats();
+  std::sort(window_ms.begin(), window_ms.end());
+  const double median_ms = window_ms.empty() ? 0.0 : window_ms[window_ms.size() / 2];
+  {
+    TextOut f((fs::path(args.out) / "stats.json").string());
+    std::ostringstream j;
+    j << "{\n  \"events\": " << events << ",\n  \"events_segmented\": " << ws.events_used
+      << ",\n  \"events_labelled\": " << st.events_labelled << ",\n  \"events_noise\": " << st.events_noise
+      << ",\n  \"events_in_no_window\": " << unsegmented << ",\n  \"events_dropped\": " << ws.events_dropped
+      << ",\n  \"windows\": " << st.windows << ",\n  \"windows_skipped\": " << ws.windows_skipped
+      << ",\n  \"labels_used\": " << ids_used.size() << ",\n  \"time_s\": " << num(process_s)
+      << ",\n  \"time_per_window_ms\": {\"mean\": " << num(st.windows ? st.time_ms / static_cast<double>(st.windows) : 0.0)
+      << ", \"median\": " << num(median_ms) << ", \"max\": " << num(st.max_window_ms) << "}"
+      << ",\n  \"time_per_event_us\": " << num(ws.events_used ? st.time_ms * 1e3 / static_cast<double>(ws.events_used) : 0.0)
+      << ",\n  \"alternations\": " << st.alternations << ",\n  \"evaluations\": " << st.evaluations
+      << ",\n  \"undistortion\": " << str(pipeline::cmax_undistortion_name(pipe.windows().undistortion()))
+      << ",\n  \"undistortion_reason\": " << str(pipe.windows().undistortion_reason())
+      << ",\n  \"dithered\": " << (pipe.windows().dithered() ? "true" : "false")
+      << ",\n  \"objective\": " << str(mapping::cmax_objective_name(pipe.objective()))
+      << ",\n  \"pngs\": " << pngs << "\n}\n";
+    std::fputs(j.str().c_str(), f.get());
+    f.close();
+  }
+  out << "evio segment: " << events << " events, " << st.windows << " windows (" << ws.windows_skipped
+      << " skipped), " << ids_used.size() << " labels; " << num(median_ms) << " ms per window (median), "
+      << num(ws.events_used ? st.time_ms * 1e3 / static_cast<double>(ws.events_used) : 0.0) << " us per event\n"
+      << "undistortion: " << pipeline::cmax_undistortion_name(pipe.windows().undistortion()) << " ("
+      << pipe.windows().undistortion_reason() << ")\n"
+      << "wrote " << args.out << "/labels.txt, segments.json, stats.json, segment_config.yaml"
+      << (args.png ? ", images/" : "") << "\n";
+  return 0;
+}
+
+}  // namespace evio::apps
