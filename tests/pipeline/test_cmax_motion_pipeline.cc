@@ -1,12 +1,14 @@
 // pipeline::CmaxMotionPipeline driven in memory: option validation, windows of N events and of a
 // duration (boundaries, skipped windows, the partial last window), warm starts and their reset,
 // the undistortion choice (auto on sub-pixel and integer input, lut dropping what it cannot map),
-// extremes (no events, one event, one pixel, one timestamp, 1.7e18 ns stamps), a constant flow
+// extremes (no events, one event, one pixel, one timestamp, a 10x burst, 1000 deg/s, 1.7e18 ns
+// stamps), a constant flow
 // recovered, and the angular velocity of 0.6 s of the simulated poster_rotation (datasets/,
 // simulated in memory) against the trajectory's exact mean rate per window.
 #include "evio/pipeline/cmax_motion_pipeline.h"
 
 #include <cmath>
+#include <cstdio>
 #include <random>
 #include <stdexcept>
 #include <string>
@@ -291,6 +293,51 @@ TEST(CmaxMotionPipeline, ExtremesGiveFiniteResultsOrNone) {
       EXPECT_TRUE(std::isfinite(x.objective));
       EXPECT_GE(x.t_ref_ns, x.t_start_ns);
     }
+  }
+  {  // a 10x burst inside a time window: more events, same window
+    CmaxMotionPipelineOptions t;
+    t.window_ns = 20 * kMs;
+    CmaxMotionPipeline p(t, 240, 180, test_camera().camera);
+    auto ev = moving_dots(Eigen::Vector2d(150, 40), 4000);  // 20 us apart: 80 ms
+    std::vector<SubpixelEvent> burst;
+    for (const auto& e : ev) {
+      burst.push_back(e);
+      if (e.t_ns >= 22 * kMs && e.t_ns < 38 * kMs)
+        for (int k = 1; k < 10; ++k) burst.push_back({e.t_ns + k, e.x, e.y, e.polarity});
+    }
+    const auto w = run(p, burst);
+    ASSERT_EQ(w.size(), 4u);
+    EXPECT_GT(w[1].events, 5 * w[0].events);
+    for (const auto& x : w) EXPECT_LT((x.params - Eigen::Vector2d(150, 40)).norm(), 10.0) << x.index;
+  }
+  {  // 1000 deg/s about the camera's y axis, points at infinity: recovered within 3%
+    // with windows short enough for the pyramid's reach (800 events of 100 points, each firing
+    // every 0.2 ms: about 2 ms, 3 px at the ends)
+    CmaxMotionPipelineOptions r = event_windows(800);
+    r.cmax.model = mapping::WarpModel::kRotation;
+    CmaxMotionPipeline p(r, 240, 180, test_camera().camera);
+    const Eigen::Vector3d w_true(0, 1000 * M_PI / 180, 0);
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<double> u(-0.4, 0.4), v(-0.35, 0.35);
+    std::vector<Eigen::Vector3d> pts(100);
+    for (auto& q : pts) q = Eigen::Vector3d(std::sin(u(rng)), v(rng), std::cos(u(rng))).normalized();
+    std::vector<SubpixelEvent> ev;
+    for (int k = 0; ev.size() < 12000 && k < 200000; ++k) {
+      const int64_t t = static_cast<int64_t>(k) * 2000;  // 2 us apart
+      const Eigen::Vector3d b = calib::so3_exp(w_true * (static_cast<double>(t) * 1e-9)).transpose() * pts[static_cast<size_t>(k) % pts.size()];
+      if (b.z() <= 0.2) continue;
+      const double x = 120 + 200 * b.x() / b.z(), y = 90 + 200 * b.y() / b.z();
+      if (x < 0 || y < 0 || x > 239 || y > 179) continue;
+      ev.push_back({t, static_cast<float>(std::round(x)), static_cast<float>(std::round(y)), 1});
+    }
+    const auto w = run(p, ev);
+    ASSERT_GE(w.size(), 2u);
+    for (const auto& x : w) {
+      EXPECT_TRUE(x.params.allFinite());
+      EXPECT_NEAR(x.params.y(), w_true.y(), 0.03 * w_true.y()) << x.index;
+    }
+    std::printf("1000 deg/s pan, windows of 800 events (%.1f ms): first window %.0f deg/s\n",
+                static_cast<double>(w[0].t_end_ns - w[0].t_start_ns) * 1e-6, w[0].params.y() * 180 / M_PI);
   }
   {  // time windows at stamps near INT64_MAX do not overflow
     CmaxMotionPipelineOptions t;
