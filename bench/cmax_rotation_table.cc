@@ -140,11 +140,11 @@ int main(int argc, char** argv) {
         o.cmax.pyramid_levels = static_cast<int>(L);
         if (blur >= 0) o.cmax.blur_sigma_px = blur;
         if (tolerance > 0) o.cmax.tolerance_px = tolerance;
-        o.max_window_ns = max_window_ns;
-        if (dither >= 0) o.dither_px = dither;
+        o.window.max_window_ns = max_window_ns;
+        if (dither >= 0) o.window.dither_px = dither;
         if (!evio::mapping::cmax_objective_from_name(objective)) throw std::runtime_error("unknown objective " + objective);
         o.cmax.objective = *evio::mapping::cmax_objective_from_name(objective);
-        o.window_events = W;
+        o.window.window_events = W;
         o.warm_pyramid_levels = warm_levels;
         o.keep_events = diagnose;
         evio::pipeline::CmaxMotionPipeline p(o, 0, 0, found.camera->camera);
@@ -208,7 +208,7 @@ int main(int argc, char** argv) {
     const evio::mapping::CmaxOptions d;
     std::printf("\n%s: %zu events over %.2f s, rotation model, one core; objective %s, blur %g px, tolerance %g px, dither %g px, max window %s\n\n",
                 label.c_str(), events.size(), span_s, objective.c_str(), blur >= 0 ? blur : d.blur_sigma_px,
-                tolerance > 0 ? tolerance : d.tolerance_px, dither >= 0 ? dither : evio::pipeline::CmaxMotionPipelineOptions{}.dither_px,
+                tolerance > 0 ? tolerance : d.tolerance_px, dither >= 0 ? dither : evio::pipeline::CmaxMotionPipelineOptions{}.window.dither_px,
                 max_window_ns > 0 ? (std::to_string(static_cast<double>(max_window_ns) * 1e-6) + " ms").c_str() : "none");
     std::printf("| events/window | window ms | levels (cold/warm) | windows | RMS error deg/s | median | max | rel. RMS %% | us/event | ms/window | iterations | resets |%s\n",
                 diagnose ? " from-truth RMS deg/s | est. > truth |" : "");

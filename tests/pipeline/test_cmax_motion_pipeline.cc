@@ -296,7 +296,7 @@ TEST(CmaxMotionPipeline, ExtremesGiveFiniteResultsOrNone) {
   }
   {  // a 10x burst inside a time window: more events, same window
     CmaxMotionPipelineOptions t;
-    t.window_ns = 20 * kMs;
+    t.window.window_ns = 20 * kMs;
     CmaxMotionPipeline p(t, 240, 180, test_camera().camera);
     auto ev = moving_dots(Eigen::Vector2d(150, 40), 4000);  // 20 us apart: 80 ms
     std::vector<SubpixelEvent> burst;
