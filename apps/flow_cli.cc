@@ -21,7 +21,7 @@ int main(int argc, char** argv) try {
   cli->add_option("--model", flow.model, "Warp model (overrides cmax.model; default flow)")
       ->check(CLI::IsMember({"flow", "rotation", "similarity", "6dof"}));
   cli->add_option("--objective", flow.objective,
-                  "Objective (overrides cmax.objective): auto = variance for flow and rotation, "
+                  "Objective (overrides cmax.objective): auto = variance for flow, gradient_magnitude for rotation, "
                   "normalized_gradient_magnitude for similarity and 6dof")
       ->check(CLI::IsMember({"auto", "variance", "mean_square", "gradient_magnitude", "normalized_gradient_magnitude"}));
   cli->add_option_function<std::string>(

@@ -74,7 +74,7 @@ const Table<mapping::CmaxOptions>& cmax_table() {
                    {"mean_square", CmaxObjective::kMeanSquare},
                    {"gradient_magnitude", CmaxObjective::kGradientMagnitude},
                    {"normalized_gradient_magnitude", CmaxObjective::kNormalizedGradientMagnitude}})
-          .note("objective", "auto: variance for flow and rotation, normalized_gradient_magnitude for similarity and 6dof")
+          .note("objective", "auto: variance for flow, gradient_magnitude for rotation, normalized_gradient_magnitude for similarity and 6dof")
           .integer("width", &O::width, 1, 100000)
           .integer("height", &O::height, 1, 100000)
           .number("blur_sigma_px", &O::blur_sigma_px, Range::kNonNegative, "px of each pyramid level")

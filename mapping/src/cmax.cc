@@ -268,8 +268,9 @@ std::vector<std::string> warp_parameter_names(WarpModel m) {
 
 CmaxObjective resolve_objective(CmaxObjective o, WarpModel m) {
   if (o != CmaxObjective::kAuto) return o;
-  return (m == WarpModel::kFlow || m == WarpModel::kRotation) ? CmaxObjective::kVariance
-                                                              : CmaxObjective::kNormalizedGradientMagnitude;
+  if (m == WarpModel::kFlow) return CmaxObjective::kVariance;
+  if (m == WarpModel::kRotation) return CmaxObjective::kGradientMagnitude;
+  return CmaxObjective::kNormalizedGradientMagnitude;
 }
 
 const char* cmax_objective_name(CmaxObjective o) {

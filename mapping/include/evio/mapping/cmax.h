@@ -105,8 +105,10 @@ void sample_at_warped(const ImageF& img, WarpModel m, const CmaxEvents& ev, cons
                       std::vector<float>* out);
 
 enum class CmaxObjective {
-  // Variance for flow and rotation, whose warps cannot collapse events (flow keeps areas; a
-  // rotation changes them by well under 1% over a window); normalised gradient magnitude for
+  // Variance for flow (its warp keeps areas: no collapse); mean squared gradient magnitude for
+  // rotation (30 s of simulated poster / boxes rotation, angular velocity RMS error: variance 1.53 /
+  // 2.73 deg/s, gradient magnitude 1.60 / 1.69: it weighs edges, not blobs, and the roll about the
+  // optical axis, which moves pixels least, gains most); normalised gradient magnitude for
   // similarity and 6dof, whose dilation / forward motion can shrink all events into a point, which
   // maximises the variance (measured: the variance objective collapses a similarity warp to
   // dilation 115/s on a scene with 1.5/s).
