@@ -1,7 +1,6 @@
 #include "flow_command.h"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -18,6 +17,7 @@
 #include "evio/sensors/image_io.h"
 #include "evio/sensors/time.h"
 #include "evio/sensors/trajectory.h"
+#include "cmax_input.h"
 #include "json_util.h"
 #include "output_files.h"
 #include "option_tables.h"
@@ -121,19 +121,11 @@ int run_flow(const FlowArgs& args, std::ostream& out) {
   const mapping::WarpModel model = cfg.cmax.model;
   const bool rotation = model == mapping::WarpModel::kRotation;
 
-  auto reader = open_dataset(args.dataset, args.dataset_options);
-  const DatasetCalibration found = find_dataset_calibration(args.dataset, args.calib, *reader);
-  std::optional<calib::PinholeCamera> camera;
-  if (found.camera) camera = found.camera->camera;
-  SensorSize sensor = reader->sensor_size();
-  if (camera) sensor = {camera->width(), camera->height()};
-  if (!sensor.known())
-    throw InputError(args.dataset, 0, "the sensor size is unknown (no calibration in the dataset)",
-                     "--calib FILE (Kalibr camchain YAML or ECD calib.txt) or --sensor WxH");
-  const bool three_d = rotation || model == mapping::WarpModel::kSixDof;
-  if (three_d && !camera)
-    throw InputError(args.dataset, 0, std::string("no camera calibration (the ") + mapping::warp_model_name(model) +
-                     " model needs the pinhole)", "--calib FILE (Kalibr camchain YAML or ECD calib.txt)");
+  CmaxInput input = open_cmax_input(args.dataset, args.dataset_options, args.calib, {model});
+  DatasetReader* reader = input.reader.get();
+  const std::optional<calib::PinholeCamera>& camera = input.camera;
+  const SensorSize sensor = input.sensor;
+  const DatasetCalibration& found = input.calibration;
 
   cfg.keep_iwe = args.png;
   pipeline::CmaxMotionPipeline pipe(cfg, sensor.width, sensor.height, camera);
@@ -184,42 +176,12 @@ int run_flow(const FlowArgs& args, std::ostream& out) {
   };
 
   // ---- the event stream -------------------------------------------------------------------------
-  Progress progress("evio flow", args.progress, "events");
-  if (args.t_start_ns) reader->seek_events(*args.t_start_ns);
-  std::vector<SubpixelEvent> chunk;
-  int64_t events = 0, t_first = 0, t_last = 0;
-  double process_s = 0;
-  bool done = false;
-  using clock = std::chrono::steady_clock;
-  while (!done) {
-    chunk.clear();
-    if (reader->read_subpixel_events(&chunk, size_t{1} << 16) == 0) break;
-    auto c0 = clock::now();
-    for (const SubpixelEvent& e : chunk) {
-      if (args.t_start_ns && e.t_ns < *args.t_start_ns) continue;
-      if (args.t_end_ns && e.t_ns >= *args.t_end_ns) {
-        done = true;
-        break;
-      }
-      if (events == 0) t_first = e.t_ns;
-      t_last = e.t_ns;
-      ++events;
-      if (pipe.process(e)) {
-        process_s += std::chrono::duration<double>(clock::now() - c0).count();
-        handle(pipe.take_windows());
-        // Output time is not processing time: restart the clock after writing.
-        c0 = clock::now();
-      }
-    }
-    process_s += std::chrono::duration<double>(clock::now() - c0).count();
-    progress.update(reader->progress(), events, std::to_string(pipe.stats().windows) + " windows");
-  }
-  {
-    const auto c0 = clock::now();
-    pipe.finish();
-    process_s += std::chrono::duration<double>(clock::now() - c0).count();
-  }
-  handle(pipe.take_windows());
+  const CmaxStreamTotals totals = stream_cmax_events(
+      reader, args.t_start_ns, args.t_end_ns, "evio flow", args.progress,
+      [&pipe](const SubpixelEvent& e) { return pipe.process(e); }, [&pipe] { pipe.finish(); },
+      [&] { handle(pipe.take_windows()); }, [&pipe] { return std::to_string(pipe.stats().windows) + " windows"; });
+  const int64_t events = totals.events, t_first = totals.t_first_ns, t_last = totals.t_last_ns;
+  const double process_s = totals.process_s;
   csv.close();
   const pipeline::CmaxMotionStats& st = pipe.stats();
 

@@ -1,7 +1,6 @@
 #include "segment_command.h"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <deque>
@@ -15,13 +14,12 @@
 
 #include "evio/calib/error.h"
 #include "evio/sensors/config_table.h"
-#include "evio/sensors/dataset_calibration.h"
 #include "evio/sensors/image_io.h"
 #include "evio/sensors/time.h"
+#include "cmax_input.h"
 #include "json_util.h"
 #include "option_tables.h"
 #include "output_files.h"
-#include "progress.h"
 
 namespace evio::apps {
 namespace {
@@ -174,19 +172,10 @@ int run_segment(const SegmentArgs& args, std::ostream& out) {
     throw InputError("--t-end", 0, "--t-end must be after --t-start", "--t-start S --t-end S with S in seconds");
   if (args.png_every < 1) throw InputError("--png-every", 0, "must be >= 1", "a positive window count");
 
-  auto reader = open_dataset(args.dataset, args.dataset_options);
-  const DatasetCalibration found = find_dataset_calibration(args.dataset, args.calib, *reader);
-  std::optional<calib::PinholeCamera> camera;
-  if (found.camera) camera = found.camera->camera;
-  SensorSize sensor = reader->sensor_size();
-  if (camera) sensor = {camera->width(), camera->height()};
-  if (!sensor.known())
-    throw InputError(args.dataset, 0, "the sensor size is unknown (no calibration in the dataset)",
-                     "--calib FILE (Kalibr camchain YAML or ECD calib.txt) or --sensor WxH");
-  for (mapping::WarpModel m : cfg.segmentation.models)
-    if ((m == mapping::WarpModel::kRotation || m == mapping::WarpModel::kSixDof) && !camera)
-      throw InputError(args.dataset, 0, std::string("no camera calibration (the ") + mapping::warp_model_name(m) +
-                       " model needs the pinhole)", "--calib FILE (Kalibr camchain YAML or ECD calib.txt)");
+  CmaxInput input = open_cmax_input(args.dataset, args.dataset_options, args.calib, cfg.segmentation.models);
+  DatasetReader* reader = input.reader.get();
+  const std::optional<calib::PinholeCamera>& camera = input.camera;
+  const SensorSize sensor = input.sensor;
 
   cfg.keep_iwe = args.png;
   pipeline::SegmentationPipeline pipe(cfg, sensor.width, sensor.height, camera);
@@ -288,40 +277,16 @@ int run_segment(const SegmentArgs& args, std::ostream& out) {
     }
   };
 
-  Progress progress("evio segment", args.progress, "events");
-  if (args.t_start_ns) reader->seek_events(*args.t_start_ns);
-  std::vector<SubpixelEvent> chunk;
-  int64_t events = 0;
-  double process_s = 0;
-  bool done = false;
-  using clock = std::chrono::steady_clock;
-  while (!done) {
-    chunk.clear();
-    if (reader->read_subpixel_events(&chunk, size_t{1} << 16) == 0) break;
-    auto c0 = clock::now();
-    for (const SubpixelEvent& e : chunk) {
-      if (args.t_start_ns && e.t_ns < *args.t_start_ns) continue;
-      if (args.t_end_ns && e.t_ns >= *args.t_end_ns) {
-        done = true;
-        break;
-      }
-      ++events;
-      pending.push_back(e);
-      if (pipe.process(e)) {
-        process_s += std::chrono::duration<double>(clock::now() - c0).count();
-        handle(pipe.take_windows());
-        c0 = clock::now();
-      }
-    }
-    process_s += std::chrono::duration<double>(clock::now() - c0).count();
-    progress.update(reader->progress(), events, std::to_string(pipe.stats().windows) + " windows");
-  }
-  {
-    const auto c0 = clock::now();
-    pipe.finish();
-    process_s += std::chrono::duration<double>(clock::now() - c0).count();
-  }
-  handle(pipe.take_windows());
+  const CmaxStreamTotals totals = stream_cmax_events(
+      reader, args.t_start_ns, args.t_end_ns, "evio segment", args.progress,
+      [&](const SubpixelEvent& e) {
+        pending.push_back(e);
+        return pipe.process(e);
+      },
+      [&pipe] { pipe.finish(); }, [&] { handle(pipe.take_windows()); },
+      [&pipe] { return std::to_string(pipe.stats().windows) + " windows"; });
+  const int64_t events = totals.events;
+  const double process_s = totals.process_s;
   flush_until(pending_first + static_cast<int64_t>(pending.size()), nullptr);
   labels_file.close();
   std::fputs("\n  ]\n}\n", seg_json.get());
