@@ -20,6 +20,7 @@
 #include "evio/calib/log.h"
 #include "evio/simulator/scene_config.h"
 #include "evio/simulator/simulator.h"
+#include "evio_test/moving_patches.h"
 
 namespace {
 
@@ -88,24 +89,11 @@ struct Synthetic {
 Synthetic two_objects(int n, uint64_t seed, int64_t t0 = 1'000'000'000, double span = 0.03) {
   WarpGeometry g;
   g.fx = g.fy = 200, g.cx = 119.5, g.cy = 89.5;
-  std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> U(0, 1);
-  struct Edge { double x, y, a; int label; };
-  std::vector<Edge> edges;
-  for (int i = 0; i < 400; ++i) {
-    const double x = 240 * U(rng), y = 180 * U(rng);
-    int label = 0;
-    if (std::hypot(x - 70, y - 90) < 35) label = 1;
-    if (std::hypot(x - 170, y - 80) < 30) label = 2;
-    edges.push_back({x, y, M_PI * U(rng), label});
-  }
-  const Eigen::Vector2d v[3] = {{0, 0}, {250, -120}, {-180, -200}};
+  const double v1[2] = {250, -120}, v2[2] = {-180, -200};
   Synthetic s{CmaxEvents(t0 + static_cast<int64_t>(span * 0.5e9), g), {}};
-  for (int k = 0; k < n; ++k) {
-    const Edge& e = edges[static_cast<size_t>(k) % edges.size()];
-    const double a = 4 * U(rng), t = span * U(rng);
-    const Eigen::Vector2d p = Eigen::Vector2d(e.x + a * std::cos(e.a), e.y + a * std::sin(e.a)) + v[e.label] * t;
-    s.ev.push_back(static_cast<float>(p.x()), static_cast<float>(p.y()), t0 + static_cast<int64_t>(t * 1e9), k % 2 ? 1 : -1);
+  int k = 0;
+  for (const evio_test::PatchEvent& e : evio_test::moving_patches(n, seed, v1, v2, t0, span)) {
+    s.ev.push_back(static_cast<float>(e.x), static_cast<float>(e.y), e.t_ns, k++ % 2 ? 1 : -1);
     s.truth.push_back(static_cast<uint16_t>(e.label));
   }
   return s;

@@ -9,6 +9,8 @@
 
 #include <gtest/gtest.h>
 
+#include "evio_test/moving_patches.h"
+
 namespace {
 
 using evio::SubpixelEvent;
@@ -126,31 +128,17 @@ TEST(CmaxWindower, DistortedCameraIntegerPixelsGoThroughTheLut) {
 // Two patches of short edges moving apart over a still background, streamed: the same label for
 // each patch throughout.
 TEST(SegmentationPipeline, StreamedWindowsKeepTheirLabels) {
-  std::mt19937_64 rng(5);
-  std::uniform_real_distribution<double> U(0, 1);
-  struct Edge { double x, y, a; int label; };
-  std::vector<Edge> edges;
-  for (int i = 0; i < 400; ++i) {
-    const double x = 240 * U(rng), y = 180 * U(rng);
-    int label = 0;
-    if (std::hypot(x - 70, y - 90) < 35) label = 1;
-    if (std::hypot(x - 170, y - 80) < 30) label = 2;
-    edges.push_back({x, y, M_PI * U(rng), label});
-  }
-  const double v[3][2] = {{0, 0}, {150, -60}, {-100, -120}};
+  const double v1[2] = {150, -60}, v2[2] = {-100, -120};
   std::vector<SubpixelEvent> ev;
   std::vector<int> truth;
-  const int n = 90000;
-  for (int k = 0; k < n; ++k) {
-    const Edge& e = edges[static_cast<size_t>(k) % edges.size()];
-    const double t = 0.09 * k / n, a = 4 * U(rng);
+  for (const evio_test::PatchEvent& p : evio_test::moving_patches(90000, 5, v1, v2, 0, 0.09, true)) {
     SubpixelEvent s;
-    s.t_ns = static_cast<int64_t>(t * 1e9);
-    s.x = static_cast<float>(e.x + a * std::cos(e.a) + v[e.label][0] * t);
-    s.y = static_cast<float>(e.y + a * std::sin(e.a) + v[e.label][1] * t);
+    s.t_ns = p.t_ns;
+    s.x = static_cast<float>(p.x);
+    s.y = static_cast<float>(p.y);
     s.polarity = 1;
     ev.push_back(s);
-    truth.push_back(e.label);
+    truth.push_back(p.label);
   }
   evio::pipeline::SegmentationPipelineOptions o;
   o.window.window_events = 30000;
