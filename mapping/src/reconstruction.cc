@@ -1,0 +1,347 @@
+#include "evio/mapping/reconstruction.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <stdexcept>
+
+namespace evio::mapping {
+namespace {
+
+constexpr double kTwoPi = 6.283185307179586;
+// The complementary filter rescales its state before exp(alpha (t - t_ref)) exceeds e^20.
+constexpr double kMaxExponent = 20.0;
+
+bool fail(std::string* why, const std::string& msg) {
+  if (why) *why = msg;
+  return false;
+}
+
+// exp(a) rounded to float, for a <= ~80: e^a = 2^k e^r with k = round(a / ln 2), |r| <= ln(2)/2,
+// e^r by its Taylor polynomial of degree 7 in double (truncation below 5e-9 relative, under the
+// float rounding of 6e-8). About a third of glibc's exp() per event, and branch-free but for the
+// underflow test.
+inline float exp_to_float(double a) {
+  if (a < -87.0) return 0.0f;
+  constexpr double kLog2e = 1.4426950408889634, kLn2 = 0.6931471805599453;
+  constexpr double kRound = 6755399441055744.0;  // 1.5 * 2^52: adding it rounds to an integer
+  const double kd = (a * kLog2e + kRound) - kRound;
+  const double r = a - kd * kLn2;
+  const double p =
+      1.0 + r * (1.0 + r * (0.5 + r * (1.0 / 6 + r * (1.0 / 24 + r * (1.0 / 120 + r * (1.0 / 720 + r * (1.0 / 5040)))))));
+  const int64_t bits = (static_cast<int64_t>(kd) + 1023) << 52;
+  double scale;
+  std::memcpy(&scale, &bits, sizeof(scale));
+  return static_cast<float>(p * scale);
+}
+
+void check_size(int width, int height) {
+  if (width < 1 || height < 1 || width > 65536 || height > 65536)
+    throw std::invalid_argument("reconstruction: sensor size " + std::to_string(width) + " x " + std::to_string(height) +
+                                " outside 1..65536");
+}
+
+void check_frame(const GreyView& f, int width, int height) {
+  if (f.width != width || f.height != height || !f.data || f.stride < f.width)
+    throw std::invalid_argument("reconstruction: a frame of " + std::to_string(f.width) + " x " +
+                                std::to_string(f.height) + " px on a " + std::to_string(width) + " x " +
+                                std::to_string(height) + " sensor (frames must have the sensor's size)");
+}
+
+void copy_frame(const GreyView& f, std::vector<uint8_t>* out) {
+  out->resize(static_cast<size_t>(f.width) * f.height);
+  for (int y = 0; y < f.height; ++y) std::memcpy(out->data() + static_cast<size_t>(y) * f.width, f.data + y * f.stride, f.width);
+}
+
+bool contrasts_valid(double on, double off, std::string* why) {
+  if (!(std::isfinite(on) && on > 0 && on <= 10)) return fail(why, "contrast_on must be in (0, 10]");
+  if (!(std::isfinite(off) && off > 0 && off <= 10)) return fail(why, "contrast_off must be in (0, 10]");
+  return true;
+}
+
+}  // namespace
+
+const char* reconstruction_method_name(ReconstructionMethod m) {
+  switch (m) {
+    case ReconstructionMethod::kHighPass: return "hf";
+    case ReconstructionMethod::kComplementary: return "cf";
+    case ReconstructionMethod::kKalman: return "akf";
+  }
+  return "?";
+}
+
+bool FrameResponse::Validate(std::string* why) const {
+  if (!(std::isfinite(gamma) && gamma > 0 && gamma <= 10)) return fail(why, "frame gamma must be in (0, 10]");
+  if (!(std::isfinite(offset) && offset > 0 && offset <= 1e6)) return fail(why, "frame log offset must be in (0, 1e6]");
+  if (!(initial_grey >= 0 && initial_grey <= 255)) return fail(why, "initial_grey must be in [0, 255]");
+  return true;
+}
+
+double FrameResponse::log_of(double v) const { return gamma * std::log(v / 255.0 + offset); }
+
+bool ComplementaryFilterOptions::Validate(std::string* why) const {
+  if (!(std::isfinite(cutoff_hz) && cutoff_hz >= 0 && cutoff_hz <= 1e6)) return fail(why, "cutoff_hz must be in [0, 1e6]");
+  if (!contrasts_valid(contrast_on, contrast_off, why)) return false;
+  if (!std::isfinite(initial_log_intensity) || std::fabs(initial_log_intensity) > 1e6)
+    return fail(why, "initial_log_intensity must be finite, |value| <= 1e6");
+  return frame.Validate(why);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Complementary filter
+
+ComplementaryFilter::ComplementaryFilter(int width, int height, int64_t t_start_ns, const ComplementaryFilterOptions& options)
+    : width_(width), height_(height), o_(options) {
+  check_size(width, height);
+  std::string why;
+  if (!o_.Validate(&why)) throw std::invalid_argument("ComplementaryFilterOptions: " + why);
+  alpha_per_ns_ = kTwoPi * o_.cutoff_hz * 1e-9;
+  c_on_ = static_cast<float>(o_.contrast_on);
+  c_off_ = static_cast<float>(-o_.contrast_off);
+  for (int v = 0; v < 256; ++v) lut_[v] = static_cast<float>(o_.frame.log_of(v));
+  reference_ = o_.high_pass ? 0.0f : static_cast<float>(o_.frame.log_of(o_.frame.initial_grey));
+  s_.assign(static_cast<size_t>(width) * height, static_cast<float>(o_.initial_log_intensity));
+  t_ref_ns_ = t_fold_ns_ = t_start_ns;
+  t_rebase_ns_ = std::numeric_limits<int64_t>::max();
+  if (alpha_per_ns_ > 0) {
+    const double span = kMaxExponent / alpha_per_ns_;
+    if (span < 9e18 && static_cast<double>(t_start_ns) + span < 9.2e18) t_rebase_ns_ = t_start_ns + static_cast<int64_t>(span);
+  }
+}
+
+void ComplementaryFilter::fold_frame(int64_t t_ns) {
+  if (t_ns <= t_fold_ns_) return;
+  // w(t) - w(t_fold) = w(t_fold) expm1(alpha (t - t_fold)), exact in double.
+  const double dw = std::exp(exponent(t_fold_ns_)) * std::expm1(alpha_per_ns_ * static_cast<double>(t_ns - t_fold_ns_));
+  t_fold_ns_ = t_ns;
+  if (dw == 0.0) return;
+  if (frame_.empty()) {
+    if (reference_ == 0.0f) return;
+    const float add = static_cast<float>(reference_ * dw);
+    for (float& s : s_) s += add;
+    return;
+  }
+  std::array<float, 256> lutw;
+  for (int v = 0; v < 256; ++v) lutw[v] = static_cast<float>(lut_[v] * dw);
+  const uint8_t* f = frame_.data();
+  float* s = s_.data();
+  const size_t n = s_.size();
+  for (size_t i = 0; i < n; ++i) s[i] += lutw[f[i]];
+}
+
+void ComplementaryFilter::rebase(int64_t t_ns) {
+  // The state at t_ns in plain log intensity (the new scale, exp(alpha (t_ns - t_ref)) = 1):
+  // S' = S exp(-alpha (t_ns - t_ref)) + L_F (1 - exp(-alpha (t_ns - t_fold))), in double (no
+  // overflow whatever the gap); values below 1e-30 become 0 (no denormals in later sums).
+  t_ns = std::max(t_ns, t_fold_ns_);  // a frame later than the event that asked: rebase there
+  const double a = exponent(t_ns);
+  const double scale = a > 700 ? 0.0 : std::exp(-a);
+  const double g = t_ns > t_fold_ns_ ? -std::expm1(-alpha_per_ns_ * static_cast<double>(t_ns - t_fold_ns_)) : 0.0;
+  const size_t n = s_.size();
+  if (frame_.empty()) {
+    const double add = reference_ * g;
+    for (size_t i = 0; i < n; ++i) s_[i] = static_cast<float>(s_[i] * scale + add);
+  } else {
+    for (size_t i = 0; i < n; ++i) s_[i] = static_cast<float>(s_[i] * scale + lut_[frame_[i]] * g);
+  }
+  for (float& s : s_)
+    if (std::fabs(s) < 1e-30f) s = 0.0f;
+  t_ref_ns_ = t_fold_ns_ = t_ns;
+  const double span = kMaxExponent / alpha_per_ns_;
+  t_rebase_ns_ = static_cast<double>(t_ns) + span < 9.2e18 ? t_ns + static_cast<int64_t>(span) : std::numeric_limits<int64_t>::max();
+  ++stats_.rebases;
+}
+
+void ComplementaryFilter::process(const Event* events, size_t n) {
+  float* s = s_.data();
+  const uint32_t w = static_cast<uint32_t>(width_), h = static_cast<uint32_t>(height_);
+  int64_t outside = 0;
+  for (size_t i = 0; i < n; ++i) {
+    const Event& e = events[i];
+    if (e.t_ns > t_rebase_ns_) rebase(e.t_ns);
+    if (e.x >= w || e.y >= h) {
+      ++outside;
+      continue;
+    }
+    const float scale = exp_to_float(alpha_per_ns_ * static_cast<double>(e.t_ns - t_ref_ns_));
+    s[e.y * w + e.x] += (e.polarity > 0 ? c_on_ : c_off_) * scale;
+  }
+  stats_.events += static_cast<int64_t>(n) - outside;
+  stats_.events_outside += outside;
+}
+
+void ComplementaryFilter::add_frame(int64_t t_ns, const GreyView& frame) {
+  if (!o_.use_frames) return;
+  check_frame(frame, width_, height_);
+  if (t_ns > t_rebase_ns_) rebase(t_ns);
+  fold_frame(t_ns);  // the previous L_F up to t_ns (a frame before the last one is fused at its time)
+  copy_frame(frame, &frame_);
+  if (stats_.frames == 0 && o_.init_from_first_frame) {
+    const float w = exp_to_float(exponent(t_fold_ns_));
+    for (size_t i = 0; i < s_.size(); ++i) s_[i] = lut_[frame_[i]] * w;
+  }
+  ++stats_.frames;
+}
+
+void ComplementaryFilter::log_intensity(int64_t t_ns, ImageF* out) const {
+  out->resize(height_, width_);
+  // L = S / w(t) + L_F (1 - w(t_fold) / w(t)), in double.
+  const double inv = std::exp(-exponent(t_ns));
+  const double g = t_ns > t_fold_ns_ ? -std::expm1(-alpha_per_ns_ * static_cast<double>(t_ns - t_fold_ns_)) : 0.0;
+  float* o = out->data();
+  const size_t n = s_.size();
+  if (frame_.empty()) {
+    const double add = reference_ * g;
+    for (size_t i = 0; i < n; ++i) o[i] = static_cast<float>(s_[i] * inv + add);
+  } else {
+    for (size_t i = 0; i < n; ++i) o[i] = static_cast<float>(s_[i] * inv + lut_[frame_[i]] * g);
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Asynchronous Kalman filter
+
+bool AsyncKalmanFilterOptions::Validate(std::string* why) const {
+  if (!contrasts_valid(contrast_on, contrast_off, why)) return false;
+  auto nonneg = [](double v) { return std::isfinite(v) && v >= 0 && v <= 1e6; };
+  if (!(std::isfinite(initial_variance) && initial_variance > 0 && initial_variance <= 1e6))
+    return fail(why, "initial_variance must be in (0, 1e6]");
+  if (!nonneg(process_noise)) return fail(why, "process_noise must be in [0, 1e6]");
+  if (!nonneg(isolated_noise)) return fail(why, "isolated_noise must be in [0, 1e6]");
+  if (!nonneg(refractory_noise)) return fail(why, "refractory_noise must be in [0, 1e6]");
+  if (refractory_period_ns < 0) return fail(why, "refractory_period must be >= 0");
+  if (!(std::isfinite(frame_noise_density) && frame_noise_density > 0 && frame_noise_density <= 1e6))
+    return fail(why, "frame_noise_density must be in (0, 1e6]");
+  if (!(exposure_low >= 0 && exposure_low <= exposure_high && exposure_high <= 255))
+    return fail(why, "need 0 <= exposure_low <= exposure_high <= 255");
+  if (!(min_exposure_weight > 0 && min_exposure_weight <= 1)) return fail(why, "min_exposure_weight must be in (0, 1]");
+  if (!std::isfinite(initial_log_intensity) || std::fabs(initial_log_intensity) > 1e6)
+    return fail(why, "initial_log_intensity must be finite, |value| <= 1e6");
+  return frame.Validate(why);
+}
+
+AsyncKalmanFilter::AsyncKalmanFilter(int width, int height, int64_t t_start_ns, const AsyncKalmanFilterOptions& options)
+    : width_(width), height_(height), o_(options) {
+  check_size(width, height);
+  std::string why;
+  if (!o_.Validate(&why)) throw std::invalid_argument("AsyncKalmanFilterOptions: " + why);
+  const size_t n = static_cast<size_t>(width) * height;
+  l_.assign(n, static_cast<float>(o_.initial_log_intensity));
+  p_.assign(n, static_cast<float>(o_.initial_variance));
+  t_update_.assign(n, t_start_ns);
+  t_event_.assign(n, t_start_ns);
+  for (int v = 0; v < 256; ++v) {
+    lut_log_[v] = static_cast<float>(o_.frame.log_of(v));
+    double w = 1.0;
+    if (v < o_.exposure_low) {
+      w = o_.min_exposure_weight + (1.0 - o_.min_exposure_weight) * v / o_.exposure_low;
+    } else if (v > o_.exposure_high) {
+      w = o_.min_exposure_weight + (1.0 - o_.min_exposure_weight) * (255.0 - v) / (255.0 - o_.exposure_high);
+    }
+    const double u = v / 255.0 + o_.frame.offset;
+    lut_rinv_[v] = static_cast<float>(u * u * w / (o_.frame_noise_density * o_.frame.gamma * o_.frame.gamma));
+  }
+}
+
+namespace {
+// The Riccati and state solution over dt seconds with the frame (lf, rinv): returns the new P,
+// updates *l. P(t) = P0 / (1 + P0 dt / R); L - L_F scales by P(t) / P0.
+inline float propagate(float* l, float p, float lf, float rinv, double dt_s) {
+  const double d = 1.0 + static_cast<double>(p) * rinv * dt_s;
+  *l = static_cast<float>(lf + (static_cast<double>(*l) - lf) / d);
+  return static_cast<float>(p / d);
+}
+}  // namespace
+
+void AsyncKalmanFilter::process(const Event* events, size_t n) {
+  const uint32_t w = static_cast<uint32_t>(width_), h = static_cast<uint32_t>(height_);
+  const bool framed = !frame_.empty();
+  const float c_on = static_cast<float>(o_.contrast_on), c_off = static_cast<float>(-o_.contrast_off);
+  int64_t outside = 0;
+  for (size_t i = 0; i < n; ++i) {
+    const Event& e = events[i];
+    if (e.x >= w || e.y >= h) {
+      ++outside;
+      continue;
+    }
+    const size_t k = static_cast<size_t>(e.y) * w + e.x;
+    const int64_t t = e.t_ns;
+    float p = p_[k];
+    if (framed) {
+      const uint8_t v = frame_[k];
+      p = propagate(&l_[k], p, lut_log_[v], lut_rinv_[v], std::max<int64_t>(0, t - t_update_[k]) * 1e-9);
+    }
+    l_[k] += e.polarity > 0 ? c_on : c_off;
+    // Event noise: process (time since the pixel's previous event), isolated pixel (time since the
+    // latest event among the 8 neighbours), refractory.
+    const int64_t since_own = std::max<int64_t>(0, t - t_event_[k]);
+    int64_t latest = std::numeric_limits<int64_t>::min();
+    const uint32_t ex = e.x, ey = e.y;
+    const uint32_t x0 = ex > 0 ? ex - 1 : 0, x1 = ex + 1 < w ? ex + 1 : ex;
+    const uint32_t y0 = ey > 0 ? ey - 1 : 0, y1 = ey + 1 < h ? ey + 1 : ey;
+    for (uint32_t y = y0; y <= y1; ++y) {
+      const int64_t* row = t_event_.data() + static_cast<size_t>(y) * w;
+      for (uint32_t x = x0; x <= x1; ++x)
+        if ((x != ex || y != ey) && row[x] > latest) latest = row[x];
+    }
+    const double since_neighbour = latest == std::numeric_limits<int64_t>::min() ? 0.0 : std::max<int64_t>(0, t - latest) * 1e-9;
+    double q = o_.process_noise * since_own * 1e-9 + o_.isolated_noise * since_neighbour;
+    if (since_own <= o_.refractory_period_ns) q += o_.refractory_noise;
+    p_[k] = static_cast<float>(p + q);
+    t_update_[k] = t;
+    t_event_[k] = t;
+  }
+  stats_.events += static_cast<int64_t>(n) - outside;
+  stats_.events_outside += outside;
+}
+
+void AsyncKalmanFilter::add_frame(int64_t t_ns, const GreyView& frame) {
+  if (!o_.use_frames) return;
+  check_frame(frame, width_, height_);
+  const size_t n = l_.size();
+  if (frame_.empty()) {
+    copy_frame(frame, &frame_);
+    for (size_t i = 0; i < n; ++i) {
+      l_[i] = lut_log_[frame_[i]];
+      p_[i] = static_cast<float>(o_.initial_variance);
+      t_update_[i] = t_ns;
+    }
+  } else {
+    for (size_t i = 0; i < n; ++i) {
+      const uint8_t v = frame_[i];
+      p_[i] = propagate(&l_[i], p_[i], lut_log_[v], lut_rinv_[v], std::max<int64_t>(0, t_ns - t_update_[i]) * 1e-9);
+      t_update_[i] = std::max(t_update_[i], t_ns);
+    }
+    copy_frame(frame, &frame_);
+  }
+  ++stats_.frames;
+}
+
+void AsyncKalmanFilter::log_intensity(int64_t t_ns, ImageF* out) const {
+  out->resize(height_, width_);
+  float* o = out->data();
+  for (size_t i = 0; i < l_.size(); ++i) {
+    float l = l_[i];
+    if (!frame_.empty()) {
+      const uint8_t v = frame_[i];
+      propagate(&l, p_[i], lut_log_[v], lut_rinv_[v], std::max<int64_t>(0, t_ns - t_update_[i]) * 1e-9);
+    }
+    o[i] = l;
+  }
+}
+
+void AsyncKalmanFilter::variance(int64_t t_ns, ImageF* out) const {
+  out->resize(height_, width_);
+  float* o = out->data();
+  for (size_t i = 0; i < p_.size(); ++i) {
+    float l = 0, p = p_[i];
+    if (!frame_.empty()) {
+      const uint8_t v = frame_[i];
+      p = propagate(&l, p, 0.0f, lut_rinv_[v], std::max<int64_t>(0, t_ns - t_update_[i]) * 1e-9);
+    }
+    o[i] = p;
+  }
+}
+
+}  // namespace evio::mapping
