@@ -103,10 +103,18 @@ ComplementaryFilter::ComplementaryFilter(int width, int height, int64_t t_start_
   reference_ = o_.high_pass ? 0.0f : static_cast<float>(o_.frame.log_of(o_.frame.initial_grey));
   s_.assign(static_cast<size_t>(width) * height, static_cast<float>(o_.initial_log_intensity));
   t_ref_ns_ = t_fold_ns_ = t_start_ns;
-  t_rebase_ns_ = std::numeric_limits<int64_t>::max();
-  if (alpha_per_ns_ > 0) {
-    const double span = kMaxExponent / alpha_per_ns_;
-    if (span < 9e18 && static_cast<double>(t_start_ns) + span < 9.2e18) t_rebase_ns_ = t_start_ns + static_cast<int64_t>(span);
+  // Rebase before exp(alpha d) exceeds e^20 or d leaves the tables' 33 bits.
+  const double span = alpha_per_ns_ > 0 ? kMaxExponent / alpha_per_ns_ : 1e300;
+  rebase_span_ns_ = static_cast<uint64_t>(std::min(span, static_cast<double>(kTableSpanNs)));
+  const size_t digits = size_t{1} << kDigitBits;
+  exp_lo_.resize(digits);
+  exp_mid_.resize(digits);
+  exp_hi_.resize(digits);
+  for (size_t j = 0; j < digits; ++j) {
+    auto e = [this](double d_ns) { return static_cast<float>(std::min(std::exp(alpha_per_ns_ * d_ns), 3e38)); };
+    exp_lo_[j] = e(static_cast<double>(j));
+    exp_mid_[j] = e(static_cast<double>(j << kDigitBits));
+    exp_hi_[j] = e(static_cast<double>(j << (2 * kDigitBits)));
   }
 }
 
@@ -148,23 +156,34 @@ void ComplementaryFilter::rebase(int64_t t_ns) {
   for (float& s : s_)
     if (std::fabs(s) < 1e-30f) s = 0.0f;
   t_ref_ns_ = t_fold_ns_ = t_ns;
-  const double span = kMaxExponent / alpha_per_ns_;
-  t_rebase_ns_ = static_cast<double>(t_ns) + span < 9.2e18 ? t_ns + static_cast<int64_t>(span) : std::numeric_limits<int64_t>::max();
   ++stats_.rebases;
 }
 
 void ComplementaryFilter::process(const Event* events, size_t n) {
   float* s = s_.data();
   const uint32_t w = static_cast<uint32_t>(width_), h = static_cast<uint32_t>(height_);
+  const float* lo = exp_lo_.data();
+  const float* mid = exp_mid_.data();
+  const float* hi = exp_hi_.data();
   int64_t outside = 0;
   for (size_t i = 0; i < n; ++i) {
     const Event& e = events[i];
-    if (e.t_ns > t_rebase_ns_) rebase(e.t_ns);
+    uint64_t d = static_cast<uint64_t>(e.t_ns - t_ref_ns_);  // ns since t_ref (wraps when negative)
+    float scale;
+    if (d <= rebase_span_ns_) {
+      // exp(alpha d) from three tables over d's 11-bit digits (about 4 float ulps: 2e-7 relative
+      // error on an event's contribution c, 3e-8 for c = 0.1)
+      scale = hi[d >> (2 * kDigitBits)] * mid[(d >> kDigitBits) & kDigitMask] * lo[d & kDigitMask];
+    } else if (static_cast<int64_t>(d) > 0) {
+      rebase(e.t_ns);
+      scale = exp_to_float(exponent(e.t_ns));  // the event is at or before the new t_ref
+    } else {
+      scale = exp_to_float(exponent(e.t_ns));  // before t_ref (out of order): w < 1
+    }
     if (e.x >= w || e.y >= h) {
       ++outside;
       continue;
     }
-    const float scale = exp_to_float(alpha_per_ns_ * static_cast<double>(e.t_ns - t_ref_ns_));
     s[e.y * w + e.x] += (e.polarity > 0 ? c_on_ : c_off_) * scale;
   }
   stats_.events += static_cast<int64_t>(n) - outside;
@@ -174,7 +193,7 @@ void ComplementaryFilter::process(const Event* events, size_t n) {
 void ComplementaryFilter::add_frame(int64_t t_ns, const GreyView& frame) {
   if (!o_.use_frames) return;
   check_frame(frame, width_, height_);
-  if (t_ns > t_rebase_ns_) rebase(t_ns);
+  if (t_ns - t_ref_ns_ > static_cast<int64_t>(rebase_span_ns_)) rebase(t_ns);
   fold_frame(t_ns);  // the previous L_F up to t_ns (a frame before the last one is fused at its time)
   copy_frame(frame, &frame_);
   if (stats_.frames == 0 && o_.init_from_first_frame) {

@@ -132,7 +132,13 @@ class ComplementaryFilter : public LogIntensityFilter {
   std::vector<uint8_t> frame_;    // the latest frame (empty before the first)
   std::array<float, 256> lut_{};  // frame value -> log intensity
   float reference_;               // L_F before the first frame (0 for the high-pass filter)
-  int64_t t_ref_ns_, t_fold_ns_, t_rebase_ns_;
+  int64_t t_ref_ns_, t_fold_ns_;
+  // exp(alpha d) for d = t - t_ref < 2^33 ns as the product of three tables over d's 11-bit digits.
+  static constexpr int kDigitBits = 11;
+  static constexpr uint64_t kDigitMask = (uint64_t{1} << kDigitBits) - 1;
+  static constexpr uint64_t kTableSpanNs = (uint64_t{1} << (3 * kDigitBits)) - 1;
+  uint64_t rebase_span_ns_;  // rebase when t - t_ref exceeds this
+  std::vector<float> exp_lo_, exp_mid_, exp_hi_;
   ReconstructionStats stats_;
 };
 
