@@ -52,6 +52,10 @@ inline constexpr SubcommandInfo kSubcommands[] = {
      "Motion segmentation by contrast maximisation (Stoffregen et al. ICCV 2019): clusters of events that share a "
      "motion, their number and warp models chosen per window, labels that persist across windows: labels.txt, "
      "segments.json, coloured IWE PNGs, stats.json"},
+    {"reconstruct",
+     "Image reconstruction from events and APS frames, per pixel and per event (high-pass, complementary filter "
+     "Scheerlinck et al. ACCV 2018, asynchronous Kalman filter Wang et al. ICCV 2021): images/ (PNG + float TIFF log "
+     "intensity), images.txt, stats.json, optional MP4"},
 };
 
 // The summary of a subcommand, or nullptr for an unknown name.

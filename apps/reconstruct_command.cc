@@ -1,0 +1,330 @@
+#include "reconstruct_command.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <ostream>
+#include <sstream>
+
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "evio/calib/error.h"
+#include "evio/sensors/config_table.h"
+#include "evio/sensors/ecd.h"
+#include "evio/sensors/time.h"
+#include "cmax_input.h"
+#include "json_util.h"
+#include "option_tables.h"
+#include "output_files.h"
+#include "progress.h"
+#include "video_out.h"
+
+namespace evio::apps {
+namespace {
+
+namespace fs = std::filesystem;
+using yaml_config::Range;
+using yaml_config::Table;
+using C = ReconstructConfig;
+using mapping::ReconstructionMethod;
+
+const std::vector<std::pair<std::string, ReconstructionMethod>>& method_names() {
+  static const std::vector<std::pair<std::string, ReconstructionMethod>> names = {
+      {"hf", ReconstructionMethod::kHighPass}, {"cf", ReconstructionMethod::kComplementary}, {"akf", ReconstructionMethod::kKalman}};
+  return names;
+}
+
+const Table<C>& reconstruct_config_table() {
+  static const Table<C> table = [] {
+    using CF = mapping::ComplementaryFilterOptions;
+    using KF = mapping::AsyncKalmanFilterOptions;
+    using FR = mapping::FrameResponse;
+    Table<CF> cf("complementary filter settings");
+    cf.number("cutoff_hz", &CF::cutoff_hz, Range::kNonNegative, "Hz")
+        .note("cutoff_hz", "crossover frequency f; alpha = 2 pi f rad/s; 0: direct integration")
+        .number("contrast_on", &CF::contrast_on, Range::kPositive, "log intensity")
+        .number("contrast_off", &CF::contrast_off, Range::kPositive, "log intensity")
+        .note("contrast_off", "subtracted per OFF event")
+        .number("initial_log_intensity", &CF::initial_log_intensity, Range::kAny, "log intensity")
+        .boolean("init_from_first_frame", &CF::init_from_first_frame)
+        .note("init_from_first_frame", "the first frame sets the state (the published filter starts from 0)");
+    Table<KF> akf("asynchronous Kalman filter settings");
+    akf.number("contrast_on", &KF::contrast_on, Range::kPositive, "log intensity")
+        .number("contrast_off", &KF::contrast_off, Range::kPositive, "log intensity")
+        .number("initial_variance", &KF::initial_variance, Range::kPositive, "log^2")
+        .number("process_noise", &KF::process_noise, Range::kNonNegative, "log^2/s")
+        .note("process_noise", "per s since the pixel's previous event")
+        .number("isolated_noise", &KF::isolated_noise, Range::kNonNegative, "log^2/s")
+        .note("isolated_noise", "per s since the latest event among the 8 neighbours")
+        .number("refractory_noise", &KF::refractory_noise, Range::kNonNegative, "log^2")
+        .duration_ms("refractory_period_ms", &KF::refractory_period_ns, Range::kNonNegative)
+        .number("frame_noise_density", &KF::frame_noise_density, Range::kPositive, "intensity^2 s")
+        .note("frame_noise_density", "of a well-exposed pixel, normalised intensity (0..1)")
+        .number("exposure_low", &KF::exposure_low, Range::kNonNegative, "grey level")
+        .number("exposure_high", &KF::exposure_high, Range::kNonNegative, "grey level")
+        .number("min_exposure_weight", &KF::min_exposure_weight, Range::kPositive, "")
+        .note("min_exposure_weight", "frame confidence at 0 and 255 (1 between exposure_low and exposure_high)")
+        .number("initial_log_intensity", &KF::initial_log_intensity, Range::kAny, "log intensity");
+    Table<FR> frames("frame response settings");
+    frames.number("gamma", &FR::gamma, Range::kPositive, "")
+        .number("log_offset", &FR::offset, Range::kPositive, "")
+        .note("log_offset", "L = gamma log(v/255 + log_offset); 1 as dvs_image_reconstruction, ~0.01 with gamma 2.2 for gamma-encoded frames")
+        .number("initial_grey", &FR::initial_grey, Range::kNonNegative, "grey level")
+        .validate();
+    Table<C> top("reconstruct settings");
+    top.choice("method", &C::method, method_names())
+        .boolean("use_frames", &C::use_frames)
+        .number("rate_hz", &C::rate_hz, Range::kPositive, "Hz")
+        .note("rate_hz", "images per second of sensor time (without --at)")
+        .number("video_fps", &C::video_fps, Range::kPositive, "Hz")
+        .section("cf", cf, &C::cf)
+        .section("akf", akf, &C::akf)
+        .section("frames", frames, &C::frames)
+        .section("display", log_image_display_table(), &C::display)
+        .ignored("description")
+        .validate();
+    return top;
+  }();
+  return table;
+}
+
+std::string num(double v) { return json_number(v, 9); }
+
+// The frame as 8-bit grey (the filters' input): mono8 as it is, colour converted, 16-bit scaled.
+cv::Mat grey8(const cv::Mat& m, const std::string& where) {
+  cv::Mat g = m;
+  if (g.channels() == 3) cv::cvtColor(m, g, cv::COLOR_BGR2GRAY);
+  if (g.channels() == 4) cv::cvtColor(m, g, cv::COLOR_BGRA2GRAY);
+  if (g.depth() == CV_16U) g.convertTo(g, CV_8U, 1.0 / 257.0);
+  if (g.type() != CV_8UC1) throw InputError(where, 0, "unsupported frame pixel type", "8- or 16-bit grey or colour frames");
+  return g;
+}
+
+}  // namespace
+
+bool ReconstructConfig::Validate(std::string* why) const {
+  if (!(rate_hz > 0 && rate_hz <= 1e6)) {
+    if (why) *why = "rate_hz must be in (0, 1e6]";
+    return false;
+  }
+  mapping::ComplementaryFilterOptions c = cf;
+  c.frame = frames;
+  mapping::AsyncKalmanFilterOptions k = akf;
+  k.frame = frames;
+  return c.Validate(why) && k.Validate(why) && display.Validate(why);
+}
+
+ReconstructConfig load_reconstruct_config(const std::string& path, const std::vector<std::string>& sets) {
+  return yaml_config::read_config(reconstruct_config_table(), ReconstructConfig{}, path, sets,
+                                  "a reconstruct config YAML (see README.md, `evio reconstruct`)");
+}
+
+std::string reconstruct_config_text(const ReconstructConfig& c) {
+  return yaml_config::config_text(reconstruct_config_table(), c,
+                                  "# evio reconstruct configuration, resolved: every key with the value used (comments: "
+                                  "unit and range).\n# Readable by `evio reconstruct --config`. Section cf is also the "
+                                  "high-pass filter's (method hf: reference 0, no frames).\n");
+}
+
+ReconstructConfig resolve_reconstruct_config(const ReconstructArgs& args) {
+  ReconstructConfig cfg = load_reconstruct_config(args.config, args.set);
+  if (!args.method.empty()) {
+    bool found = false;
+    for (const auto& [name, m] : method_names())
+      if (name == args.method) {
+        cfg.method = m;
+        found = true;
+      }
+    if (!found) throw InputError("--method", 0, "unknown method '" + args.method + "'", "hf, cf or akf");
+  }
+  if (args.use_frames) cfg.use_frames = true;
+  if (args.rate_hz) cfg.rate_hz = *args.rate_hz;
+  if (args.cutoff_hz) cfg.cf.cutoff_hz = *args.cutoff_hz;
+  if (args.contrast_on) cfg.cf.contrast_on = cfg.akf.contrast_on = *args.contrast_on;
+  if (args.contrast_off) cfg.cf.contrast_off = cfg.akf.contrast_off = *args.contrast_off;
+  if (args.cutoff_hz && cfg.method == ReconstructionMethod::kKalman)
+    throw InputError("--cutoff-hz", 0, "the Kalman filter has no cut-off (its gain comes from the noise models)",
+                     "--method hf or cf, or the akf section's noise settings");
+  if (cfg.method == ReconstructionMethod::kHighPass && cfg.use_frames)
+    throw InputError("--use-frames", 0, "the high-pass filter uses events only", "--method cf or akf with --use-frames");
+  std::string why;
+  if (!cfg.Validate(&why)) throw InputError(args.config.empty() ? "the flags" : args.config, 0, why, "valid reconstruct settings");
+  return cfg;
+}
+
+int run_reconstruct(const ReconstructArgs& args, std::ostream& out) {
+  using clock = std::chrono::steady_clock;
+  const ReconstructConfig cfg = resolve_reconstruct_config(args);
+  CmaxInput input = open_cmax_input(args.dataset, args.dataset_options, args.calib, {});
+  DatasetReader* reader = input.reader.get();
+  const int width = input.sensor.width, height = input.sensor.height;
+
+  std::vector<Frame> frames;
+  if (cfg.use_frames) {
+    frames = reader->read_frames();
+    if (frames.empty())
+      throw InputError(args.dataset, 0, "--use-frames: the dataset has no APS frames", "a recording with frames, or no --use-frames");
+  }
+  // Times of the images: --at, or every 1/rate from the first event.
+  std::vector<int64_t> at = args.at_ns;
+  std::sort(at.begin(), at.end());
+  const int64_t period_ns = std::max<int64_t>(1, std::llround(1e9 / cfg.rate_hz));
+
+  fs::create_directories(fs::path(args.out) / "images");
+  {
+    TextOut f((fs::path(args.out) / "reconstruct_config.yaml").string());
+    std::fputs(reconstruct_config_text(cfg).c_str(), f.get());
+    f.close();
+  }
+  TextOut list((fs::path(args.out) / "images.txt").string());
+  std::fputs("# timestamp[s] image (evio reconstruct)\n", list.get());
+  VideoOut video;
+  std::string video_status = "not requested";
+  if (args.video) {
+    std::string why;
+    video_status = video.open((fs::path(args.out) / "video.mp4").string(), cfg.video_fps, width, height, &why)
+                       ? "written"
+                       : "unavailable: " + why;
+    if (!video.is_open()) out << "evio reconstruct: --video: no video.mp4 written (" << why << ")\n";
+  }
+
+  std::unique_ptr<mapping::LogIntensityFilter> filter;
+  double filter_s = 0, readout_s = 0;  // in process/add_frame; in log_intensity
+  int64_t images = 0, events = 0, t_first = 0, t_last = 0;
+  size_t next_frame = 0, next_at = 0;
+  int64_t next_rate = 0;
+  mapping::ImageF img;
+  auto write_image_at = [&](int64_t t) {
+    const auto c0 = clock::now();
+    filter->log_intensity(t, &img);
+    readout_s += std::chrono::duration<double>(clock::now() - c0).count();
+    char name[64];
+    std::snprintf(name, sizeof(name), "images/frame_%08lld", static_cast<long long>(images));
+    const std::string base = (fs::path(args.out) / name).string();
+    mapping::write_log_image_png8(base + ".png", img, nullptr, cfg.display);
+    mapping::write_log_image_tiff(base + ".tiff", img, nullptr);
+    std::fprintf(list.get(), "%s %s.png\n", format_seconds(t).c_str(), name);
+    if (video.is_open()) {
+      const mapping::ImageF d = mapping::log_image_to_display(img, nullptr, cfg.display);
+      cv::Mat m(height, width, CV_8UC1);
+      for (int y = 0; y < height; ++y)
+        for (int x = 0; x < width; ++x) m.at<uint8_t>(y, x) = static_cast<uint8_t>(std::lround(255.0 * d(y, x)));
+      video.write(m);
+    }
+    ++images;
+  };
+  auto fuse_frame = [&](Frame& f) {
+    if (f.image.empty()) load_frame_image(&f);
+    const cv::Mat g = grey8(f.image, f.path.empty() ? args.dataset : f.path);
+    f.image.release();
+    if (g.cols != width || g.rows != height)
+      throw InputError(f.path.empty() ? args.dataset : f.path, 0,
+                       "frame of " + std::to_string(g.cols) + " x " + std::to_string(g.rows) + " px",
+                       "frames of the sensor's size " + std::to_string(width) + " x " + std::to_string(height));
+    const auto c0 = clock::now();
+    filter->add_frame(f.t_ns, mapping::GreyView{g.data, g.cols, g.rows, static_cast<std::ptrdiff_t>(g.step)});
+    filter_s += std::chrono::duration<double>(clock::now() - c0).count();
+  };
+  // Everything due at or before t (frames at t_f <= t, images at times < t), in time order.
+  auto due_before = [&](int64_t t, bool inclusive_images) {
+    for (;;) {
+      const int64_t tf = next_frame < frames.size() ? frames[next_frame].t_ns : INT64_MAX;
+      const int64_t ti = at.empty() ? next_rate : (next_at < at.size() ? at[next_at] : INT64_MAX);
+      const bool image_due = inclusive_images ? ti <= t : ti < t;
+      if (tf <= t && tf <= ti) {
+        fuse_frame(frames[next_frame++]);
+      } else if (image_due) {
+        write_image_at(ti);
+        if (at.empty()) next_rate += period_ns; else ++next_at;
+      } else {
+        return;
+      }
+    }
+  };
+
+  Progress progress("evio reconstruct", args.progress, "events");
+  EventBuffer chunk;
+  const auto wall0 = clock::now();
+  for (;;) {
+    chunk.clear();
+    if (reader->read_events(&chunk, 1 << 16) == 0) break;
+    const Event* ev = chunk.data();
+    const size_t n = chunk.size();
+    if (!filter) {
+      t_first = ev[0].t_ns;
+      if (!frames.empty()) t_first = std::min(t_first, frames.front().t_ns);
+      next_rate = ev[0].t_ns;
+      switch (cfg.method) {
+        case ReconstructionMethod::kHighPass:
+        case ReconstructionMethod::kComplementary: {
+          mapping::ComplementaryFilterOptions o = cfg.cf;
+          o.frame = cfg.frames;
+          o.high_pass = cfg.method == ReconstructionMethod::kHighPass;
+          o.use_frames = cfg.use_frames;
+          filter = std::make_unique<mapping::ComplementaryFilter>(width, height, t_first, o);
+          break;
+        }
+        case ReconstructionMethod::kKalman: {
+          mapping::AsyncKalmanFilterOptions o = cfg.akf;
+          o.frame = cfg.frames;
+          o.use_frames = cfg.use_frames;
+          filter = std::make_unique<mapping::AsyncKalmanFilter>(width, height, t_first, o);
+          break;
+        }
+      }
+    }
+    // Batches of events between the next frame or image time.
+    size_t i = 0;
+    while (i < n) {
+      due_before(ev[i].t_ns, false);
+      const int64_t tf = next_frame < frames.size() ? frames[next_frame].t_ns : INT64_MAX;
+      const int64_t ti = at.empty() ? next_rate : (next_at < at.size() ? at[next_at] : INT64_MAX);
+      size_t j = i;
+      while (j < n && ev[j].t_ns <= tf && ev[j].t_ns < ti) ++j;  // events at t_f precede the frame
+      if (j == i) j = i + 1;
+      const auto c0 = clock::now();
+      filter->process(ev + i, j - i);
+      filter_s += std::chrono::duration<double>(clock::now() - c0).count();
+      i = j;
+    }
+    events += static_cast<int64_t>(n);
+    t_last = ev[n - 1].t_ns;
+    progress.update(reader->progress(), events, std::to_string(images) + " images");
+  }
+  if (!filter) throw InputError(args.dataset, 0, "no events", "a recording with events");
+  // Images at --at times after the last event; with --rate, up to the last event.
+  due_before(at.empty() ? t_last : std::max(t_last, at.back()), true);
+  list.close();
+  video.close();
+  const double wall_s = std::chrono::duration<double>(clock::now() - wall0).count();
+
+  const mapping::ReconstructionStats& st = filter->stats();
+  const double ns_per_event = events ? filter_s * 1e9 / static_cast<double>(events) : 0.0;
+  {
+    TextOut f((fs::path(args.out) / "stats.json").string());
+    std::ostringstream j;
+    j << "{\n  \"method\": \"" << mapping::reconstruction_method_name(cfg.method) << "\",\n  \"use_frames\": "
+      << (cfg.use_frames ? "true" : "false") << ",\n  \"events\": " << events << ",\n  \"events_outside_sensor\": "
+      << st.events_outside << ",\n  \"frames_fused\": " << st.frames << ",\n  \"images\": " << images
+      << ",\n  \"t_first_s\": " << num(t_first * 1e-9) << ",\n  \"t_last_s\": " << num(t_last * 1e-9)
+      << ",\n  \"filter_time_s\": " << num(filter_s) << ",\n  \"time_per_event_ns\": " << num(ns_per_event)
+      << ",\n  \"events_per_s\": " << num(filter_s > 0 ? static_cast<double>(events) / filter_s : 0.0)
+      << ",\n  \"readout_time_s\": " << num(readout_s) << ",\n  \"wall_time_s\": " << num(wall_s) << ",\n  \"rebases\": " << st.rebases << ",\n  \"video\": \""
+      << json_escape(video_status) << "\"\n}\n";
+    std::fputs(j.str().c_str(), f.get());
+    f.close();
+  }
+  out << "evio reconstruct: " << mapping::reconstruction_method_name(cfg.method) << (cfg.use_frames ? " with frames" : "")
+      << ", " << events << " events, " << st.frames << " frames fused, " << images << " images; filter "
+      << num(ns_per_event) << " ns per event (" << num(filter_s > 0 ? events / filter_s * 1e-6 : 0.0)
+      << " M events/s), wall " << num(wall_s) << " s\n"
+      << "wrote " << args.out << "/images.txt, images/, stats.json, reconstruct_config.yaml"
+      << (video_status == "written" ? ", video.mp4" : "") << "\n";
+  return 0;
+}
+
+}  // namespace evio::apps
