@@ -72,7 +72,7 @@ const Table<C>& reconstruct_config_table() {
     Table<FR> frames("frame response settings");
     frames.number("gamma", &FR::gamma, Range::kPositive, "")
         .number("log_offset", &FR::offset, Range::kPositive, "")
-        .note("log_offset", "L = gamma log(v/255 + log_offset); 1 as dvs_image_reconstruction, ~0.01 with gamma 2.2 for gamma-encoded frames")
+        .note("log_offset", "L = gamma log(v/255 + log_offset); 1 as dvs_image_reconstruction; log_eps^(1/gamma) for gamma-encoded frames (0.04: the simulator, gamma 2.2)")
         .number("initial_grey", &FR::initial_grey, Range::kNonNegative, "grey level")
         .validate();
     Table<C> top("reconstruct settings");
