@@ -118,6 +118,17 @@ Differences compare_with_published(ComplementaryFilter* f, PublishedCf<double>* 
   return d;
 }
 
+// The published filter's settings: no initialisation from the first frame.
+ComplementaryFilterOptions published_options(double cutoff_hz, double on, double off, double initial) {
+  ComplementaryFilterOptions o;
+  o.cutoff_hz = cutoff_hz;
+  o.contrast_on = on;
+  o.contrast_off = off;
+  o.initial_log_intensity = initial;
+  o.init_from_first_frame = false;
+  return o;
+}
+
 struct RealSlice {
   std::vector<Event> events;
   std::vector<TimedFrame> frames;  // those within the events' span
@@ -152,12 +163,7 @@ TEST(ComplementaryFilter, EqualsPublishedEquationsOnRealSlice) {
   readouts.push_back(slice->events.back().t_ns);
   for (double cutoff : {0.5, 20.0}) {
     for (bool frames : {true, false}) {
-      ComplementaryFilterOptions o;
-      o.cutoff_hz = cutoff;
-      o.contrast_on = 0.1;
-      o.contrast_off = 0.1;
-      o.initial_log_intensity = 0.0;
-      o.init_from_first_frame = false;
+      ComplementaryFilterOptions o = published_options(cutoff, 0.1, 0.1, 0.0);
       o.use_frames = frames;
       ComplementaryFilter f(240, 180, 0, o);
       PublishedCf<double> ref(240, 180, 0, cutoff, 0.1, 0.1, 0.0, std::log(1.5));
@@ -206,13 +212,7 @@ TEST(ComplementaryFilter, EqualsPublishedEquationsOnSyntheticStreams) {
     const std::vector<int64_t> readouts = {t0 + 1'000'000'000, t0 + 2'000'000'000, t0 + 30'100'000'000LL,
                                            t0 + 30'450'000'000LL, t0 + 31'500'000'000LL};
     for (double cutoff : {0.5, 5.0}) {
-      ComplementaryFilterOptions o;
-      o.cutoff_hz = cutoff;
-      o.contrast_on = 0.12;
-      o.contrast_off = 0.09;
-      o.initial_log_intensity = 0.3;
-      o.init_from_first_frame = false;
-      ComplementaryFilter f(w, h, t0, o);
+      ComplementaryFilter f(w, h, t0, published_options(cutoff, 0.12, 0.09, 0.3));
       PublishedCf<double> ref(w, h, t0, cutoff, 0.12, 0.09, 0.3, std::log(1.5));
       PublishedCf<float> ref_float(w, h, t0, cutoff, 0.12, 0.09, 0.3, std::log(1.5));
       const Differences d = compare_with_published(&f, &ref, &ref_float, ev, frames, readouts);

@@ -99,10 +99,10 @@ class LogIntensityFilter {
 // (no per-pixel timestamp, no per-pixel decay), and a frame adds L_F (exp(alpha (t_k - t_ref)) -
 // exp(alpha (t_{k-1} - t_ref))) to every pixel (one multiply-add per pixel, no exp). Reading the
 // image divides by exp(alpha (t - t_ref)). The same equations, reordered; float state, the
-// exponentials in double. When alpha (t - t_ref) would exceed 20 the whole state is rescaled to a
-// new t_ref (a "rebase": every 6.4 s at 0.5 Hz; also after a gap of any length, where it decays
-// the state exactly, to 0 after hours). Since the update is a sum, events need not be in order
-// between two frames.
+// exponentials in double (per event from three tables, see process()). When alpha (t - t_ref)
+// would exceed 20, or t - t_ref 8.6 s, the whole state is rescaled to a new t_ref (a "rebase":
+// every 6.4 s at 0.5 Hz; also after a gap of any length, where it decays the state exactly, to 0
+// after hours). Since the update is a sum, events need not be in order between two frames.
 class ComplementaryFilter : public LogIntensityFilter {
  public:
   // t_start_ns: the time of the initial state. Throws std::invalid_argument for invalid options or
