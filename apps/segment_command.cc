@@ -65,6 +65,8 @@ const Table<C>& segment_config_table() {
         .number("model_gain_per_parameter", &S::model_gain_per_parameter, Range::kNonNegative, "")
         .number("noise_support", &S::noise_support, Range::kNonNegative, "lone votes")
         .number("new_motion_px", &S::new_motion_px, Range::kNonNegative, "px")
+        .integer("split_rounds", &S::split_rounds, 0, 8)
+        .note("split_rounds", "rounds of new clusters for tiles the clusters leave unexplained, kept if they survive the merges")
         .integer("footprint_radius_px", &S::footprint_radius_px, 0, 100)
         .seed("seed", &S::seed)
         .validate();

@@ -23,6 +23,7 @@ struct MotionSegmenter::State {
   std::map<WarpModel, std::unique_ptr<ContrastMaximizer>> cm;  // one per model (level 0 only)
   std::vector<float> support;         // per event: the clusters' blurred IWEs at its warped positions, summed
   std::vector<int> best_other;        // per cluster: the other cluster whose motion explains its events best
+  std::vector<int> nearest;           // per cluster: the other cluster whose motion is closest on its events
   int alternations = 0;
   int evaluations = 0;
   double self_vote = 1.0;  // what an event's own vote puts at its position after the blur
@@ -162,6 +163,7 @@ bool SegmentationOptions::Validate(std::string* why) const {
     return fail("model_gain_per_parameter must be >= 0");
   if (!(noise_support >= 0 && std::isfinite(noise_support))) return fail("noise_support must be >= 0");
   if (!(new_motion_px >= 0 && std::isfinite(new_motion_px))) return fail("new_motion_px must be >= 0 px");
+  if (split_rounds < 0 || split_rounds > 8) return fail("split_rounds must be in 0..8");
   if (footprint_radius_px < 0 || footprint_radius_px > 100) return fail("footprint_radius_px must be in [0, 100] px");
   return true;
 }
@@ -251,6 +253,31 @@ void MotionSegmenter::compute_gains(const CmaxEvents& ev, State* s) {
         if (v > c.objective_other) c.objective_other = v, s->best_other[j] = static_cast<int>(i);
       }
     c.gain = (N > 1 && c.objective_other > 0) ? c.objective / c.objective_other - 1.0 : 0.0;
+  }
+  // Where a removed cluster's events go: the cluster whose flow is closest to its own at its
+  // events (mean flow difference over up to 256 of them). Not best_other: under the normalised
+  // objective a near-still motion scores about 1 on any events, often above the right motion
+  // slightly off, and would take over an object's events (and then its motion).
+  s->nearest.assign(N, -1);
+  const WarpGeometry& g = cm_options_.geometry;
+  for (size_t j = 0; j < N; ++j) {
+    const size_t m = mine[j].size(), step = std::max<size_t>(1, m / 256);
+    double best = std::numeric_limits<double>::infinity();
+    for (size_t i = 0; i < N; ++i) {
+      if (i == j) continue;
+      double d = 0;
+      int cnt = 0;
+      for (size_t q = 0; q < m; q += step, ++cnt) {
+        const uint32_t k = mine[j][q];
+        d += (flow_at(s->cl[i].model, s->cl[i].params, g, ev.x[k], ev.y[k]) -
+              flow_at(s->cl[j].model, s->cl[j].params, g, ev.x[k], ev.y[k])).norm();
+      }
+      if (cnt == 0) {  // no events of its own: compare at the image centre
+        d = (flow_at(s->cl[i].model, s->cl[i].params, g, g.cx, g.cy) - flow_at(s->cl[j].model, s->cl[j].params, g, g.cx, g.cy)).norm();
+        cnt = 1;
+      }
+      if (d / cnt < best) best = d / cnt, s->nearest[j] = static_cast<int>(i);
+    }
   }
 }
 
@@ -352,6 +379,131 @@ void MotionSegmenter::alternate(const CmaxEvents& ev, State* s, int iterations) 
   }
 }
 
+void MotionSegmenter::decide_count(const CmaxEvents& ev, State* sp, SegmentationResult* out) {
+  // Remove the least useful cluster while it is not useful enough.
+  State& s = *sp;
+  const bool debug = log_level() == LogLevel::kDebug;
+  while (true) {
+    compute_gains(ev, &s);
+    CountStep step;
+    step.clusters = static_cast<int>(s.cl.size());
+    for (const auto& c : s.cl) step.sum_objective += c.objective;
+    if (s.cl.size() <= 1) {
+      out->count_steps.push_back(step);
+      break;
+    }
+    // Below the bar, a new proposal goes before a cluster that lives on from the last window
+    // (near-duplicates of a live cluster must not take its label).
+    int worst = 0;
+    auto below = [&](size_t j) { return s.cl[j].gain < options_.min_cluster_gain; };
+    for (size_t j = 1; j < s.cl.size(); ++j) {
+      const bool jp = s.cl[j].id < 0 && below(j), wp = s.cl[worst].id < 0 && below(worst);
+      if ((jp && !wp) || (jp == wp && s.cl[j].gain < s.cl[worst].gain)) worst = static_cast<int>(j);
+    }
+    step.smallest_gain = s.cl[worst].gain;
+    if (!below(worst)) {
+      out->count_steps.push_back(step);
+      break;
+    }
+    step.removed = true;
+    step.removed_id = s.cl[worst].id;
+    step.removed_model = s.cl[worst].model;
+    step.removed_params = s.cl[worst].params;
+    out->count_steps.push_back(step);
+    if (debug) log_debug(describe("gains before a removal", s.cl));
+    // A proposal that absorbs a live cluster takes over its label (it is the same object).
+    const int into = s.nearest[worst];
+    if (into >= 0 && s.cl[into].id < 0 && s.cl[worst].id >= 0) s.cl[into].id = s.cl[worst].id;
+    remove_cluster(&s, worst, into);
+    update_associations(ev, &s);
+    alternate(ev, &s, std::max(2, options_.iterations / 2));
+  }
+}
+
+int MotionSegmenter::add_proposals(const CmaxEvents& ev, State* s, int room, const std::vector<Eigen::Vector2d>& flows,
+                                   const std::vector<Eigen::Vector2d>& centres, WarpModel base, int* evaluations) {
+  const size_t n = ev.size();
+  const WarpGeometry& g = ev.geometry();
+  std::vector<Eigen::Vector2d> starts;
+  std::vector<std::vector<float>> start_votes;
+  if (s->cl.empty() && options_.init == SegmentationInit::kGreedy) {
+    // Greedy: fit a flow to the events the previous fits leave out of focus.
+    std::vector<float> rest(n, 1.0f), c;
+    CmaxOptions o = cm_options_;
+    o.model = WarpModel::kFlow;
+    ContrastMaximizer cm(o);
+    for (int j = 0; j < room; ++j) {
+      const CmaxResult r = cm.maximize(ev, Eigen::VectorXd(), rest.data());
+      *evaluations += r.evaluations;
+      starts.push_back(r.params);
+      start_votes.push_back(rest);
+      const ImageF img = cm.iwe(ev, r.params, rest.data(), true);
+      sample_at_warped(img, WarpModel::kFlow, ev, r.params, &c);
+      double mean = 0, wsum = 0;
+      for (size_t k = 0; k < n; ++k) mean += rest[k] * c[k], wsum += rest[k];
+      mean = wsum > 0 ? mean / wsum : 0;
+      for (size_t k = 0; k < n; ++k) rest[k] *= static_cast<float>(1.0 - c[k] / (c[k] + mean + 1e-12));
+    }
+  } else {
+    // k-means on the local flows of the tiles the clusters leave unexplained (all tiles when
+    // there are none): a tile is explained when its flow is within new_motion_px over the window
+    // of the flow of the cluster that holds most of its events.
+    const int T = options_.tile_px;
+    const int nx = (cm_options_.width + T - 1) / T, ny = (cm_options_.height + T - 1) / T;
+    auto tile_of = [&](double x, double y) {
+      const int i = static_cast<int>(std::floor(x / T)), j = static_cast<int>(std::floor(y / T));
+      return (i >= 0 && j >= 0 && i < nx && j < ny) ? j * nx + i : -1;
+    };
+    std::vector<int> index(static_cast<size_t>(nx) * ny, -1);  // tile -> entry of flows
+    for (size_t i = 0; i < centres.size(); ++i) index[static_cast<size_t>(tile_of(centres[i].x(), centres[i].y()))] = static_cast<int>(i);
+    std::vector<char> unexplained(flows.size(), 1);
+    if (!s->cl.empty()) {
+      const size_t N = s->cl.size();
+      std::vector<std::vector<int>> held(flows.size(), std::vector<int>(N, 0));
+      for (size_t k = 0; k < n; ++k) {
+        const int t = tile_of(ev.x[k], ev.y[k]);
+        if (t < 0 || index[static_cast<size_t>(t)] < 0) continue;
+        size_t best = 0;
+        for (size_t j = 1; j < N; ++j)
+          if (s->w[j][k] > s->w[best][k]) best = j;
+        ++held[static_cast<size_t>(index[static_cast<size_t>(t)])][best];
+      }
+      const double span = ev.dt_max_s() - ev.dt_min_s();
+      for (size_t i = 0; i < flows.size(); ++i) {
+        const size_t j = static_cast<size_t>(std::max_element(held[i].begin(), held[i].end()) - held[i].begin());
+        const SegmentCluster& c = s->cl[j];
+        unexplained[i] = (flows[i] - flow_at(c.model, c.params, g, centres[i].x(), centres[i].y())).norm() * span >=
+                         options_.new_motion_px;
+      }
+    }
+    std::vector<Eigen::Vector2d> f2;
+    std::vector<int> entry;  // f2 -> flows
+    for (size_t i = 0; i < flows.size(); ++i)
+      if (unexplained[i]) f2.push_back(flows[i]), entry.push_back(static_cast<int>(i));
+    if (f2.empty()) return 0;
+    std::vector<int> assignment;
+    starts = kmeans(f2, std::min<int>(room, static_cast<int>(f2.size())), options_.seed, &assignment);
+    std::vector<int> proposal_of(flows.size(), -1);
+    for (size_t q = 0; q < f2.size(); ++q) proposal_of[static_cast<size_t>(entry[q])] = assignment[q];
+    start_votes.assign(starts.size(), std::vector<float>(n, 0.0f));
+    for (size_t k = 0; k < n; ++k) {
+      const int t = tile_of(ev.x[k], ev.y[k]);
+      if (t < 0 || index[static_cast<size_t>(t)] < 0) continue;
+      const int p = proposal_of[static_cast<size_t>(index[static_cast<size_t>(t)])];
+      if (p >= 0) start_votes[static_cast<size_t>(p)][k] = 1.0f;
+    }
+  }
+  for (size_t i = 0; i < starts.size(); ++i) {
+    SegmentCluster c;
+    c.id = -1;  // an id only if it survives
+    c.model = base;
+    c.params = params_from_flow(base, starts[i], g);
+    s->cl.push_back(c);
+    s->w.push_back(start_votes[i]);
+  }
+  return static_cast<int>(starts.size());
+}
+
 SegmentationResult MotionSegmenter::segment(const CmaxEvents& ev, const std::vector<SegmentCluster>* previous,
                                             int* next_id) {
   SegmentationResult out;
@@ -395,122 +547,42 @@ SegmentationResult MotionSegmenter::segment(const CmaxEvents& ev, const std::vec
       s.w.push_back(votes);
     }
   }
-  const int proposals = target - static_cast<int>(s.cl.size());
-  if (proposals > 0) {
-    // Each proposal comes with the events it was made from, whose votes make its first IWE.
-    std::vector<Eigen::Vector2d> starts;
-    std::vector<std::vector<float>> start_votes;
-    if (options_.init == SegmentationInit::kKmeans) {
-      std::vector<Eigen::Vector2d> flows, centres;
-      tile_flows(ev, &flows, &centres);
-      // With clusters from the last window, propose only motions they do not already explain:
-      // tiles whose flow differs from every live cluster's there by more than new_motion_px
-      // over the window.
-      if (!s.cl.empty()) {
-        const double span = ev.dt_max_s() - ev.dt_min_s();
-        std::vector<Eigen::Vector2d> f2, c2;
-        for (size_t i = 0; i < flows.size(); ++i) {
-          bool explained = false;
-          for (const SegmentCluster& c : s.cl)
-            explained |= (flows[i] - flow_at(c.model, c.params, g, centres[i].x(), centres[i].y())).norm() * span <
-                         options_.new_motion_px;
-          if (!explained) f2.push_back(flows[i]), c2.push_back(centres[i]);
-        }
-        flows.swap(f2);
-        centres.swap(c2);
-      }
-      std::vector<int> assignment;
-      starts = kmeans(flows, proposals, options_.seed, &assignment);
-      start_votes.assign(starts.size(), std::vector<float>(n, 0.0f));
-      const int T = options_.tile_px;
-      for (size_t k = 0; k < n; ++k) {
-        for (size_t i = 0; i < centres.size(); ++i) {
-          if (std::abs(ev.x[k] - centres[i].x()) <= 0.5 * T && std::abs(ev.y[k] - centres[i].y()) <= 0.5 * T) {
-            start_votes[static_cast<size_t>(assignment[i])][k] = 1.0f;
-            break;
-          }
-        }
-      }
-    } else {
-      // Greedy: fit a flow to the events the previous fits leave out of focus.
-      std::vector<float> rest(n, 1.0f), c;
-      CmaxOptions o = cm_options_;
-      o.model = WarpModel::kFlow;
-      ContrastMaximizer cm(o);
-      for (int j = 0; j < proposals; ++j) {
-        const CmaxResult r = cm.maximize(ev, Eigen::VectorXd(), rest.data());
-        out.evaluations += r.evaluations;
-        starts.push_back(r.params);
-        start_votes.push_back(rest);
-        const ImageF img = cm.iwe(ev, r.params, rest.data(), true);
-        sample_at_warped(img, WarpModel::kFlow, ev, r.params, &c);
-        double mean = 0, wsum = 0;
-        for (size_t k = 0; k < n; ++k) mean += rest[k] * c[k], wsum += rest[k];
-        mean = wsum > 0 ? mean / wsum : 0;
-        for (size_t k = 0; k < n; ++k) rest[k] *= static_cast<float>(1.0 - c[k] / (c[k] + mean + 1e-12));
-      }
-    }
-    for (size_t i = 0; i < starts.size(); ++i) {
-      SegmentCluster c;
-      c.id = -1;  // an id only if it survives
-      c.model = base;
-      c.params = params_from_flow(base, starts[i], g);
-      s.cl.push_back(c);
-      s.w.push_back(start_votes[i]);
-    }
+  if (!s.cl.empty()) {
+    // Refit the live clusters to this window before asking which tiles they leave unexplained
+    // (an accelerating object's tiles would otherwise all look new).
+    update_associations(ev, &s);
+    alternate(ev, &s, std::max(2, options_.iterations / 2));
   }
-  if (s.cl.empty()) {  // no texture anywhere: one still cluster
-    SegmentCluster c;
-    c.model = base;
-    c.params = Eigen::VectorXd::Zero(warp_dof(base));
-    s.cl.push_back(c);
-  }
-  // First associations: every cluster's IWE from its own votes.
-  s.w.resize(s.cl.size(), std::vector<float>(n, 1.0f));
   const bool debug = log_level() == LogLevel::kDebug;
-  if (debug) log_debug(describe("start", s.cl));
-  update_associations(ev, &s);
-  if (debug) log_debug(describe("first associations", s.cl));
-  alternate(ev, &s, options_.iterations);
-  if (debug) log_debug(describe("alternated", s.cl));
-
-  // The automatic count: remove the least useful cluster while it is not useful enough.
-  if (options_.clusters == 0) {
-    while (true) {
-      compute_gains(ev, &s);
-      CountStep step;
-      step.clusters = static_cast<int>(s.cl.size());
-      for (const auto& c : s.cl) step.sum_objective += c.objective;
-      if (s.cl.size() <= 1) {
-        out.count_steps.push_back(step);
-        break;
-      }
-      // Below the bar, a new proposal goes before a cluster that lives on from the last window
-      // (near-duplicates of a live cluster must not take its label).
-      int worst = 0;
-      auto below = [&](size_t j) { return s.cl[j].gain < options_.min_cluster_gain; };
-      for (size_t j = 1; j < s.cl.size(); ++j) {
-        const bool jp = s.cl[j].id < 0 && below(j), wp = s.cl[worst].id < 0 && below(worst);
-        if ((jp && !wp) || (jp == wp && s.cl[j].gain < s.cl[worst].gain)) worst = static_cast<int>(j);
-      }
-      step.smallest_gain = s.cl[worst].gain;
-      if (!below(worst)) {
-        out.count_steps.push_back(step);
-        break;
-      }
-      step.removed = true;
-      step.removed_id = s.cl[worst].id;
-      step.removed_model = s.cl[worst].model;
-      step.removed_params = s.cl[worst].params;
-      out.count_steps.push_back(step);
-      if (debug) log_debug(describe("gains before a removal", s.cl));
-      // A proposal that absorbs a live cluster takes over its label (it is the same object).
-      const int into = s.best_other[worst];
-      if (into >= 0 && s.cl[into].id < 0 && s.cl[worst].id >= 0) s.cl[into].id = s.cl[worst].id;
-      remove_cluster(&s, worst, into);
-      update_associations(ev, &s);
-      alternate(ev, &s, std::max(2, options_.iterations / 2));
+  // Local flows per tile, once per window: the k-means proposals come from them.
+  std::vector<Eigen::Vector2d> flows, centres;
+  if (options_.init == SegmentationInit::kKmeans || !s.cl.empty() || options_.split_rounds > 0)
+    tile_flows(ev, &flows, &centres);
+  // Split and merge: propose clusters for what the clusters leave unexplained, alternate, and
+  // (automatic count) merge the clusters that do not pay; again while new proposals survive.
+  for (int round = 0;; ++round) {
+    const int room = target - static_cast<int>(s.cl.size());
+    auto unnamed = [&] { return std::count_if(s.cl.begin(), s.cl.end(), [](const SegmentCluster& c) { return c.id < 0; }); };
+    const auto unnamed_before = unnamed();
+    const int added = room > 0 ? add_proposals(ev, &s, room, flows, centres, base, &out.evaluations) : 0;
+    if (round > 0 && added == 0) break;
+    if (s.cl.empty()) {  // no texture anywhere: one still cluster
+      SegmentCluster c;
+      c.model = base;
+      c.params = Eigen::VectorXd::Zero(warp_dof(base));
+      s.cl.push_back(c);
+      s.w.push_back(std::vector<float>(n, 1.0f));
     }
+    if (debug) log_debug(describe(round == 0 ? "start" : "split proposals", s.cl));
+    // First associations: each new cluster's IWE from its own votes.
+    update_associations(ev, &s);
+    if (debug) log_debug(describe("first associations", s.cl));
+    alternate(ev, &s, options_.iterations);
+    if (debug) log_debug(describe("alternated", s.cl));
+    if (options_.clusters == 0) decide_count(ev, &s, &out);
+    if (options_.clusters > 0 || round >= options_.split_rounds) break;
+    // A round whose proposals all merged away changes nothing more.
+    if (round > 0 && unnamed() <= unnamed_before) break;
   }
 
   // The warp model of each cluster: the simplest whose objective is not beaten by a richer one

@@ -4,7 +4,8 @@
 // count, and labels that persist across windows. Also synthetic two-motion windows and the
 // extremes. Instrument knobs (environment, for exploring; the defaults are what is asserted):
 // SEG_WINDOW=N events per window, SEG_MS=ms time windows, SEG_TRACE=1 debug log of every stage,
-// SEG_NOISE / SEG_GAIN: noise_support / min_cluster_gain.
+// SEG_NOISE / SEG_GAIN / SEG_NEWPX / SEG_SPLIT: noise_support / min_cluster_gain / new_motion_px /
+// split_rounds; SEG_SEED / SEG_DURATION: another realisation or a longer stretch of the scene.
 #include "evio/mapping/cmax_segmentation.h"
 
 #include <algorithm>
@@ -54,7 +55,8 @@ const Recording& dynamic_3objects() {
     Recording r;
     evio::set_log_sink([](evio::LogLevel, const std::string&) {});
     evio::simulator::SimulateOverrides o;
-    o.duration_s = 1.6;
+    o.duration_s = getenv("SEG_DURATION") ? std::stod(getenv("SEG_DURATION")) : 1.6;
+    if (getenv("SEG_SEED")) o.seed = std::stoull(getenv("SEG_SEED"));
     const auto c = evio::simulator::load_simulation_config(std::string(EVIO_SOURCE_DIR) + "/datasets/dynamic_3objects.yaml", o);
     r.camera = c.simulator.camera.intrinsics();
     r.sim = std::make_shared<evio::simulator::Simulator>(c.scene, c.trajectory, c.simulator);
@@ -134,6 +136,8 @@ TEST(CmaxSegmentation, DynamicThreeObjects) {
   if (getenv("SEG_GREEDY")) o.init = evio::mapping::SegmentationInit::kGreedy;
   if (getenv("SEG_MAXC")) o.max_clusters = std::stoi(getenv("SEG_MAXC"));
   if (getenv("SEG_GAIN")) o.min_cluster_gain = std::stod(getenv("SEG_GAIN"));
+  if (getenv("SEG_NEWPX")) o.new_motion_px = std::stod(getenv("SEG_NEWPX"));
+  if (getenv("SEG_SPLIT")) o.split_rounds = std::stoi(getenv("SEG_SPLIT"));
   MotionSegmenter seg(o);
   // ~0.1 s windows: long enough for the slow objects to move 2-5 px, short enough for the
   // sinusoidally moving ones to keep a constant velocity within about a pixel.
@@ -200,6 +204,21 @@ TEST(CmaxSegmentation, DynamicThreeObjects) {
     int true_noise = 0;
     for (size_t k = first; k < first + window; ++k) true_noise += rec.labels[k] == 65535;
     std::printf(" noise: %d of %d found", noise_by[65535], true_noise);
+    if (getenv("SEG_WHERE")) {  // where each cluster's events are: mean and spread of t, x, y
+      for (const auto& c : r.clusters) {
+        double st = 0, sx = 0, sy = 0, stt = 0, sxx = 0, syy = 0;
+        int m = 0;
+        for (size_t k = 0; k < window; ++k)
+          if (r.labels[k] == c.id) {
+            const double t = (rec.events[first + k].t_ns - t0) * 1e-9, x = rec.events[first + k].x, y = rec.events[first + k].y;
+            st += t, sx += x, sy += y, stt += t * t, sxx += x * x, syy += y * y, ++m;
+          }
+        if (m == 0) continue;
+        auto sd = [&](double a, double aa) { return std::sqrt(std::max(0.0, aa / m - (a / m) * (a / m))); };
+        std::printf("\n   cluster %d: %d events, t %.3f+-%.3f s, x %.0f+-%.0f, y %.0f+-%.0f, params %s", c.id, m, st / m, sd(st, stt), sx / m,
+                    sd(sx, sxx), sy / m, sd(sy, syy), ::testing::PrintToString(c.params.transpose().eval()).c_str());
+      }
+    }
     std::printf("\n   count steps:");
     for (const auto& st : r.count_steps) std::printf(" [%d clusters, smallest gain %.3f%s]", st.clusters, st.smallest_gain, st.removed ? ", removed" : "");
     std::printf("\n");
