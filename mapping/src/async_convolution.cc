@@ -32,6 +32,16 @@ inline void clamped_range(int e, int q, int n, int r, int* lo, int* hi) {
   *hi = std::min(r, e == n - 1 ? r : e - q);
 }
 
+// Interior event: C(ex - i, ey - j) += cw K(i, j), centre at c; R fixed (unrolled) or -1 (r).
+template <int R>
+inline void add_interior(float* c, size_t w, const float* tap, float cw, int r) {
+  const int rr = R >= 0 ? R : r;
+  for (int j = -rr; j <= rr; ++j) {
+    float* row = c - static_cast<ptrdiff_t>(j) * static_cast<ptrdiff_t>(w);
+    for (int i = -rr; i <= rr; ++i) row[-i] += cw * *tap++;
+  }
+}
+
 // out = K * in (replicated borders), H x W.
 void convolve(const ConvolutionKernel& k, const std::vector<float>& in, int w, int h, std::vector<float>* out) {
   const int r = k.radius();
@@ -170,11 +180,11 @@ void AsyncConvolution::spread(const Event& e, float cw) {
     const int r = k.radius();
     float* s = planes_[p].s.data();
     if (ex >= r && ey >= r && ex + r < w && ey + r < h) {
-      // Interior: C(ex - i, ey - j) += cw K(i, j).
-      const float* tap = k.taps.data();
-      for (int j = -r; j <= r; ++j) {
-        float* row = s + static_cast<size_t>(ey - j) * w + ex;
-        for (int i = -r; i <= r; ++i) row[-i] += cw * *tap++;
+      float* c = s + static_cast<size_t>(ey) * w + ex;
+      switch (r) {
+        case 1: add_interior<1>(c, w, k.taps.data(), cw, r); break;
+        case 2: add_interior<2>(c, w, k.taps.data(), cw, r); break;
+        default: add_interior<-1>(c, w, k.taps.data(), cw, r); break;
       }
       continue;
     }

@@ -46,6 +46,7 @@ const char* reconstruction_method_name(ReconstructionMethod m) {
     case ReconstructionMethod::kHighPass: return "hf";
     case ReconstructionMethod::kComplementary: return "cf";
     case ReconstructionMethod::kKalman: return "akf";
+    case ReconstructionMethod::kGradient: return "gradient";
   }
   return "?";
 }

@@ -196,8 +196,8 @@ class AsyncKalmanFilter : public LogIntensityFilter {
   ReconstructionStats stats_;
 };
 
-// "hf", "cf", "akf".
-enum class ReconstructionMethod { kHighPass, kComplementary, kKalman };
+// "hf", "cf", "akf", "gradient" (the Poisson image of the gradient state, async_convolution.h).
+enum class ReconstructionMethod { kHighPass, kComplementary, kKalman, kGradient };
 const char* reconstruction_method_name(ReconstructionMethod m);
 
 }  // namespace evio::mapping
