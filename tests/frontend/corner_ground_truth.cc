@@ -253,6 +253,25 @@ CornerMetrics CornerScorer::evaluate(const std::function<bool(const Event&)>& is
   return m;
 }
 
+CornerMetrics CornerScorer::evaluate_efast(const frontend::EfastOptions& options) const {
+  frontend::EfastDetector detector(seq_.width(), seq_.height(), options);
+  return evaluate([&detector](const Event& e) { return detector.process(e); });
+}
+
+const CornerGroundTruthSequence& default_corner_sequence() {
+  static const std::unique_ptr<CornerGroundTruthSequence> seq = [] {
+    auto s = std::make_unique<CornerGroundTruthSequence>(CornerSceneOptions{});
+    std::printf("scene: %s\n", s->describe().c_str());
+    return s;
+  }();
+  return *seq;
+}
+
+const CornerScorer& default_corner_scorer() {
+  static const CornerScorer s(default_corner_sequence());
+  return s;
+}
+
 void print_corner_metrics(const char* name, const CornerMetrics& m) {
   std::printf(
       "%s: %lld events, %lld corner events (reduction %.1fx); precision %.4f (TP %lld) vs chance %.4f "

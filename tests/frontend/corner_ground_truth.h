@@ -16,6 +16,7 @@
 
 #include "evio/calib/camera.h"
 #include "evio/calib/geometry.h"
+#include "evio/frontend/efast.h"
 #include "evio/sensors/measurements.h"
 #include "evio/simulator/simulator.h"
 
@@ -136,11 +137,18 @@ class CornerScorer {
   explicit CornerScorer(const CornerGroundTruthSequence& seq);
   // Scores any per-event corner decision (called once per event, in time order).
   CornerMetrics evaluate(const std::function<bool(const Event&)>& is_corner) const;
+  // eFAST with these options over the sequence's events.
+  CornerMetrics evaluate_efast(const frontend::EfastOptions& options) const;
 
  private:
   const CornerGroundTruthSequence& seq_;
   std::vector<uint8_t> near_;  // per event: a true corner within the radius
 };
+
+// The default sequence (CornerSceneOptions{}), simulated once per process (described on stdout
+// then), and its scorer.
+const CornerGroundTruthSequence& default_corner_sequence();
+const CornerScorer& default_corner_scorer();
 
 // One line of figures on stdout.
 void print_corner_metrics(const char* name, const CornerMetrics& m);

@@ -21,27 +21,13 @@
 namespace evio::test {
 namespace {
 
-// The simulated sequence, built once for all tests of this file.
-const CornerGroundTruthSequence& sequence() {
-  static const std::unique_ptr<CornerGroundTruthSequence> seq = [] {
-    auto s = std::make_unique<CornerGroundTruthSequence>(CornerSceneOptions{});
-    std::printf("scene: %s\n", s->describe().c_str());
-    return s;
-  }();
-  return *seq;
+const CornerGroundTruthSequence& sequence() { return default_corner_sequence(); }
+
+CornerMetrics evaluate(const std::function<bool(const Event&)>& is_corner) {
+  return default_corner_scorer().evaluate(is_corner);
 }
 
-const CornerScorer& scorer() {
-  static const CornerScorer s(sequence());
-  return s;
-}
-
-CornerMetrics evaluate(const std::function<bool(const Event&)>& is_corner) { return scorer().evaluate(is_corner); }
-
-CornerMetrics evaluate_efast(const frontend::EfastOptions& options) {
-  frontend::EfastDetector detector(sequence().width(), sequence().height(), options);
-  return evaluate([&detector](const Event& e) { return detector.process(e); });
-}
+CornerMetrics evaluate_efast(const frontend::EfastOptions& options) { return default_corner_scorer().evaluate_efast(options); }
 
 // Bilinear sample of a CV_32F image at pixel coordinates (pixel centres at integers).
 double bilinear(const cv::Mat& img, const Eigen::Vector2d& p) {

@@ -4,7 +4,6 @@
 // by the same rule (a corner event within 2 px of a projected true corner at its time; see
 // CornerScorer for precision, chance, event recall, (corner, 50 ms bin) recall, reduction).
 #include <cstdio>
-#include <memory>
 
 #include <gtest/gtest.h>
 
@@ -15,29 +14,14 @@
 namespace evio::test {
 namespace {
 
-const CornerGroundTruthSequence& sequence() {
-  static const std::unique_ptr<CornerGroundTruthSequence> seq = [] {
-    auto s = std::make_unique<CornerGroundTruthSequence>(CornerSceneOptions{});
-    std::printf("scene: %s\n", s->describe().c_str());
-    return s;
-  }();
-  return *seq;
-}
-
-const CornerScorer& scorer() {
-  static const CornerScorer s(sequence());
-  return s;
-}
+const CornerGroundTruthSequence& sequence() { return default_corner_sequence(); }
 
 CornerMetrics evaluate_harris(const mapping::EventHarrisOptions& o) {
   mapping::EventHarrisDetector det(sequence().width(), sequence().height(), sequence().t_begin_ns(), o);
-  return scorer().evaluate([&det](const Event& e) { return det.process(e); });
+  return default_corner_scorer().evaluate([&det](const Event& e) { return det.process(e); });
 }
 
-CornerMetrics evaluate_efast(const frontend::EfastOptions& o) {
-  frontend::EfastDetector det(sequence().width(), sequence().height(), o);
-  return scorer().evaluate([&det](const Event& e) { return det.process(e); });
-}
+CornerMetrics evaluate_efast(const frontend::EfastOptions& o) { return default_corner_scorer().evaluate_efast(o); }
 
 // The settings the figures below are for: the scene's contrast threshold (0.2), a 5 Hz high-pass
 // gradient state, threshold 5e-4 (log/px)^4, NMS radius 3 (a sweep over cut-off 2-20 Hz, threshold
