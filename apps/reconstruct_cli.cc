@@ -13,12 +13,13 @@ int main(int argc, char** argv) try {
       "images/frame_NNNNNNNN.png (8-bit, 1st..99th percentile of the log intensity) and .tiff (float32 log intensity)\n"
       "at each requested time, listed in images.txt (`t[s] path`, as in the Event Camera Dataset, so the folder opens\n"
       "as a dataset); stats.json (events, frames fused, images, ns per event and events/s of the filter);\n"
-      "reconstruct_config.yaml; video.mp4 with --video when OpenCV has an MP4 encoder.");
+      "reconstruct_config.yaml; video.mp4 with --video when OpenCV has an MP4 encoder; corners.txt with --corners.");
   CLI::Option* dataset_opt = cli->add_option("DATASET", rec.dataset, "Dataset (any format evio reads)");
   CLI::Option* out_opt = cli->add_option("-o,--out", rec.out, "Output folder (created)");
   cli->add_option("--method", rec.method,
                   "hf: high-pass filter (events only); cf: complementary filter (ACCV 2018); akf: asynchronous Kalman "
-                  "filter (ICCV 2021). Default: the config's method (cf)");
+                  "filter (ICCV 2021); gradient: Poisson image of the asynchronous-convolution gradient state (RAL 2019; "
+                  "cutoff, contrasts and frames as cf). Default: the config's method (cf)");
   CLI::Option* rate = cli->add_option_function<double>(
                              "--rate", [&rec](const double& hz) { rec.rate_hz = hz; },
                              "Images per second of sensor time from the first event, Hz (default 30; rate_hz)")
@@ -52,6 +53,9 @@ int main(int argc, char** argv) try {
          "--contrast-off", [&rec](const double& c) { rec.contrast_off = c; },
          "Log-intensity step of an OFF event, positive, subtracted (default 0.1)")
       ->check(CLI::PositiveNumber);
+  cli->add_flag("--corners", rec.corners,
+                "Also write corners.txt: event Harris corner events (RAL 2019; config section harris), `t[s] x y p` as "
+                "`evio corners` writes them");
   cli->add_flag("--video", rec.video, "Also write video.mp4 (OpenCV VideoWriter, mp4v; reported when unavailable)");
   cli->add_option("--config", rec.config, "Reconstruct config YAML: method, cf, akf, frames, display (--print-config lists every key)");
   cli->add_option("--calib", rec.calib, "Calibration (Kalibr camchain .yaml or ECD calib.txt) for the sensor size; default: the dataset's");

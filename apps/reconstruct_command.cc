@@ -34,7 +34,8 @@ using mapping::ReconstructionMethod;
 
 const std::vector<std::pair<std::string, ReconstructionMethod>>& method_names() {
   static const std::vector<std::pair<std::string, ReconstructionMethod>> names = {
-      {"hf", ReconstructionMethod::kHighPass}, {"cf", ReconstructionMethod::kComplementary}, {"akf", ReconstructionMethod::kKalman}};
+      {"hf", ReconstructionMethod::kHighPass}, {"cf", ReconstructionMethod::kComplementary}, {"akf", ReconstructionMethod::kKalman},
+      {"gradient", ReconstructionMethod::kGradient}};
   return names;
 }
 
@@ -69,6 +70,23 @@ const Table<C>& reconstruct_config_table() {
         .number("min_exposure_weight", &KF::min_exposure_weight, Range::kPositive, "")
         .note("min_exposure_weight", "frame confidence at 0 and 255 (1 between exposure_low and exposure_high)")
         .number("initial_log_intensity", &KF::initial_log_intensity, Range::kAny, "log intensity");
+    using HO = mapping::EventHarrisOptions;
+    Table<HO> harris("event Harris settings");
+    harris.number("cutoff_hz", &HO::cutoff_hz, Range::kNonNegative, "Hz")
+        .note("cutoff_hz", "high-pass cut-off of the gradient state (contrasts: the cf section's)")
+        .integer("gradient_size", &HO::gradient_size, 3, 5)
+        .note("gradient_size", "Sobel kernel, 3 or 5 px")
+        .integer("window_radius", &HO::window_radius, 1, 4)
+        .note("window_radius", "Gaussian structure-tensor window (2 r + 1)^2 px")
+        .number("window_sigma_px", &HO::window_sigma_px, Range::kPositive, "px")
+        .number("k", &HO::harris_k, Range::kNonNegative, "")
+        .note("k", "R = det M - k trace(M)^2")
+        .number("threshold", &HO::threshold, Range::kNonNegative, "(log/px)^4")
+        .note("threshold", "minimum R of a corner event; R scales with contrast^4")
+        .integer("nms_radius", &HO::nms_radius, 0, 8)
+        .note("nms_radius", "local non-maximum suppression radius, px")
+        .integer("border_px", &HO::border_px, 0, 1000)
+        .validate();
     Table<FR> frames("frame response settings");
     frames.number("gamma", &FR::gamma, Range::kPositive, "")
         .number("log_offset", &FR::offset, Range::kPositive, "")
@@ -83,6 +101,9 @@ const Table<C>& reconstruct_config_table() {
         .number("video_fps", &C::video_fps, Range::kPositive, "Hz")
         .section("cf", cf, &C::cf)
         .section("akf", akf, &C::akf)
+        .boolean("gradient_sobel", &C::gradient_sobel)
+        .note("gradient_sobel", "method gradient: Sobel 3x3 gradients (forward differences otherwise: exactly the cf image)")
+        .section("harris", harris, &C::harris)
         .section("frames", frames, &C::frames)
         .section("display", log_image_display_table(), &C::display)
         .ignored("description")
@@ -115,7 +136,7 @@ bool ReconstructConfig::Validate(std::string* why) const {
   c.frame = frames;
   mapping::AsyncKalmanFilterOptions k = akf;
   k.frame = frames;
-  return c.Validate(why) && k.Validate(why) && display.Validate(why);
+  return c.Validate(why) && k.Validate(why) && harris.Validate(why) && display.Validate(why);
 }
 
 ReconstructConfig load_reconstruct_config(const std::string& path, const std::vector<std::string>& sets) {
@@ -139,7 +160,7 @@ ReconstructConfig resolve_reconstruct_config(const ReconstructArgs& args) {
         cfg.method = m;
         found = true;
       }
-    if (!found) throw InputError("--method", 0, "unknown method '" + args.method + "'", "hf, cf or akf");
+    if (!found) throw InputError("--method", 0, "unknown method '" + args.method + "'", "hf, cf, akf or gradient");
   }
   if (args.use_frames) cfg.use_frames = true;
   if (args.rate_hz) cfg.rate_hz = *args.rate_hz;
@@ -246,6 +267,17 @@ int run_reconstruct(const ReconstructArgs& args, std::ostream& out) {
     }
   };
 
+  // --corners: event Harris corner events on every event, written as `evio corners` writes them.
+  std::unique_ptr<mapping::EventHarrisDetector> harris;
+  std::unique_ptr<TextOut> corners_file;
+  bool zero_one = true;  // polarity convention of the input, known after the first chunk
+  double harris_s = 0;
+  if (args.corners) {
+    corners_file = std::make_unique<TextOut>((fs::path(args.out) / "corners.txt").string());
+    std::fputs("# t[s] x y p   (event Harris corner events, polarity as in the input)\n", corners_file->get());
+  }
+  char line[96];
+
   Progress progress("evio reconstruct", args.progress, "events");
   EventBuffer chunk;
   const auto wall0 = clock::now();
@@ -258,6 +290,13 @@ int run_reconstruct(const ReconstructArgs& args, std::ostream& out) {
       t_first = ev[0].t_ns;
       if (!frames.empty()) t_first = std::min(t_first, frames.front().t_ns);
       next_rate = ev[0].t_ns;
+      if (args.corners) {
+        mapping::EventHarrisOptions h = cfg.harris;
+        h.contrast_on = cfg.cf.contrast_on;
+        h.contrast_off = cfg.cf.contrast_off;
+        harris = std::make_unique<mapping::EventHarrisDetector>(width, height, t_first, h);
+        zero_one = reader->event_report().polarity != PolarityConvention::kMinusPlusOne;
+      }
       switch (cfg.method) {
         case ReconstructionMethod::kHighPass:
         case ReconstructionMethod::kComplementary: {
@@ -266,6 +305,15 @@ int run_reconstruct(const ReconstructArgs& args, std::ostream& out) {
           o.high_pass = cfg.method == ReconstructionMethod::kHighPass;
           o.use_frames = cfg.use_frames;
           filter = std::make_unique<mapping::ComplementaryFilter>(width, height, t_first, o);
+          break;
+        }
+        case ReconstructionMethod::kGradient: {
+          mapping::PoissonGradientOptions o;
+          o.filter = cfg.cf;
+          o.filter.frame = cfg.frames;
+          o.filter.use_frames = cfg.use_frames;
+          o.sobel = cfg.gradient_sobel;
+          filter = std::make_unique<mapping::PoissonGradientFilter>(width, height, t_first, o);
           break;
         }
         case ReconstructionMethod::kKalman: {
@@ -291,6 +339,16 @@ int run_reconstruct(const ReconstructArgs& args, std::ostream& out) {
       filter_s += std::chrono::duration<double>(clock::now() - c0).count();
       i = j;
     }
+    if (harris) {
+      const auto c0 = clock::now();
+      for (size_t k = 0; k < n; ++k) {
+        if (!harris->process(ev[k])) continue;
+        char* end = format_seconds(ev[k].t_ns, line);
+        *end = '\0';
+        std::fprintf(corners_file->get(), "%s %d %d %d\n", line, ev[k].x, ev[k].y, ev[k].polarity > 0 ? 1 : (zero_one ? 0 : -1));
+      }
+      harris_s += std::chrono::duration<double>(clock::now() - c0).count();
+    }
     events += static_cast<int64_t>(n);
     t_last = ev[n - 1].t_ns;
     progress.update(reader->progress(), events, std::to_string(images) + " images");
@@ -300,6 +358,7 @@ int run_reconstruct(const ReconstructArgs& args, std::ostream& out) {
   due_before(at.empty() ? t_last : std::max(t_last, at.back()), true);
   list.close();
   video.close();
+  if (corners_file) corners_file->close();
   const double wall_s = std::chrono::duration<double>(clock::now() - wall0).count();
 
   const mapping::ReconstructionStats& st = filter->stats();
@@ -313,7 +372,11 @@ int run_reconstruct(const ReconstructArgs& args, std::ostream& out) {
       << ",\n  \"t_first_s\": " << num(t_first * 1e-9) << ",\n  \"t_last_s\": " << num(t_last * 1e-9)
       << ",\n  \"filter_time_s\": " << num(filter_s) << ",\n  \"time_per_event_ns\": " << num(ns_per_event)
       << ",\n  \"events_per_s\": " << num(filter_s > 0 ? static_cast<double>(events) / filter_s : 0.0)
-      << ",\n  \"readout_time_s\": " << num(readout_s) << ",\n  \"wall_time_s\": " << num(wall_s) << ",\n  \"rebases\": " << st.rebases << ",\n  \"video\": \""
+      << ",\n  \"readout_time_s\": " << num(readout_s) << ",\n  \"wall_time_s\": " << num(wall_s) << ",\n  \"rebases\": " << st.rebases;
+    if (harris)
+      j << ",\n  \"corner_events\": " << harris->stats().corners << ",\n  \"harris_time_s\": " << num(harris_s)
+        << ",\n  \"harris_time_per_event_ns\": " << num(events ? harris_s * 1e9 / static_cast<double>(events) : 0.0);
+    j << ",\n  \"video\": \""
       << json_escape(video_status) << "\"\n}\n";
     std::fputs(j.str().c_str(), f.get());
     f.close();
@@ -323,7 +386,10 @@ int run_reconstruct(const ReconstructArgs& args, std::ostream& out) {
       << num(ns_per_event) << " ns per event (" << num(filter_s > 0 ? events / filter_s * 1e-6 : 0.0)
       << " M events/s), wall " << num(wall_s) << " s\n"
       << "wrote " << args.out << "/images.txt, images/, stats.json, reconstruct_config.yaml"
-      << (video_status == "written" ? ", video.mp4" : "") << "\n";
+      << (video_status == "written" ? ", video.mp4" : "") << (harris ? ", corners.txt" : "") << "\n";
+  if (harris)
+    out << "event Harris: " << harris->stats().corners << " corner events (" << num(harris_s * 1e9 / std::max<int64_t>(1, events))
+        << " ns per event)\n";
   return 0;
 }
 

@@ -1,12 +1,16 @@
-// `evio reconstruct DATASET --out DIR --method hf|cf|akf`: image reconstruction from events (and
-// APS frames with --use-frames) by the per-pixel filters of mapping/reconstruction.h, streamed in
-// bounded memory (events in chunks, one frame decoded at a time). At each requested time writes
+// `evio reconstruct DATASET --out DIR --method hf|cf|akf|gradient [--corners]`: image reconstruction
+// from events (and APS frames with --use-frames) by the per-pixel filters of
+// mapping/reconstruction.h, or the Poisson image of the asynchronous-convolution gradient state
+// (mapping/async_convolution.h), streamed in bounded memory (events in chunks, one frame decoded at
+// a time). At each requested time writes
 //   images/frame_NNNNNNNN.png   8-bit, the log intensity's 1st..99th percentile range (display section)
 //   images/frame_NNNNNNNN.tiff  float32 log intensity (the filter's state)
 //   images.txt                  `t[s] images/frame_NNNNNNNN.png`, as in the Event Camera Dataset
 //   video.mp4                   with --video, when OpenCV's VideoWriter has an MP4 codec
 //   stats.json                  events, frames fused, images, events/s, ns per event (filter only)
 //   reconstruct_config.yaml     the resolved config
+//   corners.txt                 with --corners: event Harris corner events (mapping/event_harris.h),
+//                               `t[s] x y p` as `evio corners` writes them
 #pragma once
 
 #include <cstdint>
@@ -15,6 +19,8 @@
 #include <string>
 #include <vector>
 
+#include "evio/mapping/async_convolution.h"
+#include "evio/mapping/event_harris.h"
 #include "evio/mapping/mosaic_image.h"
 #include "evio/mapping/reconstruction.h"
 #include "evio/sensors/dataset.h"
@@ -28,6 +34,8 @@ struct ReconstructConfig {
   double rate_hz = 30.0;  // images per second of sensor time when no --at list
   mapping::ComplementaryFilterOptions cf;  // hf and cf (hf: high_pass, no frames)
   mapping::AsyncKalmanFilterOptions akf;
+  bool gradient_sobel = false;             // gradient: Sobel 3x3 instead of forward differences
+  mapping::EventHarrisOptions harris;      // --corners (contrasts: cf's)
   mapping::FrameResponse frames;           // copied into cf and akf
   mapping::LogImageDisplayOptions display;
   double video_fps = 30.0;
@@ -44,7 +52,7 @@ struct ReconstructArgs {
   std::vector<std::string> set;
   std::string calib;
   std::string out;
-  std::string method;                 // hf | cf | akf (empty: the config's)
+  std::string method;                 // hf | cf | akf | gradient (empty: the config's)
   std::optional<double> rate_hz;      // --rate
   std::vector<int64_t> at_ns;         // --at (absolute file times)
   bool use_frames = false;            // --use-frames
@@ -52,6 +60,7 @@ struct ReconstructArgs {
   std::optional<double> contrast_on;  // --contrast-on
   std::optional<double> contrast_off; // --contrast-off
   bool video = false;                 // --video
+  bool corners = false;               // --corners
   bool progress = true;
 };
 

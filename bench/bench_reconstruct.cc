@@ -1,6 +1,9 @@
 // Image reconstruction from events (mapping/reconstruction.h), one core: the complementary filter
 // without and with APS frames (BM_ComplementaryFilter/frames:0 and /frames:1), the asynchronous
-// Kalman filter, and as a same-process baseline the published complementary-filter equations run
+// Kalman filter, the asynchronous convolution state (async_convolution.h: a Sobel x/y pair, 3x3
+// and 5x5, events only: BM_AsyncConvolution/size:3|5) and the event Harris corner path on top of it
+// (event_harris.h: gradient state, structure tensor around the event, response and NMS:
+// BM_EventHarris), and as a same-process baseline the published complementary-filter equations run
 // the straightforward way (per event exp() and double state; per frame a global update with one
 // exp() per pixel, as dvs_image_reconstruction's offline loop does, without ROS).
 // Input: the real ECD slice (../shared/data/real/ecd_slider_depth_head, or $EVIO_REAL_DATA, 50,000
@@ -20,6 +23,8 @@
 #include <benchmark/benchmark.h>
 
 #include "bench_reporter.h"
+#include "evio/mapping/async_convolution.h"
+#include "evio/mapping/event_harris.h"
 #include "evio/mapping/reconstruction.h"
 #include "evio/sensors/ecd.h"
 
@@ -154,6 +159,33 @@ void BM_AsyncKalmanFilter(benchmark::State& state) {
   set_counters(state);
 }
 
+void BM_AsyncConvolution(benchmark::State& state) {
+  const int size = static_cast<int>(state.range(0));
+  evio::mapping::AsyncConvolutionOptions o;  // 0.5 Hz, +-0.1, events only
+  o.filter.use_frames = false;
+  o.filter.high_pass = true;
+  o.kernels = {evio::mapping::sobel_kernel(true, size), evio::mapping::sobel_kernel(false, size)};
+  evio::mapping::ImageF img;
+  for (auto _ : state) {
+    evio::mapping::AsyncConvolution f(input().width, input().height, 0, o);
+    run(&f, false);
+    f.convolved(0, input().events.back().t_ns, &img);
+    benchmark::DoNotOptimize(img.data());
+  }
+  set_counters(state);
+}
+
+void BM_EventHarris(benchmark::State& state) {
+  const evio::mapping::EventHarrisOptions o;  // 5 Hz, Sobel 3x3, 5x5 window, NMS radius 3
+  int64_t corners = 0;
+  for (auto _ : state) {
+    evio::mapping::EventHarrisDetector f(input().width, input().height, 0, o);
+    for (const Event& e : input().events) corners += f.process(e);
+    benchmark::DoNotOptimize(corners);
+  }
+  set_counters(state);
+}
+
 // The published equations, straightforward: double state, per-pixel timestamps, exp() per event;
 // per frame the global update (exp() per pixel) and the frame's log.
 class PublishedLoop {
@@ -201,6 +233,8 @@ void BM_PublishedEquationsLoop(benchmark::State& state) {
 
 BENCHMARK(BM_ComplementaryFilter)->ArgName("frames")->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_AsyncKalmanFilter)->ArgName("frames")->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_AsyncConvolution)->ArgName("size")->Arg(3)->Arg(5)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_EventHarris)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_PublishedEquationsLoop)->ArgName("frames")->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 
 }  // namespace

@@ -10,30 +10,9 @@ namespace evio::mapping {
 namespace {
 
 constexpr double kTwoPi = 6.283185307179586;
-// The complementary filter rescales its state before exp(alpha (t - t_ref)) exceeds e^20.
-constexpr double kMaxExponent = 20.0;
-
 bool fail(std::string* why, const std::string& msg) {
   if (why) *why = msg;
   return false;
-}
-
-// exp(a) rounded to float, for a <= ~80: e^a = 2^k e^r with k = round(a / ln 2), |r| <= ln(2)/2,
-// e^r by its Taylor polynomial of degree 7 in double (truncation below 5e-9 relative, under the
-// float rounding of 6e-8). About a third of glibc's exp() per event, and branch-free but for the
-// underflow test.
-inline float exp_to_float(double a) {
-  if (a < -87.0) return 0.0f;
-  constexpr double kLog2e = 1.4426950408889634, kLn2 = 0.6931471805599453;
-  constexpr double kRound = 6755399441055744.0;  // 1.5 * 2^52: adding it rounds to an integer
-  const double kd = (a * kLog2e + kRound) - kRound;
-  const double r = a - kd * kLn2;
-  const double p =
-      1.0 + r * (1.0 + r * (0.5 + r * (1.0 / 6 + r * (1.0 / 24 + r * (1.0 / 120 + r * (1.0 / 720 + r * (1.0 / 5040)))))));
-  const int64_t bits = (static_cast<int64_t>(kd) + 1023) << 52;
-  double scale;
-  std::memcpy(&scale, &bits, sizeof(scale));
-  return static_cast<float>(p * scale);
 }
 
 void check_size(int width, int height) {
@@ -67,6 +46,7 @@ const char* reconstruction_method_name(ReconstructionMethod m) {
     case ReconstructionMethod::kHighPass: return "hf";
     case ReconstructionMethod::kComplementary: return "cf";
     case ReconstructionMethod::kKalman: return "akf";
+    case ReconstructionMethod::kGradient: return "gradient";
   }
   return "?";
 }
@@ -92,37 +72,19 @@ bool ComplementaryFilterOptions::Validate(std::string* why) const {
 // Complementary filter
 
 ComplementaryFilter::ComplementaryFilter(int width, int height, int64_t t_start_ns, const ComplementaryFilterOptions& options)
-    : width_(width), height_(height), o_(options) {
+    : width_(width), height_(height), o_(options), clock_(kTwoPi * options.cutoff_hz * 1e-9, t_start_ns) {
   check_size(width, height);
   std::string why;
   if (!o_.Validate(&why)) throw std::invalid_argument("ComplementaryFilterOptions: " + why);
-  alpha_per_ns_ = kTwoPi * o_.cutoff_hz * 1e-9;
   c_on_ = static_cast<float>(o_.contrast_on);
   c_off_ = static_cast<float>(-o_.contrast_off);
   for (int v = 0; v < 256; ++v) lut_[v] = static_cast<float>(o_.frame.log_of(v));
   reference_ = o_.high_pass ? 0.0f : static_cast<float>(o_.frame.log_of(o_.frame.initial_grey));
   s_.assign(static_cast<size_t>(width) * height, static_cast<float>(o_.initial_log_intensity));
-  t_ref_ns_ = t_fold_ns_ = t_start_ns;
-  // Rebase before exp(alpha d) exceeds e^20 or d leaves the tables' 33 bits.
-  const double span = alpha_per_ns_ > 0 ? kMaxExponent / alpha_per_ns_ : 1e300;
-  rebase_span_ns_ = static_cast<uint64_t>(std::min(span, static_cast<double>(kTableSpanNs)));
-  const size_t digits = size_t{1} << kDigitBits;
-  exp_lo_.resize(digits);
-  exp_mid_.resize(digits);
-  exp_hi_.resize(digits);
-  for (size_t j = 0; j < digits; ++j) {
-    auto e = [this](double d_ns) { return static_cast<float>(std::min(std::exp(alpha_per_ns_ * d_ns), 3e38)); };
-    exp_lo_[j] = e(static_cast<double>(j));
-    exp_mid_[j] = e(static_cast<double>(j << kDigitBits));
-    exp_hi_[j] = e(static_cast<double>(j << (2 * kDigitBits)));
-  }
 }
 
 void ComplementaryFilter::fold_frame(int64_t t_ns) {
-  if (t_ns <= t_fold_ns_) return;
-  // w(t) - w(t_fold) = w(t_fold) expm1(alpha (t - t_fold)), exact in double.
-  const double dw = std::exp(exponent(t_fold_ns_)) * std::expm1(alpha_per_ns_ * static_cast<double>(t_ns - t_fold_ns_));
-  t_fold_ns_ = t_ns;
+  const double dw = clock_.fold(t_ns);
   if (dw == 0.0) return;
   if (frame_.empty()) {
     if (reference_ == 0.0f) return;
@@ -139,46 +101,31 @@ void ComplementaryFilter::fold_frame(int64_t t_ns) {
 }
 
 void ComplementaryFilter::rebase(int64_t t_ns) {
-  // The state at t_ns in plain log intensity (the new scale, exp(alpha (t_ns - t_ref)) = 1):
-  // S' = S exp(-alpha (t_ns - t_ref)) + L_F (1 - exp(-alpha (t_ns - t_fold))), in double (no
-  // overflow whatever the gap); values below 1e-30 become 0 (no denormals in later sums).
-  t_ns = std::max(t_ns, t_fold_ns_);  // a frame later than the event that asked: rebase there
-  const double a = exponent(t_ns);
-  const double scale = a > 700 ? 0.0 : std::exp(-a);
-  const double g = t_ns > t_fold_ns_ ? -std::expm1(-alpha_per_ns_ * static_cast<double>(t_ns - t_fold_ns_)) : 0.0;
+  // The state at t_ns in plain log intensity (scaled_decay.h); values below 1e-30 become 0 (no
+  // denormals in later sums).
+  const ScaledDecayClock::Rebase r = clock_.rebase(t_ns);
   const size_t n = s_.size();
   if (frame_.empty()) {
-    const double add = reference_ * g;
-    for (size_t i = 0; i < n; ++i) s_[i] = static_cast<float>(s_[i] * scale + add);
+    const double add = reference_ * r.gain;
+    for (size_t i = 0; i < n; ++i) s_[i] = static_cast<float>(s_[i] * r.scale + add);
   } else {
-    for (size_t i = 0; i < n; ++i) s_[i] = static_cast<float>(s_[i] * scale + lut_[frame_[i]] * g);
+    for (size_t i = 0; i < n; ++i) s_[i] = static_cast<float>(s_[i] * r.scale + lut_[frame_[i]] * r.gain);
   }
   for (float& s : s_)
     if (std::fabs(s) < 1e-30f) s = 0.0f;
-  t_ref_ns_ = t_fold_ns_ = t_ns;
   ++stats_.rebases;
 }
 
 void ComplementaryFilter::process(const Event* events, size_t n) {
   float* s = s_.data();
   const uint32_t w = static_cast<uint32_t>(width_), h = static_cast<uint32_t>(height_);
-  const float* lo = exp_lo_.data();
-  const float* mid = exp_mid_.data();
-  const float* hi = exp_hi_.data();
   int64_t outside = 0;
   for (size_t i = 0; i < n; ++i) {
     const Event& e = events[i];
-    uint64_t d = static_cast<uint64_t>(e.t_ns - t_ref_ns_);  // ns since t_ref (wraps when negative)
     float scale;
-    if (d <= rebase_span_ns_) {
-      // exp(alpha d) from three tables over d's 11-bit digits (about 4 float ulps: 2e-7 relative
-      // error on an event's contribution c, 3e-8 for c = 0.1)
-      scale = hi[d >> (2 * kDigitBits)] * mid[(d >> kDigitBits) & kDigitMask] * lo[d & kDigitMask];
-    } else if (static_cast<int64_t>(d) > 0) {
+    if (!clock_.event_weight(e.t_ns, &scale)) {
       rebase(e.t_ns);
-      scale = exp_to_float(exponent(e.t_ns));  // the event is at or before the new t_ref
-    } else {
-      scale = exp_to_float(exponent(e.t_ns));  // before t_ref (out of order): w < 1
+      scale = exp_to_float(clock_.exponent(e.t_ns));  // the event is at or before the new t_ref
     }
     if (e.x >= w || e.y >= h) {
       ++outside;
@@ -193,11 +140,11 @@ void ComplementaryFilter::process(const Event* events, size_t n) {
 void ComplementaryFilter::add_frame(int64_t t_ns, const GreyView& frame) {
   if (!o_.use_frames) return;
   check_frame(frame, width_, height_);
-  if (t_ns - t_ref_ns_ > static_cast<int64_t>(rebase_span_ns_)) rebase(t_ns);
+  if (clock_.needs_rebase(t_ns)) rebase(t_ns);
   fold_frame(t_ns);  // the previous L_F up to t_ns (a frame before the last one is fused at its time)
   copy_frame(frame, &frame_);
   if (stats_.frames == 0 && o_.init_from_first_frame) {
-    const float w = exp_to_float(exponent(t_fold_ns_));
+    const float w = exp_to_float(clock_.exponent(clock_.t_fold_ns()));
     for (size_t i = 0; i < s_.size(); ++i) s_[i] = lut_[frame_[i]] * w;
   }
   ++stats_.frames;
@@ -206,15 +153,14 @@ void ComplementaryFilter::add_frame(int64_t t_ns, const GreyView& frame) {
 void ComplementaryFilter::log_intensity(int64_t t_ns, ImageF* out) const {
   out->resize(height_, width_);
   // L = S / w(t) + L_F (1 - w(t_fold) / w(t)), in double.
-  const double inv = std::exp(-exponent(t_ns));
-  const double g = t_ns > t_fold_ns_ ? -std::expm1(-alpha_per_ns_ * static_cast<double>(t_ns - t_fold_ns_)) : 0.0;
+  const ScaledDecayClock::Readout r = clock_.readout(t_ns);
   float* o = out->data();
   const size_t n = s_.size();
   if (frame_.empty()) {
-    const double add = reference_ * g;
-    for (size_t i = 0; i < n; ++i) o[i] = static_cast<float>(s_[i] * inv + add);
+    const double add = reference_ * r.gain;
+    for (size_t i = 0; i < n; ++i) o[i] = static_cast<float>(s_[i] * r.inv + add);
   } else {
-    for (size_t i = 0; i < n; ++i) o[i] = static_cast<float>(s_[i] * inv + lut_[frame_[i]] * g);
+    for (size_t i = 0; i < n; ++i) o[i] = static_cast<float>(s_[i] * r.inv + lut_[frame_[i]] * r.gain);
   }
 }
 

@@ -1,6 +1,6 @@
 // `evio reconstruct`: outputs on a tiny synthetic ECD folder with APS frames (a bright bar moving
 // over a grey wall): images.txt in the Event Camera Dataset layout, PNG + float TIFF per time,
-// stats.json, the resolved config, --at and --rate, and errors.
+// stats.json, the resolved config, --at and --rate, --method gradient, --corners, and errors.
 #include "reconstruct_command.h"
 
 #include <cmath>
@@ -56,7 +56,7 @@ std::string bar_folder(const evio_test::TempDir& dir) {
 
 TEST(ReconstructCommand, WritesImagesListedLikeADataset) {
   evio_test::TempDir dir;
-  for (const char* method : {"hf", "cf", "akf"}) {
+  for (const char* method : {"hf", "cf", "akf", "gradient"}) {
     ReconstructArgs a;
     a.dataset = bar_folder(dir);
     a.out = dir.file(std::string("out_") + method);
@@ -88,6 +88,40 @@ TEST(ReconstructCommand, WritesImagesListedLikeADataset) {
   }
 }
 
+// --corners: event Harris corner events in corners.txt as `evio corners` writes them (`t x y p`,
+// polarity as in the input: 0/1 here), at the bar's four corners (y = 60 or 119, x on an edge).
+TEST(ReconstructCommand, CornersWritesHarrisCornerEvents) {
+  evio_test::TempDir dir;
+  ReconstructArgs a;
+  a.dataset = bar_folder(dir);
+  a.out = dir.file("out");
+  a.method = "gradient";
+  a.corners = true;
+  a.set = {"harris.threshold=3e-7"};  // edges of one 0.1 event: R ~ 1e-6 at the corners (measured: 63 corner events, all at corners; 1e-7: 533, a third at corners)
+  a.at_ns = {100'000'000};
+  a.progress = false;
+  std::ostringstream out;
+  ASSERT_EQ(run_reconstruct(a, out), 0) << out.str();
+  std::istringstream corners(evio_test::read_text(a.out + "/corners.txt"));
+  std::string header;
+  std::getline(corners, header);
+  EXPECT_EQ(header, "# t[s] x y p   (event Harris corner events, polarity as in the input)");
+  double t;
+  int x, y, p, n = 0, at_corner = 0;
+  while (corners >> t >> x >> y >> p) {
+    ++n;
+    EXPECT_TRUE(p == 0 || p == 1);
+    EXPECT_GE(t, 0.005);
+    at_corner += std::abs(y - 60) <= 3 || std::abs(y - 119) <= 3;
+  }
+  std::printf("%d corner events, %d within 3 px of the bar's top or bottom edge\n", n, at_corner);
+  EXPECT_GT(n, 30);
+  EXPECT_GT(at_corner, 0.9 * n);
+  const std::string stats = evio_test::read_text(a.out + "/stats.json");
+  EXPECT_NE(stats.find("\"corner_events\": " + std::to_string(n)), std::string::npos) << stats;
+  EXPECT_NE(stats.find("\"harris_time_per_event_ns\""), std::string::npos) << stats;
+}
+
 TEST(ReconstructCommand, RateConfigRoundTripAndErrors) {
   evio_test::TempDir dir;
   ReconstructArgs a;
@@ -115,7 +149,7 @@ TEST(ReconstructCommand, RateConfigRoundTripAndErrors) {
   bad.method = "akf";
   EXPECT_THROW(resolve_reconstruct_config(bad), InputError);  // --cutoff-hz with akf
   bad = a;
-  bad.method = "gradient";
+  bad.method = "poisson";
   EXPECT_THROW(resolve_reconstruct_config(bad), InputError);
   bad = a;
   bad.cutoff_hz.reset();

@@ -177,4 +177,110 @@ std::string CornerGroundTruthSequence::describe() const {
   return buf;
 }
 
+CornerScorer::CornerScorer(const CornerGroundTruthSequence& seq) : seq_(seq), near_(seq.events().size(), 0) {
+  std::vector<Eigen::Vector2d> px;
+  for (size_t i = 0; i < seq.events().size(); ++i) {
+    const Event& e = seq.events()[i];
+    seq.true_corners_at(e.t_ns, kCornerMatchRadiusPx, &px);
+    const Eigen::Vector2d p(e.x, e.y);
+    for (const Eigen::Vector2d& c : px)
+      if ((c - p).squaredNorm() <= kCornerMatchRadiusPx * kCornerMatchRadiusPx) {
+        near_[i] = 1;
+        break;
+      }
+  }
+}
+
+CornerMetrics CornerScorer::evaluate(const std::function<bool(const Event&)>& is_corner) const {
+  const CornerGroundTruthSequence& seq = seq_;
+  const std::vector<uint8_t>& near = near_;
+  const CornerSceneOptions& so = seq.options();
+  const int num_corners = static_cast<int>(seq.corners_w().size());
+  const int64_t t0 = seq.t_begin_ns();
+  const int num_bins = static_cast<int>((seq.t_end_ns() - t0) / kCornerBinNs);  // whole bins only
+  std::vector<uint8_t> hit(static_cast<size_t>(num_bins) * num_corners, 0);
+
+  CornerMetrics m;
+  std::vector<Eigen::Vector2d> px;
+  std::vector<int> ids;
+  for (size_t i = 0; i < seq.events().size(); ++i) {
+    const Event& e = seq.events()[i];
+    const bool corner = is_corner(e);
+    ++m.events;
+    if (near[i]) {
+      ++m.near_events;
+      if (corner) ++m.near_events_flagged;
+    }
+    if (!corner) continue;
+    ++m.corner_events;
+    seq.true_corners_at(e.t_ns, kCornerMatchRadiusPx, &px, &ids);
+    const Eigen::Vector2d p(e.x, e.y);
+    const int bin = static_cast<int>((e.t_ns - t0) / kCornerBinNs);
+    bool tp = false;
+    for (size_t k = 0; k < px.size(); ++k) {
+      if ((px[k] - p).squaredNorm() > kCornerMatchRadiusPx * kCornerMatchRadiusPx) continue;
+      tp = true;
+      if (bin < num_bins) hit[static_cast<size_t>(bin) * num_corners + ids[k]] = 1;
+    }
+    if (tp) ++m.true_positives;
+  }
+
+  // (corner, bin) pairs: the corner is inside the detectable area (>= 4 px from the border) at the
+  // bin's start, middle and end, and moves at >= 20 px/s on average over the bin.
+  const double lo = kCornerDetectorBorderPx, x_hi = seq.width() - 1 - kCornerDetectorBorderPx,
+               y_hi = seq.height() - 1 - kCornerDetectorBorderPx;
+  auto inside = [&](const Eigen::Vector2d& q) { return q.x() >= lo && q.y() >= lo && q.x() <= x_hi && q.y() <= y_hi; };
+  for (int b = 0; b < num_bins; ++b) {
+    const int64_t ta = t0 + b * kCornerBinNs, tb = ta + kCornerBinNs;
+    for (int c = 0; c < num_corners; ++c) {
+      Eigen::Vector2d pa, pm, pb;
+      if (!seq.project_corner(c, ta, &pa) || !seq.project_corner(c, ta + kCornerBinNs / 2, &pm) ||
+          !seq.project_corner(c, tb, &pb))
+        continue;
+      if (!inside(pa) || !inside(pm) || !inside(pb)) continue;
+      if ((pb - pa).norm() / (kCornerBinNs * 1e-9) < kMinCornerSpeedPxps) continue;
+      const int gi = c % (so.squares_x + 1), gj = c / (so.squares_x + 1);
+      const bool inner = gi > 0 && gi < so.squares_x && gj > 0 && gj < so.squares_y;
+      const bool h = hit[static_cast<size_t>(b) * num_corners + c] != 0;
+      ++m.pairs;
+      m.pairs_hit += h;
+      if (inner) {
+        ++m.inner_pairs;
+        m.inner_pairs_hit += h;
+      }
+    }
+  }
+  return m;
+}
+
+CornerMetrics CornerScorer::evaluate_efast(const frontend::EfastOptions& options) const {
+  frontend::EfastDetector detector(seq_.width(), seq_.height(), options);
+  return evaluate([&detector](const Event& e) { return detector.process(e); });
+}
+
+const CornerGroundTruthSequence& default_corner_sequence() {
+  static const std::unique_ptr<CornerGroundTruthSequence> seq = [] {
+    auto s = std::make_unique<CornerGroundTruthSequence>(CornerSceneOptions{});
+    std::printf("scene: %s\n", s->describe().c_str());
+    return s;
+  }();
+  return *seq;
+}
+
+const CornerScorer& default_corner_scorer() {
+  static const CornerScorer s(default_corner_sequence());
+  return s;
+}
+
+void print_corner_metrics(const char* name, const CornerMetrics& m) {
+  std::printf(
+      "%s: %lld events, %lld corner events (reduction %.1fx); precision %.4f (TP %lld) vs chance %.4f "
+      "(%lld events within %.0f px of a true corner); event recall %.4f (%lld flagged); (corner, %lld ms bin) "
+      "recall %.4f (%lld of %lld pairs), inner X-junctions only %.4f (%lld of %lld)\n",
+      name, (long long)m.events, (long long)m.corner_events, m.reduction(), m.precision(),
+      (long long)m.true_positives, m.chance(), (long long)m.near_events, kCornerMatchRadiusPx, m.event_recall(),
+      (long long)m.near_events_flagged, (long long)(kCornerBinNs / 1'000'000), m.pair_recall(), (long long)m.pairs_hit,
+      (long long)m.pairs, m.inner_pair_recall(), (long long)m.inner_pairs_hit, (long long)m.inner_pairs);
+}
+
 }  // namespace evio::test

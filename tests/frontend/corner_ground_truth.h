@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -15,6 +16,7 @@
 
 #include "evio/calib/camera.h"
 #include "evio/calib/geometry.h"
+#include "evio/frontend/efast.h"
 #include "evio/sensors/measurements.h"
 #include "evio/simulator/simulator.h"
 
@@ -100,5 +102,55 @@ class CornerGroundTruthSequence {
   simulator::SimulationStats stats_;
   int64_t t_begin_ns_ = 0, t_end_ns_ = 0;
 };
+
+// Scoring of per-event corner decisions against a sequence's true corners. A corner event is a
+// true positive when a projected true corner lies within kCornerMatchRadiusPx of its pixel at its
+// time. Precision; chance level (share of all events within that radius of a true corner: the
+// precision of flagging events at random); event recall (share of those near events flagged);
+// (corner, 50 ms bin) recall (share of the bins in which a visible, moving corner, at least
+// kCornerDetectorBorderPx inside the image, gets a corner event within the radius); reduction
+// (events per corner event).
+constexpr double kCornerMatchRadiusPx = 2.0;
+constexpr int64_t kCornerBinNs = 50'000'000;       // recall bins, ns
+constexpr double kMinCornerSpeedPxps = 20;         // a corner "moves" in a bin at this mean image speed, px/s
+constexpr int kCornerDetectorBorderPx = 4;         // eFAST never fires within 4 px of the border
+
+struct CornerMetrics {
+  int64_t events = 0;
+  int64_t corner_events = 0;
+  int64_t true_positives = 0;
+  int64_t near_events = 0;          // events within the radius of a true corner
+  int64_t near_events_flagged = 0;  // of those, flagged as corners
+  int64_t pairs = 0, pairs_hit = 0;                  // (corner, bin) pairs: visible and moving; with a hit
+  int64_t inner_pairs = 0, inner_pairs_hit = 0;      // the same for inner (X-junction) corners only
+  double precision() const { return corner_events ? double(true_positives) / corner_events : 0.0; }
+  double chance() const { return events ? double(near_events) / events : 0.0; }
+  double event_recall() const { return near_events ? double(near_events_flagged) / near_events : 0.0; }
+  double pair_recall() const { return pairs ? double(pairs_hit) / pairs : 0.0; }
+  double inner_pair_recall() const { return inner_pairs ? double(inner_pairs_hit) / inner_pairs : 0.0; }
+  double reduction() const { return corner_events ? double(events) / corner_events : 0.0; }
+};
+
+class CornerScorer {
+ public:
+  // Flags the events near a true corner (once); seq must outlive the scorer.
+  explicit CornerScorer(const CornerGroundTruthSequence& seq);
+  // Scores any per-event corner decision (called once per event, in time order).
+  CornerMetrics evaluate(const std::function<bool(const Event&)>& is_corner) const;
+  // eFAST with these options over the sequence's events.
+  CornerMetrics evaluate_efast(const frontend::EfastOptions& options) const;
+
+ private:
+  const CornerGroundTruthSequence& seq_;
+  std::vector<uint8_t> near_;  // per event: a true corner within the radius
+};
+
+// The default sequence (CornerSceneOptions{}), simulated once per process (described on stdout
+// then), and its scorer.
+const CornerGroundTruthSequence& default_corner_sequence();
+const CornerScorer& default_corner_scorer();
+
+// One line of figures on stdout.
+void print_corner_metrics(const char* name, const CornerMetrics& m);
 
 }  // namespace evio::test

@@ -21,137 +21,13 @@
 namespace evio::test {
 namespace {
 
-constexpr double kMatchRadiusPx = 2.0;
-constexpr int64_t kBinNs = 50'000'000;       // recall bins, ns
-constexpr double kMinCornerSpeedPxps = 20;   // a corner "moves" in a bin at this mean image speed, px/s
-constexpr int kDetectorBorderPx = 4;         // eFAST never fires within 4 px of the border
+const CornerGroundTruthSequence& sequence() { return default_corner_sequence(); }
 
-// The simulated sequence, built once for all tests of this file.
-const CornerGroundTruthSequence& sequence() {
-  static const std::unique_ptr<CornerGroundTruthSequence> seq = [] {
-    auto s = std::make_unique<CornerGroundTruthSequence>(CornerSceneOptions{});
-    std::printf("scene: %s\n", s->describe().c_str());
-    return s;
-  }();
-  return *seq;
-}
-
-// Per event: some true corner (projected at the event's time, up to 2 px outside the image) lies
-// within 2 px of the event's pixel. Computed once.
-const std::vector<uint8_t>& near_corner_flags() {
-  static const std::vector<uint8_t> flags = [] {
-    const CornerGroundTruthSequence& seq = sequence();
-    std::vector<uint8_t> f(seq.events().size(), 0);
-    std::vector<Eigen::Vector2d> px;
-    for (size_t i = 0; i < seq.events().size(); ++i) {
-      const Event& e = seq.events()[i];
-      seq.true_corners_at(e.t_ns, kMatchRadiusPx, &px);
-      const Eigen::Vector2d p(e.x, e.y);
-      for (const Eigen::Vector2d& c : px)
-        if ((c - p).squaredNorm() <= kMatchRadiusPx * kMatchRadiusPx) {
-          f[i] = 1;
-          break;
-        }
-    }
-    return f;
-  }();
-  return flags;
-}
-
-struct CornerMetrics {
-  int64_t events = 0;
-  int64_t corner_events = 0;
-  int64_t true_positives = 0;
-  int64_t near_events = 0;          // events within 2 px of a true corner
-  int64_t near_events_flagged = 0;  // of those, flagged as corners
-  int64_t pairs = 0, pairs_hit = 0;                  // (corner, bin) pairs: visible and moving; with a hit
-  int64_t inner_pairs = 0, inner_pairs_hit = 0;      // the same for inner (X-junction) corners only
-  double precision() const { return corner_events ? double(true_positives) / corner_events : 0.0; }
-  double chance() const { return events ? double(near_events) / events : 0.0; }
-  double event_recall() const { return near_events ? double(near_events_flagged) / near_events : 0.0; }
-  double pair_recall() const { return pairs ? double(pairs_hit) / pairs : 0.0; }
-  double inner_pair_recall() const { return inner_pairs ? double(inner_pairs_hit) / inner_pairs : 0.0; }
-  double reduction() const { return corner_events ? double(events) / corner_events : 0.0; }
-};
-
-// Scores any per-event corner decision (called once per event, in time order).
 CornerMetrics evaluate(const std::function<bool(const Event&)>& is_corner) {
-  const CornerGroundTruthSequence& seq = sequence();
-  const std::vector<uint8_t>& near = near_corner_flags();
-  const CornerSceneOptions& so = seq.options();
-  const int num_corners = static_cast<int>(seq.corners_w().size());
-  const int64_t t0 = seq.t_begin_ns();
-  const int num_bins = static_cast<int>((seq.t_end_ns() - t0) / kBinNs);  // whole bins only
-  std::vector<uint8_t> hit(static_cast<size_t>(num_bins) * num_corners, 0);
-
-  CornerMetrics m;
-  std::vector<Eigen::Vector2d> px;
-  std::vector<int> ids;
-  for (size_t i = 0; i < seq.events().size(); ++i) {
-    const Event& e = seq.events()[i];
-    const bool corner = is_corner(e);
-    ++m.events;
-    if (near[i]) {
-      ++m.near_events;
-      if (corner) ++m.near_events_flagged;
-    }
-    if (!corner) continue;
-    ++m.corner_events;
-    seq.true_corners_at(e.t_ns, kMatchRadiusPx, &px, &ids);
-    const Eigen::Vector2d p(e.x, e.y);
-    const int bin = static_cast<int>((e.t_ns - t0) / kBinNs);
-    bool tp = false;
-    for (size_t k = 0; k < px.size(); ++k) {
-      if ((px[k] - p).squaredNorm() > kMatchRadiusPx * kMatchRadiusPx) continue;
-      tp = true;
-      if (bin < num_bins) hit[static_cast<size_t>(bin) * num_corners + ids[k]] = 1;
-    }
-    if (tp) ++m.true_positives;
-  }
-
-  // (corner, bin) pairs: the corner is inside the detectable area (>= 4 px from the border) at the
-  // bin's start, middle and end, and moves at >= 20 px/s on average over the bin.
-  const double lo = kDetectorBorderPx, x_hi = seq.width() - 1 - kDetectorBorderPx,
-               y_hi = seq.height() - 1 - kDetectorBorderPx;
-  auto inside = [&](const Eigen::Vector2d& q) { return q.x() >= lo && q.y() >= lo && q.x() <= x_hi && q.y() <= y_hi; };
-  for (int b = 0; b < num_bins; ++b) {
-    const int64_t ta = t0 + b * kBinNs, tb = ta + kBinNs;
-    for (int c = 0; c < num_corners; ++c) {
-      Eigen::Vector2d pa, pm, pb;
-      if (!seq.project_corner(c, ta, &pa) || !seq.project_corner(c, ta + kBinNs / 2, &pm) ||
-          !seq.project_corner(c, tb, &pb))
-        continue;
-      if (!inside(pa) || !inside(pm) || !inside(pb)) continue;
-      if ((pb - pa).norm() / (kBinNs * 1e-9) < kMinCornerSpeedPxps) continue;
-      const int gi = c % (so.squares_x + 1), gj = c / (so.squares_x + 1);
-      const bool inner = gi > 0 && gi < so.squares_x && gj > 0 && gj < so.squares_y;
-      const bool h = hit[static_cast<size_t>(b) * num_corners + c] != 0;
-      ++m.pairs;
-      m.pairs_hit += h;
-      if (inner) {
-        ++m.inner_pairs;
-        m.inner_pairs_hit += h;
-      }
-    }
-  }
-  return m;
+  return default_corner_scorer().evaluate(is_corner);
 }
 
-CornerMetrics evaluate_efast(const frontend::EfastOptions& options) {
-  frontend::EfastDetector detector(sequence().width(), sequence().height(), options);
-  return evaluate([&detector](const Event& e) { return detector.process(e); });
-}
-
-void print(const char* name, const CornerMetrics& m) {
-  std::printf(
-      "%s: %lld events, %lld corner events (reduction %.1fx); precision %.4f (TP %lld) vs chance %.4f "
-      "(%lld events within %.0f px of a true corner); event recall %.4f (%lld flagged); (corner, %lld ms bin) "
-      "recall %.4f (%lld of %lld pairs), inner X-junctions only %.4f (%lld of %lld)\n",
-      name, (long long)m.events, (long long)m.corner_events, m.reduction(), m.precision(),
-      (long long)m.true_positives, m.chance(), (long long)m.near_events, kMatchRadiusPx, m.event_recall(),
-      (long long)m.near_events_flagged, (long long)(kBinNs / 1'000'000), m.pair_recall(), (long long)m.pairs_hit,
-      (long long)m.pairs, m.inner_pair_recall(), (long long)m.inner_pairs_hit, (long long)m.inner_pairs);
-}
+CornerMetrics evaluate_efast(const frontend::EfastOptions& options) { return default_corner_scorer().evaluate_efast(options); }
 
 // Bilinear sample of a CV_32F image at pixel coordinates (pixel centres at integers).
 double bilinear(const cv::Mat& img, const Eigen::Vector2d& p) {
@@ -239,8 +115,8 @@ TEST(EfastSimulated, PrecisionAndRecallAgainstProjectedCorners) {
   frontend::EfastOptions fo;
   fo.filter_sae = true;
   const CornerMetrics filtered = evaluate_efast(fo);
-  print("eFAST, plain SAE   ", plain);
-  print("eFAST, filtered SAE", filtered);
+  print_corner_metrics("eFAST, plain SAE   ", plain);
+  print_corner_metrics("eFAST, filtered SAE", filtered);
 
   for (const CornerMetrics* m : {&plain, &filtered}) {
     ASSERT_GT(m->corner_events, 1000);
@@ -275,7 +151,7 @@ TEST(EfastSimulated, UninformedSelectionScoresAtChance) {
   const int64_t stride = std::max<int64_t>(1, efast.events / efast.corner_events);
   int64_t n = 0;
   const CornerMetrics strided = evaluate([&n, stride](const Event&) { return n++ % stride == 0; });
-  print("every k-th event    ", strided);
+  print_corner_metrics("every k-th event    ", strided);
   EXPECT_NEAR(strided.precision(), strided.chance(), 0.02);
   EXPECT_NEAR(strided.event_recall(), 1.0 / stride, 0.02);
   EXPECT_LT(strided.precision(), 0.3 * efast.precision());

@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "evio/mapping/image.h"
+#include "evio/mapping/scaled_decay.h"
 #include "evio/sensors/measurements.h"
 
 namespace evio::mapping {
@@ -121,24 +122,16 @@ class ComplementaryFilter : public LogIntensityFilter {
 
  private:
   void rebase(int64_t t_ns);
-  void fold_frame(int64_t t_ns);  // adds L_F's contribution over (t_fold_ns_, t_ns]
-  double exponent(int64_t t_ns) const { return alpha_per_ns_ * static_cast<double>(t_ns - t_ref_ns_); }
+  void fold_frame(int64_t t_ns);  // adds L_F's contribution over (t_fold, t_ns]
 
   int width_, height_;
   ComplementaryFilterOptions o_;
-  double alpha_per_ns_;
   float c_on_, c_off_;            // +contrast_on, -contrast_off
   std::vector<float> s_;          // scaled state, H x W row-major
   std::vector<uint8_t> frame_;    // the latest frame (empty before the first)
   std::array<float, 256> lut_{};  // frame value -> log intensity
   float reference_;               // L_F before the first frame (0 for the high-pass filter)
-  int64_t t_ref_ns_, t_fold_ns_;
-  // exp(alpha d) for d = t - t_ref < 2^33 ns as the product of three tables over d's 11-bit digits.
-  static constexpr int kDigitBits = 11;
-  static constexpr uint64_t kDigitMask = (uint64_t{1} << kDigitBits) - 1;
-  static constexpr uint64_t kTableSpanNs = (uint64_t{1} << (3 * kDigitBits)) - 1;
-  uint64_t rebase_span_ns_;  // rebase when t - t_ref exceeds this
-  std::vector<float> exp_lo_, exp_mid_, exp_hi_;
+  ScaledDecayClock clock_;        // t_ref, t_fold, exp(alpha d) per event (scaled_decay.h)
   ReconstructionStats stats_;
 };
 
@@ -203,8 +196,8 @@ class AsyncKalmanFilter : public LogIntensityFilter {
   ReconstructionStats stats_;
 };
 
-// "hf", "cf", "akf".
-enum class ReconstructionMethod { kHighPass, kComplementary, kKalman };
+// "hf", "cf", "akf", "gradient" (the Poisson image of the gradient state, async_convolution.h).
+enum class ReconstructionMethod { kHighPass, kComplementary, kKalman, kGradient };
 const char* reconstruction_method_name(ReconstructionMethod m);
 
 }  // namespace evio::mapping
