@@ -172,12 +172,13 @@ bool AsyncKalmanFilterOptions::Validate(std::string* why) const {
   auto nonneg = [](double v) { return std::isfinite(v) && v >= 0 && v <= 1e6; };
   if (!(std::isfinite(initial_variance) && initial_variance > 0 && initial_variance <= 1e6))
     return fail(why, "initial_variance must be in (0, 1e6]");
+  if (!nonneg(event_noise)) return fail(why, "event_noise must be in [0, 1e6]");
   if (!nonneg(process_noise)) return fail(why, "process_noise must be in [0, 1e6]");
   if (!nonneg(isolated_noise)) return fail(why, "isolated_noise must be in [0, 1e6]");
   if (!nonneg(refractory_noise)) return fail(why, "refractory_noise must be in [0, 1e6]");
   if (refractory_period_ns < 0) return fail(why, "refractory_period must be >= 0");
-  if (!(std::isfinite(frame_noise_density) && frame_noise_density > 0 && frame_noise_density <= 1e6))
-    return fail(why, "frame_noise_density must be in (0, 1e6]");
+  if (!(std::isfinite(frame_noise_std) && frame_noise_std > 0 && frame_noise_std <= 255))
+    return fail(why, "frame_noise_std must be in (0, 255]");
   if (!(exposure_low >= 0 && exposure_low <= exposure_high && exposure_high <= 255))
     return fail(why, "need 0 <= exposure_low <= exposure_high <= 255");
   if (!(min_exposure_weight > 0 && min_exposure_weight <= 1)) return fail(why, "min_exposure_weight must be in (0, 1]");
@@ -196,6 +197,7 @@ AsyncKalmanFilter::AsyncKalmanFilter(int width, int height, int64_t t_start_ns, 
   p_.assign(n, static_cast<float>(o_.initial_variance));
   t_update_.assign(n, t_start_ns);
   t_event_.assign(n, t_start_ns);
+  const double sv = o_.frame_noise_std / 255.0;
   for (int v = 0; v < 256; ++v) {
     lut_log_[v] = static_cast<float>(o_.frame.log_of(v));
     double w = 1.0;
@@ -204,25 +206,16 @@ AsyncKalmanFilter::AsyncKalmanFilter(int width, int height, int64_t t_start_ns, 
     } else if (v > o_.exposure_high) {
       w = o_.min_exposure_weight + (1.0 - o_.min_exposure_weight) * (255.0 - v) / (255.0 - o_.exposure_high);
     }
+    // dL/dv = gamma / (v + 255 offset): the grey-level noise in log units, divided by w
     const double u = v / 255.0 + o_.frame.offset;
-    lut_rinv_[v] = static_cast<float>(u * u * w / (o_.frame_noise_density * o_.frame.gamma * o_.frame.gamma));
+    lut_var_[v] = static_cast<float>(sv * sv * o_.frame.gamma * o_.frame.gamma / (u * u * w));
   }
 }
 
-namespace {
-// The Riccati and state solution over dt seconds with the frame (lf, rinv): returns the new P,
-// updates *l. P(t) = P0 / (1 + P0 dt / R); L - L_F scales by P(t) / P0.
-inline float propagate(float* l, float p, float lf, float rinv, double dt_s) {
-  const double d = 1.0 + static_cast<double>(p) * rinv * dt_s;
-  *l = static_cast<float>(lf + (static_cast<double>(*l) - lf) / d);
-  return static_cast<float>(p / d);
-}
-}  // namespace
-
 void AsyncKalmanFilter::process(const Event* events, size_t n) {
   const uint32_t w = static_cast<uint32_t>(width_), h = static_cast<uint32_t>(height_);
-  const bool framed = !frame_.empty();
   const float c_on = static_cast<float>(o_.contrast_on), c_off = static_cast<float>(-o_.contrast_off);
+  const double proc_per_ns = o_.process_noise * 1e-9, iso_per_ns = o_.isolated_noise * 1e-9;
   int64_t outside = 0;
   for (size_t i = 0; i < n; ++i) {
     const Event& e = events[i];
@@ -232,15 +225,11 @@ void AsyncKalmanFilter::process(const Event* events, size_t n) {
     }
     const size_t k = static_cast<size_t>(e.y) * w + e.x;
     const int64_t t = e.t_ns;
-    float p = p_[k];
-    if (framed) {
-      const uint8_t v = frame_[k];
-      p = propagate(&l_[k], p, lut_log_[v], lut_rinv_[v], std::max<int64_t>(0, t - t_update_[k]) * 1e-9);
-    }
     l_[k] += e.polarity > 0 ? c_on : c_off;
-    // Event noise: process (time since the pixel's previous event), isolated pixel (time since the
-    // latest event among the 8 neighbours), refractory.
-    const int64_t since_own = std::max<int64_t>(0, t - t_event_[k]);
+    // Event noise: the step's own error, process (time since the pixel's last update), isolated
+    // pixel (time since the latest event among the 8 neighbours), refractory (time since the
+    // pixel's previous event).
+    const int64_t since_own = t - t_event_[k];
     int64_t latest = std::numeric_limits<int64_t>::min();
     const uint32_t ex = e.x, ey = e.y;
     const uint32_t x0 = ex > 0 ? ex - 1 : 0, x1 = ex + 1 < w ? ex + 1 : ex;
@@ -250,11 +239,11 @@ void AsyncKalmanFilter::process(const Event* events, size_t n) {
       for (uint32_t x = x0; x <= x1; ++x)
         if ((x != ex || y != ey) && row[x] > latest) latest = row[x];
     }
-    const double since_neighbour = latest == std::numeric_limits<int64_t>::min() ? 0.0 : std::max<int64_t>(0, t - latest) * 1e-9;
-    double q = o_.process_noise * since_own * 1e-9 + o_.isolated_noise * since_neighbour;
+    double q = o_.event_noise + proc_per_ns * static_cast<double>(std::max<int64_t>(0, t - t_update_[k]));
+    if (latest != std::numeric_limits<int64_t>::min()) q += iso_per_ns * static_cast<double>(std::max<int64_t>(0, t - latest));
     if (since_own <= o_.refractory_period_ns) q += o_.refractory_noise;
-    p_[k] = static_cast<float>(p + q);
-    t_update_[k] = t;
+    p_[k] = static_cast<float>(p_[k] + q);
+    t_update_[k] = std::max(t_update_[k], t);
     t_event_[k] = t;
   }
   stats_.events += static_cast<int64_t>(n) - outside;
@@ -264,49 +253,42 @@ void AsyncKalmanFilter::process(const Event* events, size_t n) {
 void AsyncKalmanFilter::add_frame(int64_t t_ns, const GreyView& frame) {
   if (!o_.use_frames) return;
   check_frame(frame, width_, height_);
-  const size_t n = l_.size();
-  if (frame_.empty()) {
-    copy_frame(frame, &frame_);
-    for (size_t i = 0; i < n; ++i) {
-      l_[i] = lut_log_[frame_[i]];
-      p_[i] = static_cast<float>(o_.initial_variance);
-      t_update_[i] = t_ns;
-    }
-  } else {
-    for (size_t i = 0; i < n; ++i) {
-      const uint8_t v = frame_[i];
-      p_[i] = propagate(&l_[i], p_[i], lut_log_[v], lut_rinv_[v], std::max<int64_t>(0, t_ns - t_update_[i]) * 1e-9);
+  const bool first = stats_.frames == 0;
+  const double proc_per_ns = o_.process_noise * 1e-9;
+  for (int y = 0; y < height_; ++y) {
+    const uint8_t* row = frame.data + y * frame.stride;
+    for (int x = 0; x < width_; ++x) {
+      const size_t i = static_cast<size_t>(y) * width_ + x;
+      const uint8_t v = row[x];
+      const float r = lut_var_[v];
+      if (first) {
+        l_[i] = lut_log_[v];
+        p_[i] = r;
+      } else {
+        // The measurement update: K = P / (P + R), L += K (L_F - L), P = (1 - K) P
+        const float p =
+            static_cast<float>(p_[i] + proc_per_ns * static_cast<double>(std::max<int64_t>(0, t_ns - t_update_[i])));
+        const float k = p / (p + r);
+        l_[i] += k * (lut_log_[v] - l_[i]);
+        p_[i] = p - k * p;
+      }
       t_update_[i] = std::max(t_update_[i], t_ns);
     }
-    copy_frame(frame, &frame_);
   }
   ++stats_.frames;
 }
 
-void AsyncKalmanFilter::log_intensity(int64_t t_ns, ImageF* out) const {
+void AsyncKalmanFilter::log_intensity(int64_t /*t_ns*/, ImageF* out) const {
   out->resize(height_, width_);
-  float* o = out->data();
-  for (size_t i = 0; i < l_.size(); ++i) {
-    float l = l_[i];
-    if (!frame_.empty()) {
-      const uint8_t v = frame_[i];
-      propagate(&l, p_[i], lut_log_[v], lut_rinv_[v], std::max<int64_t>(0, t_ns - t_update_[i]) * 1e-9);
-    }
-    o[i] = l;
-  }
+  std::copy(l_.begin(), l_.end(), out->data());
 }
 
 void AsyncKalmanFilter::variance(int64_t t_ns, ImageF* out) const {
   out->resize(height_, width_);
   float* o = out->data();
-  for (size_t i = 0; i < p_.size(); ++i) {
-    float l = 0, p = p_[i];
-    if (!frame_.empty()) {
-      const uint8_t v = frame_[i];
-      p = propagate(&l, p, 0.0f, lut_rinv_[v], std::max<int64_t>(0, t_ns - t_update_[i]) * 1e-9);
-    }
-    o[i] = p;
-  }
+  const double proc_per_ns = o_.process_noise * 1e-9;
+  for (size_t i = 0; i < p_.size(); ++i)
+    o[i] = static_cast<float>(p_[i] + proc_per_ns * static_cast<double>(std::max<int64_t>(0, t_ns - t_update_[i])));
 }
 
 }  // namespace evio::mapping
