@@ -1,4 +1,5 @@
 #include "evio/mapping/async_convolution.h"
+#include "evio/calib/error.h"
 
 #include <algorithm>
 #include <cmath>
@@ -8,11 +9,6 @@ namespace evio::mapping {
 namespace {
 
 constexpr double kTwoPi = 6.283185307179586;
-
-bool fail(std::string* why, const std::string& msg) {
-  if (why) *why = msg;
-  return false;
-}
 
 // Outer product of a column (y) and a row (x) profile, divided by norm.
 ConvolutionKernel separable(const std::string& name, const std::vector<double>& col, const std::vector<double>& row,
@@ -63,12 +59,12 @@ void convolve(const ConvolutionKernel& k, const std::vector<float>& in, int w, i
 // Kernels
 
 bool ConvolutionKernel::Validate(std::string* why) const {
-  if (size < 1 || size > 9 || size % 2 == 0) return fail(why, "kernel '" + name + "': size must be odd, 1..9");
+  if (size < 1 || size > 9 || size % 2 == 0) return validation_failed(why, "kernel '" + name + "': size must be odd, 1..9");
   if (taps.size() != static_cast<size_t>(size) * size)
-    return fail(why, "kernel '" + name + "': needs size * size = " + std::to_string(size * size) + " taps, has " +
+    return validation_failed(why, "kernel '" + name + "': needs size * size = " + std::to_string(size * size) + " taps, has " +
                          std::to_string(taps.size()));
   for (float t : taps)
-    if (!std::isfinite(t) || std::fabs(t) > 1e6) return fail(why, "kernel '" + name + "': taps must be finite, |tap| <= 1e6");
+    if (!std::isfinite(t) || std::fabs(t) > 1e6) return validation_failed(why, "kernel '" + name + "': taps must be finite, |tap| <= 1e6");
   return true;
 }
 
@@ -119,7 +115,7 @@ bool kernel_from_name(const std::string& name, ConvolutionKernel* k, std::string
   } else if (name == "forward_x" || name == "forward_y") {
     *k = forward_difference_kernel(name == "forward_x");
   } else {
-    return fail(why, "unknown kernel '" + name +
+    return validation_failed(why, "unknown kernel '" + name +
                          "' (sobel_x3, sobel_y3, sobel_x5, sobel_y5, laplacian3, laplacian5, gaussian3, gaussian5, "
                          "forward_x, forward_y)");
   }
@@ -137,7 +133,7 @@ ConvolutionKernel user_kernel(const std::string& name, int size, const std::vect
 }
 
 bool AsyncConvolutionOptions::Validate(std::string* why) const {
-  if (kernels.empty() || kernels.size() > 16) return fail(why, "asynchronous convolution: 1 to 16 kernels");
+  if (kernels.empty() || kernels.size() > 16) return validation_failed(why, "asynchronous convolution: 1 to 16 kernels");
   for (const ConvolutionKernel& k : kernels)
     if (!k.Validate(why)) return false;
   return filter.Validate(why);

@@ -1,4 +1,5 @@
 #include "evio/mapping/event_harris.h"
+#include "evio/calib/error.h"
 
 #include <algorithm>
 #include <cmath>
@@ -6,11 +7,6 @@
 
 namespace evio::mapping {
 namespace {
-
-bool fail(std::string* why, const std::string& msg) {
-  if (why) *why = msg;
-  return false;
-}
 
 AsyncConvolutionOptions gradient_state_options(const EventHarrisOptions& o) {
   AsyncConvolutionOptions c;
@@ -28,18 +24,18 @@ AsyncConvolutionOptions gradient_state_options(const EventHarrisOptions& o) {
 }  // namespace
 
 bool EventHarrisOptions::Validate(std::string* why) const {
-  if (!(std::isfinite(cutoff_hz) && cutoff_hz >= 0 && cutoff_hz <= 1e6)) return fail(why, "harris cutoff_hz must be in [0, 1e6]");
-  if (!(std::isfinite(contrast_on) && contrast_on > 0 && contrast_on <= 10)) return fail(why, "harris contrast_on must be in (0, 10]");
+  if (!(std::isfinite(cutoff_hz) && cutoff_hz >= 0 && cutoff_hz <= 1e6)) return validation_failed(why, "harris cutoff_hz must be in [0, 1e6]");
+  if (!(std::isfinite(contrast_on) && contrast_on > 0 && contrast_on <= 10)) return validation_failed(why, "harris contrast_on must be in (0, 10]");
   if (!(std::isfinite(contrast_off) && contrast_off > 0 && contrast_off <= 10))
-    return fail(why, "harris contrast_off must be in (0, 10]");
-  if (gradient_size != 3 && gradient_size != 5) return fail(why, "harris gradient_size must be 3 or 5");
-  if (window_radius < 1 || window_radius > 4) return fail(why, "harris window_radius must be in 1..4");
+    return validation_failed(why, "harris contrast_off must be in (0, 10]");
+  if (gradient_size != 3 && gradient_size != 5) return validation_failed(why, "harris gradient_size must be 3 or 5");
+  if (window_radius < 1 || window_radius > 4) return validation_failed(why, "harris window_radius must be in 1..4");
   if (!(std::isfinite(window_sigma_px) && window_sigma_px > 0 && window_sigma_px <= 100))
-    return fail(why, "harris window_sigma_px must be in (0, 100]");
-  if (!(harris_k >= 0 && harris_k < 0.25)) return fail(why, "harris k must be in [0, 0.25)");
-  if (!(std::isfinite(threshold) && threshold >= 0)) return fail(why, "harris threshold must be finite, >= 0");
-  if (nms_radius < 0 || nms_radius > 8) return fail(why, "harris nms_radius must be in 0..8");
-  if (border_px < 0) return fail(why, "harris border_px must be >= 0");
+    return validation_failed(why, "harris window_sigma_px must be in (0, 100]");
+  if (!(harris_k >= 0 && harris_k < 0.25)) return validation_failed(why, "harris k must be in [0, 0.25)");
+  if (!(std::isfinite(threshold) && threshold >= 0)) return validation_failed(why, "harris threshold must be finite, >= 0");
+  if (nms_radius < 0 || nms_radius > 8) return validation_failed(why, "harris nms_radius must be in 0..8");
+  if (border_px < 0) return validation_failed(why, "harris border_px must be >= 0");
   return true;
 }
 

@@ -1,4 +1,5 @@
 #include "evio/mapping/reconstruction.h"
+#include "evio/calib/error.h"
 
 #include <algorithm>
 #include <cmath>
@@ -10,11 +11,6 @@ namespace evio::mapping {
 namespace {
 
 constexpr double kTwoPi = 6.283185307179586;
-bool fail(std::string* why, const std::string& msg) {
-  if (why) *why = msg;
-  return false;
-}
-
 void check_size(int width, int height) {
   if (width < 1 || height < 1 || width > 65536 || height > 65536)
     throw std::invalid_argument("reconstruction: sensor size " + std::to_string(width) + " x " + std::to_string(height) +
@@ -34,8 +30,8 @@ void copy_frame(const GreyView& f, std::vector<uint8_t>* out) {
 }
 
 bool contrasts_valid(double on, double off, std::string* why) {
-  if (!(std::isfinite(on) && on > 0 && on <= 10)) return fail(why, "contrast_on must be in (0, 10]");
-  if (!(std::isfinite(off) && off > 0 && off <= 10)) return fail(why, "contrast_off must be in (0, 10]");
+  if (!(std::isfinite(on) && on > 0 && on <= 10)) return validation_failed(why, "contrast_on must be in (0, 10]");
+  if (!(std::isfinite(off) && off > 0 && off <= 10)) return validation_failed(why, "contrast_off must be in (0, 10]");
   return true;
 }
 
@@ -52,19 +48,19 @@ const char* reconstruction_method_name(ReconstructionMethod m) {
 }
 
 bool FrameResponse::Validate(std::string* why) const {
-  if (!(std::isfinite(gamma) && gamma > 0 && gamma <= 10)) return fail(why, "frame gamma must be in (0, 10]");
-  if (!(std::isfinite(offset) && offset > 0 && offset <= 1e6)) return fail(why, "frame log offset must be in (0, 1e6]");
-  if (!(initial_grey >= 0 && initial_grey <= 255)) return fail(why, "initial_grey must be in [0, 255]");
+  if (!(std::isfinite(gamma) && gamma > 0 && gamma <= 10)) return validation_failed(why, "frame gamma must be in (0, 10]");
+  if (!(std::isfinite(offset) && offset > 0 && offset <= 1e6)) return validation_failed(why, "frame log offset must be in (0, 1e6]");
+  if (!(initial_grey >= 0 && initial_grey <= 255)) return validation_failed(why, "initial_grey must be in [0, 255]");
   return true;
 }
 
 double FrameResponse::log_of(double v) const { return gamma * std::log(v / 255.0 + offset); }
 
 bool ComplementaryFilterOptions::Validate(std::string* why) const {
-  if (!(std::isfinite(cutoff_hz) && cutoff_hz >= 0 && cutoff_hz <= 1e6)) return fail(why, "cutoff_hz must be in [0, 1e6]");
+  if (!(std::isfinite(cutoff_hz) && cutoff_hz >= 0 && cutoff_hz <= 1e6)) return validation_failed(why, "cutoff_hz must be in [0, 1e6]");
   if (!contrasts_valid(contrast_on, contrast_off, why)) return false;
   if (!std::isfinite(initial_log_intensity) || std::fabs(initial_log_intensity) > 1e6)
-    return fail(why, "initial_log_intensity must be finite, |value| <= 1e6");
+    return validation_failed(why, "initial_log_intensity must be finite, |value| <= 1e6");
   return frame.Validate(why);
 }
 
@@ -171,19 +167,19 @@ bool AsyncKalmanFilterOptions::Validate(std::string* why) const {
   if (!contrasts_valid(contrast_on, contrast_off, why)) return false;
   auto nonneg = [](double v) { return std::isfinite(v) && v >= 0 && v <= 1e6; };
   if (!(std::isfinite(initial_variance) && initial_variance > 0 && initial_variance <= 1e6))
-    return fail(why, "initial_variance must be in (0, 1e6]");
-  if (!nonneg(event_noise)) return fail(why, "event_noise must be in [0, 1e6]");
-  if (!nonneg(process_noise)) return fail(why, "process_noise must be in [0, 1e6]");
-  if (!nonneg(isolated_noise)) return fail(why, "isolated_noise must be in [0, 1e6]");
-  if (!nonneg(refractory_noise)) return fail(why, "refractory_noise must be in [0, 1e6]");
-  if (refractory_period_ns < 0) return fail(why, "refractory_period must be >= 0");
+    return validation_failed(why, "initial_variance must be in (0, 1e6]");
+  if (!nonneg(event_noise)) return validation_failed(why, "event_noise must be in [0, 1e6]");
+  if (!nonneg(process_noise)) return validation_failed(why, "process_noise must be in [0, 1e6]");
+  if (!nonneg(isolated_noise)) return validation_failed(why, "isolated_noise must be in [0, 1e6]");
+  if (!nonneg(refractory_noise)) return validation_failed(why, "refractory_noise must be in [0, 1e6]");
+  if (refractory_period_ns < 0) return validation_failed(why, "refractory_period must be >= 0");
   if (!(std::isfinite(frame_noise_std) && frame_noise_std > 0 && frame_noise_std <= 255))
-    return fail(why, "frame_noise_std must be in (0, 255]");
+    return validation_failed(why, "frame_noise_std must be in (0, 255]");
   if (!(exposure_low >= 0 && exposure_low <= exposure_high && exposure_high <= 255))
-    return fail(why, "need 0 <= exposure_low <= exposure_high <= 255");
-  if (!(min_exposure_weight > 0 && min_exposure_weight <= 1)) return fail(why, "min_exposure_weight must be in (0, 1]");
+    return validation_failed(why, "need 0 <= exposure_low <= exposure_high <= 255");
+  if (!(min_exposure_weight > 0 && min_exposure_weight <= 1)) return validation_failed(why, "min_exposure_weight must be in (0, 1]");
   if (!std::isfinite(initial_log_intensity) || std::fabs(initial_log_intensity) > 1e6)
-    return fail(why, "initial_log_intensity must be finite, |value| <= 1e6");
+    return validation_failed(why, "initial_log_intensity must be finite, |value| <= 1e6");
   return frame.Validate(why);
 }
 

@@ -4,6 +4,7 @@
 // with n_k, m_k independent N(0, I3) draws from one seeded generator, drawn per sample in the
 // order gyro white, accel white, gyro bias step, accel bias step.
 #include "evio/simulator/imu.h"
+#include "evio/calib/error.h"
 
 #include <algorithm>
 #include <cmath>
@@ -14,26 +15,21 @@
 namespace evio::simulator {
 namespace {
 
-bool fail(std::string* why, const std::string& message) {
-  if (why) *why = message;
-  return false;
-}
-
 bool finite_non_negative(double x) { return std::isfinite(x) && x >= 0.0; }
 
 }  // namespace
 
 bool ImuSimOptions::Validate(std::string* why) const {
   if (!std::isfinite(rate_hz) || rate_hz <= 0.0 || rate_hz > 1e9)
-    return fail(why, "rate_hz must be finite, > 0 and at most 1e9 (a period of at least 1 ns)");
+    return validation_failed(why, "rate_hz must be finite, > 0 and at most 1e9 (a period of at least 1 ns)");
   if (enable_noise) {
     if (!finite_non_negative(noise.accelerometer_noise_density) || !finite_non_negative(noise.gyroscope_noise_density) ||
         !finite_non_negative(noise.accelerometer_random_walk) || !finite_non_negative(noise.gyroscope_random_walk))
-      return fail(why, "noise densities and random walks must be finite and >= 0");
+      return validation_failed(why, "noise densities and random walks must be finite and >= 0");
   }
-  if (!gravity_w.allFinite()) return fail(why, "gravity_w must be finite");
+  if (!gravity_w.allFinite()) return validation_failed(why, "gravity_w must be finite");
   if (!initial_bias_gyro_radps.allFinite() || !initial_bias_accel_mps2.allFinite())
-    return fail(why, "initial biases must be finite");
+    return validation_failed(why, "initial biases must be finite");
   return true;
 }
 

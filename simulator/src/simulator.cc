@@ -1,6 +1,7 @@
 // Simulator driver: adaptive stepping over the body trajectory, event generation per render,
 // APS frames and ground-truth views. See simulator.h for the model.
 #include "evio/simulator/simulator.h"
+#include "evio/calib/error.h"
 
 #include <algorithm>
 #include <chrono>
@@ -17,11 +18,6 @@
 
 namespace evio::simulator {
 namespace {
-
-bool fail(std::string* why, const std::string& msg) {
-  if (why) *why = msg;
-  return false;
-}
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -44,35 +40,35 @@ double max_flow_norm(const cv::Mat& flow) {
 }  // namespace
 
 bool SteppingOptions::Validate(std::string* why) const {
-  if (!(std::isfinite(max_flow_px) && max_flow_px >= 0)) return fail(why, "stepping.max_flow_px must be >= 0 (px)");
+  if (!(std::isfinite(max_flow_px) && max_flow_px >= 0)) return validation_failed(why, "stepping.max_flow_px must be >= 0 (px)");
   if (!(std::isfinite(max_log_change) && max_log_change >= 0))
-    return fail(why, "stepping.max_log_change must be >= 0 (log-intensity units)");
-  if (min_step_ns <= 0) return fail(why, "stepping.min_step_ns must be > 0 (ns)");
-  if (max_step_ns < min_step_ns) return fail(why, "stepping.max_step_ns must be >= min_step_ns (ns)");
+    return validation_failed(why, "stepping.max_log_change must be >= 0 (log-intensity units)");
+  if (min_step_ns <= 0) return validation_failed(why, "stepping.min_step_ns must be > 0 (ns)");
+  if (max_step_ns < min_step_ns) return validation_failed(why, "stepping.max_step_ns must be >= min_step_ns (ns)");
   return true;
 }
 
 bool ApsOptions::Validate(std::string* why) const {
-  if (!(std::isfinite(rate_hz) && rate_hz >= 0)) return fail(why, "frames.rate_hz must be >= 0 (Hz)");
+  if (!(std::isfinite(rate_hz) && rate_hz >= 0)) return validation_failed(why, "frames.rate_hz must be >= 0 (Hz)");
   if (rate_hz == 0) return true;
   if (!(std::isfinite(exposure_s) && exposure_s > 0 && exposure_s <= 1.0 / rate_hz))
-    return fail(why, "frames.exposure_s must be in (0, 1/rate_hz] (s)");
-  if (exposure_samples < 1) return fail(why, "frames.exposure_samples must be >= 1");
-  if (!(std::isfinite(gain) && gain > 0)) return fail(why, "frames.gain must be > 0");
-  if (!(std::isfinite(gamma) && gamma > 0)) return fail(why, "frames.gamma must be > 0");
+    return validation_failed(why, "frames.exposure_s must be in (0, 1/rate_hz] (s)");
+  if (exposure_samples < 1) return validation_failed(why, "frames.exposure_samples must be >= 1");
+  if (!(std::isfinite(gain) && gain > 0)) return validation_failed(why, "frames.gain must be > 0");
+  if (!(std::isfinite(gamma) && gamma > 0)) return validation_failed(why, "frames.gamma must be > 0");
   if (!(std::isfinite(read_noise_std) && read_noise_std >= 0))
-    return fail(why, "frames.read_noise_std must be >= 0 (grey levels)");
+    return validation_failed(why, "frames.read_noise_std must be >= 0 (grey levels)");
   return true;
 }
 
 bool SimulatorOptions::Validate(std::string* why) const {
   if (!camera.intrinsics().Validate(why)) return false;
-  if (supersample < 1 || supersample > 8) return fail(why, "supersample must be in 1..8");
-  if (threads < 1 || threads > 64) return fail(why, "threads must be in 1..64");
-  if (t_end_ns < t_begin_ns) return fail(why, "t_end_ns must be >= t_begin_ns");
+  if (supersample < 1 || supersample > 8) return validation_failed(why, "supersample must be in 1..8");
+  if (threads < 1 || threads > 64) return validation_failed(why, "threads must be in 1..64");
+  if (t_end_ns < t_begin_ns) return validation_failed(why, "t_end_ns must be >= t_begin_ns");
   if (!stepping.Validate(why) || !events.Validate(why) || !frames.Validate(why)) return false;
   if (!std::is_sorted(ground_truth_times_ns.begin(), ground_truth_times_ns.end()))
-    return fail(why, "ground_truth_times_ns must be sorted");
+    return validation_failed(why, "ground_truth_times_ns must be sorted");
   return true;
 }
 

@@ -45,11 +45,6 @@ cv::Mat reduce_level(const cv::Mat& src, TextureWrap wrap_u, TextureWrap wrap_v)
   return dst;
 }
 
-bool fail(std::string* why, const std::string& msg) {
-  if (why) *why = msg;
-  return false;
-}
-
 // Uniform double in [0, 1) from the top 53 bits: same numbers on every standard library
 // (std::uniform_real_distribution's algorithm is implementation-defined).
 inline double uniform01(std::mt19937_64& rng) { return static_cast<double>(rng() >> 11) * 0x1.0p-53; }
@@ -318,14 +313,14 @@ Texture Texture::load(const std::string& path, double min_intensity, double max_
 bool ProceduralTextureOptions::Validate(std::string* why) const {
   constexpr int kMaxSide = 1 << 15;
   if (width <= 0 || height <= 0 || width > kMaxSide || height > kMaxSide)
-    return fail(why, "width and height must be in [1, " + std::to_string(kMaxSide) + "] texels, got " +
+    return validation_failed(why, "width and height must be in [1, " + std::to_string(kMaxSide) + "] texels, got " +
                          std::to_string(width) + " x " + std::to_string(height));
-  if (!(cell_px > 0) || !std::isfinite(cell_px)) return fail(why, "cell_px must be > 0 texels");
-  if (num_shapes < 0) return fail(why, "num_shapes must be >= 0");
-  if (!(noise_scale_px > 0) || !std::isfinite(noise_scale_px)) return fail(why, "noise_scale_px must be > 0 texels");
-  if (octaves < 1 || octaves > 16) return fail(why, "octaves must be in [1, 16]");
+  if (!(cell_px > 0) || !std::isfinite(cell_px)) return validation_failed(why, "cell_px must be > 0 texels");
+  if (num_shapes < 0) return validation_failed(why, "num_shapes must be >= 0");
+  if (!(noise_scale_px > 0) || !std::isfinite(noise_scale_px)) return validation_failed(why, "noise_scale_px must be > 0 texels");
+  if (octaves < 1 || octaves > 16) return validation_failed(why, "octaves must be in [1, 16]");
   if (!(min_intensity >= 0) || !std::isfinite(max_intensity) || !(max_intensity >= min_intensity))
-    return fail(why, "need 0 <= min_intensity <= max_intensity (finite)");
+    return validation_failed(why, "need 0 <= min_intensity <= max_intensity (finite)");
   return true;
 }
 

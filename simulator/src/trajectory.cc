@@ -13,6 +13,7 @@
 //   w'_{j+1} = A_j^T w'_j + B~_j'' d_j + B~_j' (A_j^T w_j) x d_j
 // and are divided by dt and dt^2 for rad/s and rad/s^2.
 #include "evio/simulator/trajectory.h"
+#include "evio/calib/error.h"
 
 #include <algorithm>
 #include <cmath>
@@ -35,11 +36,6 @@ using calib::Vec3;
 constexpr int kMinOrder = 4;
 constexpr int kMaxOrder = 6;
 constexpr double kNsPerS = 1e9;
-
-bool fail(std::string* why, const std::string& message) {
-  if (why) *why = message;
-  return false;
-}
 
 bool finite3(const Eigen::Vector3d& v) { return v.allFinite(); }
 
@@ -272,19 +268,19 @@ double rotation_cost(const std::vector<FitSample>& samples, const std::vector<Qu
 // ---------------------------------------------------------------- SinusoidTrajectory
 
 bool SinusoidTrajectoryOptions::Validate(std::string* why) const {
-  if (!std::isfinite(duration_s) || duration_s <= 0.0) return fail(why, "duration_s must be finite and > 0");
+  if (!std::isfinite(duration_s) || duration_s <= 0.0) return validation_failed(why, "duration_s must be finite and > 0");
   if (duration_s * kNsPerS > 9.0e18 ||
       t_begin_ns > std::numeric_limits<int64_t>::max() - static_cast<int64_t>(std::llround(duration_s * kNsPerS)))
-    return fail(why, "t_begin_ns + duration_s overflows int64 nanoseconds");
+    return validation_failed(why, "t_begin_ns + duration_s overflows int64 nanoseconds");
   if (!finite3(position_m) || !finite3(velocity_mps) || !finite3(amplitude_m) || !finite3(phase_rad))
-    return fail(why, "position, velocity, amplitude and phase must be finite");
-  if (!valid_quaternion(q_w_b0)) return fail(why, "q_w_b0 must be a finite, non-zero quaternion");
+    return validation_failed(why, "position, velocity, amplitude and phase must be finite");
+  if (!valid_quaternion(q_w_b0)) return validation_failed(why, "q_w_b0 must be a finite, non-zero quaternion");
   if (!finite3(frequency_hz) || (frequency_hz.array() < 0.0).any())
-    return fail(why, "frequency_hz must be finite and >= 0");
+    return validation_failed(why, "frequency_hz must be finite and >= 0");
   if (!finite3(angle_rate_radps) || !finite3(angle_amplitude_rad) || !finite3(angle_phase_rad))
-    return fail(why, "angle rates, amplitudes and phases must be finite");
+    return validation_failed(why, "angle rates, amplitudes and phases must be finite");
   if (!finite3(angle_frequency_hz) || (angle_frequency_hz.array() < 0.0).any())
-    return fail(why, "angle_frequency_hz must be finite and >= 0");
+    return validation_failed(why, "angle_frequency_hz must be finite and >= 0");
   return true;
 }
 
@@ -352,29 +348,29 @@ std::string SinusoidTrajectory::describe() const {
 // ---------------------------------------------------------------- SplineTrajectory
 
 bool RandomSplineOptions::Validate(std::string* why) const {
-  if (!std::isfinite(duration_s) || duration_s <= 0.0) return fail(why, "duration_s must be finite and > 0");
-  if (order < kMinOrder || order > kMaxOrder) return fail(why, "order must be 4, 5 or 6");
+  if (!std::isfinite(duration_s) || duration_s <= 0.0) return validation_failed(why, "duration_s must be finite and > 0");
+  if (order < kMinOrder || order > kMaxOrder) return validation_failed(why, "order must be 4, 5 or 6");
   if (!std::isfinite(knot_spacing_s) || knot_spacing_s < 1e-6)
-    return fail(why, "knot_spacing_s must be finite and >= 1e-6");
-  if (duration_s / knot_spacing_s > 1e8) return fail(why, "more than 1e8 knots (duration_s / knot_spacing_s)");
+    return validation_failed(why, "knot_spacing_s must be finite and >= 1e-6");
+  if (duration_s / knot_spacing_s > 1e8) return validation_failed(why, "more than 1e8 knots (duration_s / knot_spacing_s)");
   if (duration_s * kNsPerS > 4.0e18 ||
       t_begin_ns > std::numeric_limits<int64_t>::max() / 2 - static_cast<int64_t>(std::llround(duration_s * kNsPerS)))
-    return fail(why, "t_begin_ns + duration_s overflows int64 nanoseconds");
-  if (!finite3(position_m)) return fail(why, "position_m must be finite");
-  if (!valid_quaternion(q_w_b0)) return fail(why, "q_w_b0 must be a finite, non-zero quaternion");
+    return validation_failed(why, "t_begin_ns + duration_s overflows int64 nanoseconds");
+  if (!finite3(position_m)) return validation_failed(why, "position_m must be finite");
+  if (!valid_quaternion(q_w_b0)) return validation_failed(why, "q_w_b0 must be a finite, non-zero quaternion");
   if (!finite3(position_std_m) || (position_std_m.array() < 0.0).any())
-    return fail(why, "position_std_m must be finite and >= 0");
+    return validation_failed(why, "position_std_m must be finite and >= 0");
   if (!std::isfinite(rotation_std_rad) || rotation_std_rad < 0.0)
-    return fail(why, "rotation_std_rad must be finite and >= 0");
+    return validation_failed(why, "rotation_std_rad must be finite and >= 0");
   return true;
 }
 
 bool SplineFitOptions::Validate(std::string* why) const {
-  if (order < kMinOrder || order > kMaxOrder) return fail(why, "order must be 4, 5 or 6");
+  if (order < kMinOrder || order > kMaxOrder) return validation_failed(why, "order must be 4, 5 or 6");
   if (!std::isfinite(knot_spacing_s) || knot_spacing_s < 1e-6)
-    return fail(why, "knot_spacing_s must be finite and >= 1e-6");
-  if (max_iterations < 0) return fail(why, "max_iterations must be >= 0");
-  if (!std::isfinite(smoothing) || smoothing < 0.0) return fail(why, "smoothing must be finite and >= 0");
+    return validation_failed(why, "knot_spacing_s must be finite and >= 1e-6");
+  if (max_iterations < 0) return validation_failed(why, "max_iterations must be >= 0");
+  if (!std::isfinite(smoothing) || smoothing < 0.0) return validation_failed(why, "smoothing must be finite and >= 0");
   return true;
 }
 

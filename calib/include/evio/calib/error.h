@@ -26,4 +26,11 @@ class InputError : public std::runtime_error {
   std::string expected_;
 };
 
+// The Options::Validate(std::string* why) convention: puts msg into *why (when given) and
+// returns false, so a check reads `if (x < 0) return validation_failed(why, "x must be >= 0");`.
+inline bool validation_failed(std::string* why, const std::string& msg) {
+  if (why) *why = msg;
+  return false;
+}
+
 }  // namespace evio
