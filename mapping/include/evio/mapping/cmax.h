@@ -203,6 +203,8 @@ class ContrastMaximizer {
   CmaxOptions options_;
   CmaxObjective objective_ = CmaxObjective::kVariance;  // options_.objective resolved
   std::vector<float> pad_, img_, tmp_, adj_;
+  std::vector<int32_t> cell_;      // per event used: its padded IWE cell, -1 when it does not vote
+  std::vector<float> fa_, fb_;     // and its position in the cell, [0, 1)
   std::vector<float> kernel_;
 };
 
