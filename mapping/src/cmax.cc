@@ -445,6 +445,7 @@ bool CmaxOptions::Validate(std::string* why) const {
   if (pyramid_levels < 1 || pyramid_levels > 8) return fail("pyramid_levels must be in [1, 8]");
   if (max_iterations < 1) return fail("max_iterations must be >= 1");
   if (!(tolerance_px > 0 && finite(tolerance_px))) return fail("tolerance_px must be positive (px)");
+  if (!(coarse_tolerance_px > 0 && finite(coarse_tolerance_px))) return fail("coarse_tolerance_px must be positive (px)");
   if (max_events_coarse < 0) return fail("max_events_coarse must be >= 0 (0 = all)");
   return geometry.Validate(why);
 }
@@ -596,15 +597,16 @@ CmaxResult ContrastMaximizer::maximize(const CmaxEvents& ev, const Eigen::Vector
 
   const double ref0 = reference(0, 1);
   r.objective_zero = level_value(zero, 0, 1, ref0);
-  r.objective_init = level_value(r.params, 0, 1, ref0);
+  r.objective_init = r.params == zero ? r.objective_zero : level_value(r.params, 0, 1, ref0);
   ++r.evaluations;
 
   Eigen::VectorXd theta = r.params;
   Eigen::MatrixXd H_prev;
   bool have_h = false;
-  double f_prev_level = 0;
+  double f_prev_level = 0, f_level0 = 0;
   for (int level = options_.pyramid_levels - 1; level >= 0; --level) {
     const double lscale = static_cast<double>(1 << level);
+    const double tol = level == 0 ? options_.tolerance_px : options_.coarse_tolerance_px;
     const int iterations_before = r.iterations, evaluations_before = r.evaluations;
     int stride = 1;
     if (level > 0 && options_.max_events_coarse > 0 && ev.size() > static_cast<size_t>(options_.max_events_coarse))
@@ -625,6 +627,8 @@ CmaxResult ContrastMaximizer::maximize(const CmaxEvents& ev, const Eigen::Vector
     if (!(g.norm() > 0) || !g.allFinite()) {
       r.stop = "zero_gradient";
       r.per_level.push_back({level, stride, 0, r.evaluations - evaluations_before, -f});
+      theta = z.cwiseQuotient(S);
+      if (level == 0) f_level0 = f;
       continue;
     }
     // Inverse Hessian: the previous level's, rescaled (the objective's curvature in level-0 px
@@ -641,11 +645,22 @@ CmaxResult ContrastMaximizer::maximize(const CmaxEvents& ev, const Eigen::Vector
         d = -H * g;
       }
       if (d.norm() > max_step) d *= max_step / d.norm();
+      // Once the curvature is known (it > 0), a quasi-Newton step below the tolerance means the
+      // level has converged: evaluating it could move the events by less than the tolerance.
+      if (it > 0 && d.norm() / lscale < tol) {
+        r.stop = "converged";
+        break;
+      }
       double t = 1.0, f_new = f;
       Eigen::VectorXd g_new(dof), z_new;
       bool accepted = false;
       const double slope = g.dot(d);
+      bool too_short = false;
       for (int ls = 0; ls < 12; ++ls) {
+        if (ls > 0 && t * d.norm() / lscale < tol) {  // the same: backtracked below the tolerance
+          too_short = true;
+          break;
+        }
         z_new = z + t * d;
         f_new = eval(z_new, &g_new);
         if (std::isfinite(f_new) && f_new <= f + 1e-4 * t * slope) {
@@ -656,6 +671,10 @@ CmaxResult ContrastMaximizer::maximize(const CmaxEvents& ev, const Eigen::Vector
         const double curv = f_new - f - slope * t;
         const double t_q = std::isfinite(f_new) && curv > 0 ? -slope * t * t / (2 * curv) : 0.5 * t;
         t = std::clamp(t_q, 0.1 * t, 0.5 * t);
+      }
+      if (too_short) {
+        r.stop = "converged";
+        break;
       }
       if (!accepted) {
         r.stop = "line_search";
@@ -672,7 +691,7 @@ CmaxResult ContrastMaximizer::maximize(const CmaxEvents& ev, const Eigen::Vector
         const Eigen::MatrixXd I = Eigen::MatrixXd::Identity(dof, dof);
         H = (I - rho * s * y.transpose()) * H * (I - rho * y * s.transpose()) + rho * s * s.transpose();
       }
-      if (s.norm() / lscale < options_.tolerance_px) {
+      if (s.norm() / lscale < tol) {
         r.stop = "converged";
         break;
       }
@@ -686,9 +705,11 @@ CmaxResult ContrastMaximizer::maximize(const CmaxEvents& ev, const Eigen::Vector
     f_prev_level = f;
     r.per_level.push_back({level, stride, r.iterations - iterations_before, r.evaluations - evaluations_before, -f});
     theta = z.cwiseQuotient(S);
+    if (level == 0) f_level0 = f;
   }
   r.params = theta;
-  r.objective = level_value(theta, 0, 1, ref0);
+  // Level 0 always uses every event, so its last value is the objective at theta.
+  r.objective = -f_level0;
   if (!(r.objective >= r.objective_init) || !r.params.allFinite()) {
     r.params = init.size() == dof ? init : zero;
     r.objective = r.objective_init;
