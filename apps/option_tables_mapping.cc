@@ -82,6 +82,7 @@ const Table<mapping::CmaxOptions>& cmax_table() {
           .integer("pyramid_levels", &O::pyramid_levels, 1, 8)
           .integer("max_iterations", &O::max_iterations, 1, 1000000)
           .number("tolerance_px", &O::tolerance_px, Range::kPositive, "px")
+          .number("coarse_tolerance_px", &O::coarse_tolerance_px, Range::kPositive, "px of each coarse level")
           .integer("max_events_coarse", &O::max_events_coarse, 0, 1000000000)
           .note("max_events_coarse", "0: all events on every level")
           .number("fx", [](O& o) -> double& { return o.geometry.fx; }, Range::kPositive, "px")

@@ -94,31 +94,45 @@ void gaussian_kernel(double sigma, std::vector<float>* k) {
   for (int i = -r; i <= r; ++i) k->push_back(static_cast<float>(std::exp(-0.5 * i * i / (sigma * sigma)) / sum));
 }
 
-// Separable convolution with a symmetric kernel and zero padding, in place (tmp: scratch of
-// w*h + 2r floats). As a linear map it is symmetric, so the same call applies its adjoint.
-void blur(float* img, float* tmp, int w, int h, const std::vector<float>& k) {
+// Separable convolution with a symmetric kernel and zero padding of the w x h image at `in` (rows
+// in_stride floats apart) into `out` (rows out_stride apart; out may be in, with the same stride).
+// tmp: scratch of w*h + w + 2r floats. As a linear map it is symmetric, so the same call applies its
+// adjoint.
+void blur(const float* in, int in_stride, float* out, int out_stride, float* tmp, int w, int h,
+          const std::vector<float>& k) {
   const int r = static_cast<int>(k.size()) / 2;
-  if (r == 0) return;
-  const int taps = 2 * r + 1;
-  // Rows: each row copied into a zero-padded line, then one fixed-length loop per tap.
+  if (r == 0) {
+    for (int j = 0; j < h; ++j)
+      std::copy(in + static_cast<size_t>(j) * in_stride, in + static_cast<size_t>(j) * in_stride + w,
+                out + static_cast<size_t>(j) * out_stride);
+    return;
+  }
+  using Row = Eigen::Map<Eigen::ArrayXf>;  // Eigen maps: SIMD whatever the compiler's flags
+  using ConstRow = Eigen::Map<const Eigen::ArrayXf>;
+  const float* kc = k.data() + r;  // kc[-r..r], kc[-d] == kc[d]
+  // Rows: each row copied into a zero-padded line, then one fixed-length loop per pair of taps.
   float* line = tmp + static_cast<size_t>(w) * h;  // w + 2r floats after the image scratch
   std::fill(line, line + r, 0.0f);
   std::fill(line + r + w, line + 2 * r + w, 0.0f);
   for (int j = 0; j < h; ++j) {
-    float* row = img + static_cast<size_t>(j) * w;
+    const float* row = in + static_cast<size_t>(j) * in_stride;
     std::copy(row, row + w, line + r);
-    float* out = tmp + static_cast<size_t>(j) * w;
-    Eigen::Map<Eigen::ArrayXf> o(out, w);  // Eigen maps: SIMD whatever the compiler's flags
-    o = k[0] * Eigen::Map<const Eigen::ArrayXf>(line, w);
-    for (int d = 1; d < taps; ++d) o += k[d] * Eigen::Map<const Eigen::ArrayXf>(line + d, w);
+    Row o(tmp + static_cast<size_t>(j) * w, w);
+    const float* c = line + r;
+    o = kc[0] * ConstRow(c, w);
+    for (int d = 1; d <= r; ++d) o += kc[d] * (ConstRow(c - d, w) + ConstRow(c + d, w));
   }
   // Columns: row-vector operations over the rows in reach.
-  const float* kc = k.data() + r;
   for (int j = 0; j < h; ++j) {
-    Eigen::Map<Eigen::ArrayXf> o(img + static_cast<size_t>(j) * w, w);
-    const int a = std::max(-r, -j), b = std::min(r, h - 1 - j);
-    o.setZero();
-    for (int d = a; d <= b; ++d) o += kc[d] * Eigen::Map<const Eigen::ArrayXf>(tmp + static_cast<size_t>(j + d) * w, w);
+    Row o(out + static_cast<size_t>(j) * out_stride, w);
+    auto at = [&](int jj) { return ConstRow(tmp + static_cast<size_t>(jj) * w, w); };
+    o = kc[0] * at(j);
+    for (int d = 1; d <= r; ++d) {
+      const bool up = j - d >= 0, down = j + d < h;
+      if (up && down) o += kc[d] * (at(j - d) + at(j + d));
+      else if (up) o += kc[d] * at(j - d);
+      else if (down) o += kc[d] * at(j + d);
+    }
   }
 }
 
@@ -127,17 +141,27 @@ double image_objective(CmaxObjective o, const float* h, int w, int hh, float* ad
   const size_t n = static_cast<size_t>(w) * hh;
   const double inv_n = 1.0 / static_cast<double>(n);
   if (o == CmaxObjective::kVariance || o == CmaxObjective::kMeanSquare) {
-    double sum = 0, sum2 = 0;
-    for (size_t i = 0; i < n; ++i) {
-      sum += h[i];
-      sum2 += static_cast<double>(h[i]) * h[i];
+    // Double sums in four independent chains (one chain waits on each add's latency).
+    double sum[4] = {}, sum2[4] = {};
+    size_t i = 0;
+    for (; i + 4 <= n; i += 4) {
+      for (int l = 0; l < 4; ++l) {
+        const double v = h[i + l];
+        sum[l] += v;
+        sum2[l] += v * v;
+      }
     }
-    const double mean = (o == CmaxObjective::kVariance) ? sum * inv_n : 0.0;
+    for (; i < n; ++i) {
+      sum[0] += h[i];
+      sum2[0] += static_cast<double>(h[i]) * h[i];
+    }
+    const double s1 = (sum[0] + sum[1]) + (sum[2] + sum[3]), s2 = (sum2[0] + sum2[1]) + (sum2[2] + sum2[3]);
+    const double mean = (o == CmaxObjective::kVariance) ? s1 * inv_n : 0.0;
     if (adj) {
       const float c = static_cast<float>(2.0 * inv_n), m = static_cast<float>(mean);
-      for (size_t i = 0; i < n; ++i) adj[i] = c * (h[i] - m);
+      Eigen::Map<Eigen::ArrayXf>(adj, n) = c * (Eigen::Map<const Eigen::ArrayXf>(h, n) - m);
     }
-    return sum2 * inv_n - mean * mean;
+    return s2 * inv_n - mean * mean;
   }
   // Mean squared central-difference gradient over the pixels with both neighbours.
   double f = 0;
@@ -166,23 +190,28 @@ double image_objective(CmaxObjective o, const float* h, int w, int hh, float* ad
   return f * inv_n;
 }
 
-// Bilinear votes into a (w+2) x (h+2) image with a one-pixel border (pixel (i, j) of the IWE is
-// (i+1, j+1) there), so a vote needs no bounds checks; the border is dropped afterwards.
+// Bilinear votes of every stride-th event into a (w+2) x (h+2) image with a one-pixel border
+// (pixel (i, j) of the IWE is (i+1, j+1) there), so a vote needs no bounds checks; the border is
+// dropped afterwards. The m-th event used (k = m stride) leaves its cell (the padded index of its
+// top-left pixel, -1 when it does not vote) and its position in the cell (fa, fb) for gather_all.
 template <WarpModel M>
 void vote_all(const CmaxEvents& ev, const double* p, double shift, double scale, const float* weights, bool polarity,
-              int stride, float* pad, int w, int h) {
+              int stride, float* pad, int w, int h, int32_t* cell, float* fa, float* fb) {
   const size_t n = ev.size();
   const int pw = w + 2;
-  for (size_t k = 0; k < n; k += stride) {
+  for (size_t k = 0, m = 0; k < n; k += stride, ++m) {
     double u, v;
+    cell[m] = -1;
     if (!warp_k<M>(ev, k, p, shift, &u, &v, nullptr, nullptr)) continue;
     const double lu = (u + 0.5) * scale + 0.5, lv = (v + 0.5) * scale + 0.5;  // +1: padded coordinates
     if (!(lu > 0.0 && lv > 0.0 && lu < w + 1 && lv < h + 1)) continue;
     const int i = static_cast<int>(lu), j = static_cast<int>(lv);
     const float a = static_cast<float>(lu - i), b = static_cast<float>(lv - j);
+    const int c = j * pw + i;
+    cell[m] = c, fa[m] = a, fb[m] = b;
     float wk = weights ? weights[k] : 1.0f;
     if (polarity) wk *= ev.pol[k];
-    float* q = pad + static_cast<size_t>(j) * pw + i;
+    float* q = pad + c;
     const float wb = wk * b, wb1 = wk - wb;
     q[0] += wb1 - a * wb1;
     q[1] += a * wb1;
@@ -192,40 +221,30 @@ void vote_all(const CmaxEvents& ev, const double* p, double shift, double scale,
 }
 
 // dF/dp from dF/dIWE (adj, padded like the votes, zero border): the chain rule through each
-// event's bilinear vote and its warp Jacobian.
+// event's bilinear vote (its cell and position from vote_all) and its warp Jacobian.
 template <WarpModel M, int D>
 void gather_all(const CmaxEvents& ev, const double* p, double shift, double scale, const float* weights,
-                bool polarity, int stride, const float* pad, int w, int h, double* grad) {
+                bool polarity, int stride, const float* pad, int w, const int32_t* cell, const float* fa,
+                const float* fb, double* grad) {
   const size_t n = ev.size();
   const int pw = w + 2;
   double g[D] = {};
-  for (size_t k = 0; k < n; k += stride) {
-    double u, v, Ju[D], Jv[D];
-    if (!warp_k<M>(ev, k, p, shift, &u, &v, Ju, Jv)) continue;
-    const double lu = (u + 0.5) * scale + 0.5, lv = (v + 0.5) * scale + 0.5;
-    if (!(lu > 0.0 && lv > 0.0 && lu < w + 1 && lv < h + 1)) continue;
-    const int i = static_cast<int>(lu), j = static_cast<int>(lv);
-    const double a = lu - i, b = lv - j;
-    const float* q = pad + static_cast<size_t>(j) * pw + i;
-    const double g00 = q[0], g10 = q[1], g01 = q[pw], g11 = q[pw + 1];
+  for (size_t k = 0, m = 0; k < n; k += stride, ++m) {
+    const int c = cell[m];
+    if (c < 0) continue;
+    const float a = fa[m], b = fb[m];
+    const float* q = pad + c;
     // d/da and d/db of the bilinear vote weights (1-a)(1-b), a(1-b), (1-a)b, ab.
-    const double du = (1 - b) * (g10 - g00) + b * (g11 - g01);
-    const double dv = (1 - a) * (g01 - g00) + a * (g11 - g10);
+    const float du = (1 - b) * (q[1] - q[0]) + b * (q[pw + 1] - q[pw]);
+    const float dv = (1 - a) * (q[pw] - q[0]) + a * (q[pw + 1] - q[1]);
+    double u, v, Ju[D], Jv[D];
+    warp_k<M>(ev, k, p, shift, &u, &v, Ju, Jv);  // votes, so the warp is valid
     double wk = weights ? weights[k] : 1.0;
     if (polarity) wk *= ev.pol[k];
     const double cu = wk * scale * du, cv = wk * scale * dv;
     for (int d = 0; d < D; ++d) g[d] += cu * Ju[d] + cv * Jv[d];
   }
   for (int d = 0; d < D; ++d) grad[d] += g[d];
-}
-
-// Copies between the padded (w+2) x (h+2) layout and the dense w x h one.
-void unpad(const float* pad, float* img, int w, int h) {
-  for (int j = 0; j < h; ++j) std::copy(pad + static_cast<size_t>(j + 1) * (w + 2) + 1, pad + static_cast<size_t>(j + 1) * (w + 2) + 1 + w, img + static_cast<size_t>(j) * w);
-}
-void to_pad(const float* img, float* pad, int w, int h) {
-  std::fill(pad, pad + static_cast<size_t>(w + 2) * (h + 2), 0.0f);
-  for (int j = 0; j < h; ++j) std::copy(img + static_cast<size_t>(j) * w, img + static_cast<size_t>(j + 1) * w, pad + static_cast<size_t>(j + 1) * (w + 2) + 1);
 }
 
 }  // namespace
@@ -426,6 +445,7 @@ bool CmaxOptions::Validate(std::string* why) const {
   if (pyramid_levels < 1 || pyramid_levels > 8) return fail("pyramid_levels must be in [1, 8]");
   if (max_iterations < 1) return fail("max_iterations must be >= 1");
   if (!(tolerance_px > 0 && finite(tolerance_px))) return fail("tolerance_px must be positive (px)");
+  if (!(coarse_tolerance_px > 0 && finite(coarse_tolerance_px))) return fail("coarse_tolerance_px must be positive (px)");
   if (max_events_coarse < 0) return fail("max_events_coarse must be >= 0 (0 = all)");
   return geometry.Validate(why);
 }
@@ -441,37 +461,47 @@ double ContrastMaximizer::plain_objective(const CmaxEvents& ev, const Eigen::Vec
                                           const float* weights, int stride, double dt_shift,
                                           Eigen::VectorXd* gradient) {
   const int w = (options_.width + (1 << level) - 1) >> level, h = (options_.height + (1 << level) - 1) >> level;
+  const int pw = w + 2;
   const size_t n = static_cast<size_t>(w) * h;
-  const size_t np = static_cast<size_t>(w + 2) * (h + 2);
+  const size_t np = static_cast<size_t>(pw) * (h + 2);
+  const size_t used = (ev.size() + stride - 1) / stride;
   pad_.assign(np, 0.0f);
   img_.resize(n);
   tmp_.resize(n + w + 2 * kernel_.size());
+  cell_.resize(used);
+  fa_.resize(used);
+  fb_.resize(used);
   const double scale = 1.0 / (1 << level);
   const bool pol = options_.use_polarity;
   const double* pp = p.data();
   float* pad = pad_.data();
+  int32_t* cell = cell_.data();
+  float *fa = fa_.data(), *fb = fb_.data();
   switch (options_.model) {
-    case WarpModel::kFlow: vote_all<WarpModel::kFlow>(ev, pp, dt_shift, scale, weights, pol, stride, pad, w, h); break;
-    case WarpModel::kSimilarity: vote_all<WarpModel::kSimilarity>(ev, pp, dt_shift, scale, weights, pol, stride, pad, w, h); break;
-    case WarpModel::kRotation: vote_all<WarpModel::kRotation>(ev, pp, dt_shift, scale, weights, pol, stride, pad, w, h); break;
-    case WarpModel::kSixDof: vote_all<WarpModel::kSixDof>(ev, pp, dt_shift, scale, weights, pol, stride, pad, w, h); break;
+    case WarpModel::kFlow: vote_all<WarpModel::kFlow>(ev, pp, dt_shift, scale, weights, pol, stride, pad, w, h, cell, fa, fb); break;
+    case WarpModel::kSimilarity: vote_all<WarpModel::kSimilarity>(ev, pp, dt_shift, scale, weights, pol, stride, pad, w, h, cell, fa, fb); break;
+    case WarpModel::kRotation: vote_all<WarpModel::kRotation>(ev, pp, dt_shift, scale, weights, pol, stride, pad, w, h, cell, fa, fb); break;
+    case WarpModel::kSixDof: vote_all<WarpModel::kSixDof>(ev, pp, dt_shift, scale, weights, pol, stride, pad, w, h, cell, fa, fb); break;
   }
-  unpad(pad, img_.data(), w, h);
-  blur(img_.data(), tmp_.data(), w, h, kernel_);
+  // The IWE is the padded image's interior, blurred.
+  blur(pad + pw + 1, pw, img_.data(), w, tmp_.data(), w, h, kernel_);
   const CmaxObjective inner = objective_ == CmaxObjective::kNormalizedGradientMagnitude
                                   ? CmaxObjective::kGradientMagnitude
                                   : objective_;
   if (!gradient) return image_objective(inner, img_.data(), w, h, nullptr);
   adj_.resize(n);
   const double f = image_objective(inner, img_.data(), w, h, adj_.data());
-  blur(adj_.data(), tmp_.data(), w, h, kernel_);
-  to_pad(adj_.data(), pad, w, h);
+  // dF/dIWE = blur^T dF/dh into the padded image's interior, with a zero border.
+  blur(adj_.data(), w, pad + pw + 1, pw, tmp_.data(), w, h, kernel_);
+  std::fill(pad, pad + pw, 0.0f);
+  std::fill(pad + np - pw, pad + np, 0.0f);
+  for (int j = 1; j <= h; ++j) pad[static_cast<size_t>(j) * pw] = pad[static_cast<size_t>(j) * pw + pw - 1] = 0.0f;
   double* g = gradient->data();
   switch (options_.model) {
-    case WarpModel::kFlow: gather_all<WarpModel::kFlow, 2>(ev, pp, dt_shift, scale, weights, pol, stride, pad, w, h, g); break;
-    case WarpModel::kSimilarity: gather_all<WarpModel::kSimilarity, 4>(ev, pp, dt_shift, scale, weights, pol, stride, pad, w, h, g); break;
-    case WarpModel::kRotation: gather_all<WarpModel::kRotation, 3>(ev, pp, dt_shift, scale, weights, pol, stride, pad, w, h, g); break;
-    case WarpModel::kSixDof: gather_all<WarpModel::kSixDof, 6>(ev, pp, dt_shift, scale, weights, pol, stride, pad, w, h, g); break;
+    case WarpModel::kFlow: gather_all<WarpModel::kFlow, 2>(ev, pp, dt_shift, scale, weights, pol, stride, pad, w, cell, fa, fb, g); break;
+    case WarpModel::kSimilarity: gather_all<WarpModel::kSimilarity, 4>(ev, pp, dt_shift, scale, weights, pol, stride, pad, w, cell, fa, fb, g); break;
+    case WarpModel::kRotation: gather_all<WarpModel::kRotation, 3>(ev, pp, dt_shift, scale, weights, pol, stride, pad, w, cell, fa, fb, g); break;
+    case WarpModel::kSixDof: gather_all<WarpModel::kSixDof, 6>(ev, pp, dt_shift, scale, weights, pol, stride, pad, w, cell, fa, fb, g); break;
   }
   return f;
 }
@@ -567,15 +597,16 @@ CmaxResult ContrastMaximizer::maximize(const CmaxEvents& ev, const Eigen::Vector
 
   const double ref0 = reference(0, 1);
   r.objective_zero = level_value(zero, 0, 1, ref0);
-  r.objective_init = level_value(r.params, 0, 1, ref0);
+  r.objective_init = r.params == zero ? r.objective_zero : level_value(r.params, 0, 1, ref0);
   ++r.evaluations;
 
   Eigen::VectorXd theta = r.params;
   Eigen::MatrixXd H_prev;
   bool have_h = false;
-  double f_prev_level = 0;
+  double f_prev_level = 0, f_level0 = 0;
   for (int level = options_.pyramid_levels - 1; level >= 0; --level) {
     const double lscale = static_cast<double>(1 << level);
+    const double tol = level == 0 ? options_.tolerance_px : options_.coarse_tolerance_px;
     const int iterations_before = r.iterations, evaluations_before = r.evaluations;
     int stride = 1;
     if (level > 0 && options_.max_events_coarse > 0 && ev.size() > static_cast<size_t>(options_.max_events_coarse))
@@ -596,6 +627,8 @@ CmaxResult ContrastMaximizer::maximize(const CmaxEvents& ev, const Eigen::Vector
     if (!(g.norm() > 0) || !g.allFinite()) {
       r.stop = "zero_gradient";
       r.per_level.push_back({level, stride, 0, r.evaluations - evaluations_before, -f});
+      theta = z.cwiseQuotient(S);
+      if (level == 0) f_level0 = f;
       continue;
     }
     // Inverse Hessian: the previous level's, rescaled (the objective's curvature in level-0 px
@@ -612,11 +645,22 @@ CmaxResult ContrastMaximizer::maximize(const CmaxEvents& ev, const Eigen::Vector
         d = -H * g;
       }
       if (d.norm() > max_step) d *= max_step / d.norm();
+      // Once the curvature is known (it > 0), a quasi-Newton step below the tolerance means the
+      // level has converged: evaluating it could move the events by less than the tolerance.
+      if (it > 0 && d.norm() / lscale < tol) {
+        r.stop = "converged";
+        break;
+      }
       double t = 1.0, f_new = f;
       Eigen::VectorXd g_new(dof), z_new;
       bool accepted = false;
       const double slope = g.dot(d);
+      bool too_short = false;
       for (int ls = 0; ls < 12; ++ls) {
+        if (ls > 0 && t * d.norm() / lscale < tol) {  // the same: backtracked below the tolerance
+          too_short = true;
+          break;
+        }
         z_new = z + t * d;
         f_new = eval(z_new, &g_new);
         if (std::isfinite(f_new) && f_new <= f + 1e-4 * t * slope) {
@@ -627,6 +671,10 @@ CmaxResult ContrastMaximizer::maximize(const CmaxEvents& ev, const Eigen::Vector
         const double curv = f_new - f - slope * t;
         const double t_q = std::isfinite(f_new) && curv > 0 ? -slope * t * t / (2 * curv) : 0.5 * t;
         t = std::clamp(t_q, 0.1 * t, 0.5 * t);
+      }
+      if (too_short) {
+        r.stop = "converged";
+        break;
       }
       if (!accepted) {
         r.stop = "line_search";
@@ -643,7 +691,7 @@ CmaxResult ContrastMaximizer::maximize(const CmaxEvents& ev, const Eigen::Vector
         const Eigen::MatrixXd I = Eigen::MatrixXd::Identity(dof, dof);
         H = (I - rho * s * y.transpose()) * H * (I - rho * y * s.transpose()) + rho * s * s.transpose();
       }
-      if (s.norm() / lscale < options_.tolerance_px) {
+      if (s.norm() / lscale < tol) {
         r.stop = "converged";
         break;
       }
@@ -657,9 +705,11 @@ CmaxResult ContrastMaximizer::maximize(const CmaxEvents& ev, const Eigen::Vector
     f_prev_level = f;
     r.per_level.push_back({level, stride, r.iterations - iterations_before, r.evaluations - evaluations_before, -f});
     theta = z.cwiseQuotient(S);
+    if (level == 0) f_level0 = f;
   }
   r.params = theta;
-  r.objective = level_value(theta, 0, 1, ref0);
+  // Level 0 always uses every event, so its last value is the objective at theta.
+  r.objective = -f_level0;
   if (!(r.objective >= r.objective_init) || !r.params.allFinite()) {
     r.params = init.size() == dof ? init : zero;
     r.objective = r.objective_init;

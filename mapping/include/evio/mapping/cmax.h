@@ -139,8 +139,14 @@ struct CmaxOptions {
   // optimiser runs levels pyramid_levels-1 .. 0, each warm-started from the last (>= 1, <= 8).
   int pyramid_levels = 3;
   int max_iterations = 40;      // BFGS iterations per level (>= 1)
-  // A level ends when a step moves the events by less than this, RMS in that level's pixels (> 0).
+  // Level 0 ends when a step (taken, or the next one proposed) moves the events by less than this,
+  // RMS in px (> 0).
   double tolerance_px = 0.005;
+  // The same for the coarse levels, in that level's pixels (> 0). A coarse level only has to bring
+  // the estimate into the next finer level's basin (about its blur, one pixel there), and its own
+  // optimum differs from the finer level's by more than this (ECD 10 ms window: level 1's by 0.12 of
+  // its pixels), so tightening it further buys nothing but evaluations.
+  double coarse_tolerance_px = 0.05;
   // Coarse levels use at most this many events (an even stride over the window; 0 = all), since
   // a 2^L-times smaller IWE needs fewer events for the same votes per pixel. Level 0 uses all.
   int max_events_coarse = 0;
@@ -203,6 +209,8 @@ class ContrastMaximizer {
   CmaxOptions options_;
   CmaxObjective objective_ = CmaxObjective::kVariance;  // options_.objective resolved
   std::vector<float> pad_, img_, tmp_, adj_;
+  std::vector<int32_t> cell_;      // per event used: its padded IWE cell, -1 when it does not vote
+  std::vector<float> fa_, fb_;     // and its position in the cell, [0, 1)
   std::vector<float> kernel_;
 };
 
