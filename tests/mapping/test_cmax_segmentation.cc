@@ -4,8 +4,9 @@
 // count, and labels that persist across windows. Also synthetic two-motion windows and the
 // extremes. Instrument knobs (environment, for exploring; the defaults are what is asserted):
 // SEG_WINDOW=N events per window, SEG_MS=ms time windows, SEG_TRACE=1 debug log of every stage,
-// SEG_NOISE / SEG_GAIN / SEG_NEWPX / SEG_SPLIT: noise_support / min_cluster_gain / new_motion_px /
-// split_rounds; SEG_SEED / SEG_DURATION: another realisation or a longer stretch of the scene.
+// SEG_NOISE / SEG_GAIN / SEG_NEWPX / SEG_SPLIT / SEG_MGAIN: noise_support / min_cluster_gain /
+// new_motion_px / split_rounds / model_gain_per_parameter; SEG_MODELS=flow,similarity,...: the
+// candidate models; SEG_SEED / SEG_DURATION: another realisation or a longer stretch of the scene.
 #include "evio/mapping/cmax_segmentation.h"
 
 #include <algorithm>
@@ -66,6 +67,21 @@ const Recording& dynamic_3objects() {
     return r;
   }();
   return rec;
+}
+
+// "flow,similarity" -> the models.
+std::vector<WarpModel> models_from(const std::string& list) {
+  std::vector<WarpModel> out;
+  std::string word;
+  for (char c : list + ",") {
+    if (c != ',') {
+      word += c;
+    } else if (!word.empty()) {
+      out.push_back(evio::mapping::warp_model_from_name(word).value());
+      word.clear();
+    }
+  }
+  return out;
 }
 
 // Integer pixels with their dither, as the CMax pipelines add them.
@@ -138,6 +154,8 @@ TEST(CmaxSegmentation, DynamicThreeObjects) {
   if (getenv("SEG_GAIN")) o.min_cluster_gain = std::stod(getenv("SEG_GAIN"));
   if (getenv("SEG_NEWPX")) o.new_motion_px = std::stod(getenv("SEG_NEWPX"));
   if (getenv("SEG_SPLIT")) o.split_rounds = std::stoi(getenv("SEG_SPLIT"));
+  if (getenv("SEG_MODELS")) o.models = models_from(getenv("SEG_MODELS"));
+  if (getenv("SEG_MGAIN")) o.model_gain_per_parameter = std::stod(getenv("SEG_MGAIN"));
   MotionSegmenter seg(o);
   // ~0.1 s windows: long enough for the slow objects to move 2-5 px, short enough for the
   // sinusoidally moving ones to keep a constant velocity within about a pixel.
@@ -217,6 +235,11 @@ TEST(CmaxSegmentation, DynamicThreeObjects) {
         auto sd = [&](double a, double aa) { return std::sqrt(std::max(0.0, aa / m - (a / m) * (a / m))); };
         std::printf("\n   cluster %d: %d events, t %.3f+-%.3f s, x %.0f+-%.0f, y %.0f+-%.0f, params %s", c.id, m, st / m, sd(st, stt), sx / m,
                     sd(sx, sxx), sy / m, sd(sy, syy), ::testing::PrintToString(c.params.transpose().eval()).c_str());
+        std::map<int, int> of;  // its events by true object
+        for (size_t k = 0; k < window; ++k)
+          if (r.labels[k] == c.id) ++of[rec.labels[first + k]];
+        std::printf(", objects");
+        for (const auto& [l, cnt] : of) std::printf(" %d:%d", l == 65535 ? -1 : l, cnt);
       }
     }
     std::printf("\n   count steps:");

@@ -23,9 +23,10 @@
 //   the IWE of the events assigned to j (those whose most likely cluster it is). Optionally
 //   (split_rounds > 0) split then: propose clusters for the image tiles whose local flow the
 //   cluster holding them does not explain, alternate and merge again, while proposals survive.
-// - Warp model per cluster, simplest first (flow 2 < rotation 3 < similarity 4 < 6dof 6
-//   parameters): a richer model replaces the current one when it raises the cluster's objective by
-//   more than model_gain_per_parameter per extra parameter.
+// - Warp model per cluster, simplest first (flow 2 < rotation 3 < similarity 4 = flow_accel 4 <
+//   similarity_accel 6 = 6dof 6 parameters; ties in the order given): a richer model replaces the
+//   current one when it raises the cluster's objective by more than model_gain_per_parameter per
+//   extra parameter.
 // Both decisions are returned with the numbers that made them.
 #pragma once
 
