@@ -13,16 +13,21 @@ int main(int argc, char** argv) try {
       "motion.csv: t_start_s,t_end_s,model,p0,...,contrast_zero,contrast_final,iterations,time_ms, one row per window.\n"
       "p0.. per model: flow vx vy (px/s, undistorted pixels); similarity vx vy (px/s), dilation (1/s), in-plane\n"
       "rotation (rad/s); rotation wx wy wz (rad/s, the camera's angular velocity in the camera frame); 6dof vx vy vz\n"
-      "(m/s, camera frame, at cmax.depth_m or the plane) then wx wy wz (rad/s). contrast_*: the objective at zero\n"
+      "(m/s, camera frame, at cmax.depth_m or the plane) then wx wy wz (rad/s); flow_accel and similarity_accel: those of\n"
+      "flow and similarity (velocities at the window's mid-time) then ax ay (px/s^2). contrast_*: the objective at zero\n"
       "motion and at the estimate. With the rotation model and a ground truth (--gt or the dataset's) or IMU:\n"
       "motion_eval.csv (reference angular velocities per window, errors in deg/s).");
   CLI::Option* dataset_opt = cli->add_option("DATASET", flow.dataset, "Dataset (any format evio reads; sub-pixel ECD text too)");
   CLI::Option* out_opt = cli->add_option("-o,--out", flow.out, "Output folder (created)");
   cli->add_option("--model", flow.model, "Warp model (overrides cmax.model; default flow)")
-      ->check(CLI::IsMember({"flow", "rotation", "similarity", "6dof"}));
+      ->check(CLI::IsMember([] {
+        std::vector<std::string> names;
+        for (evio::mapping::WarpModel m : evio::mapping::warp_models()) names.push_back(evio::mapping::warp_model_name(m));
+        return names;
+      }()));
   cli->add_option("--objective", flow.objective,
-                  "Objective (overrides cmax.objective): auto = variance for flow, gradient_magnitude for rotation, "
-                  "normalized_gradient_magnitude for similarity and 6dof")
+                  "Objective (overrides cmax.objective): auto = variance for flow and flow_accel, gradient_magnitude for "
+                  "rotation, normalized_gradient_magnitude for similarity, similarity_accel and 6dof")
       ->check(CLI::IsMember({"auto", "variance", "mean_square", "gradient_magnitude", "normalized_gradient_magnitude"}));
   cli->add_option_function<std::string>(
       "--t-start", [&flow](const std::string& s) { flow.t_start_ns = evio::apps::parse_seconds_flag("--t-start", s); },

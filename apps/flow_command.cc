@@ -91,7 +91,7 @@ FlowConfig resolve_flow_config(const FlowArgs& args) {
   FlowConfig cfg = load_flow_config(args.config, args.set);
   if (!args.model.empty()) {
     const auto m = mapping::warp_model_from_name(args.model);
-    if (!m) throw InputError("--model", 0, "unknown model '" + args.model + "'", "flow, rotation, similarity or 6dof");
+    if (!m) throw InputError("--model", 0, "unknown model '" + args.model + "'", mapping::warp_model_names());
     cfg.cmax.model = *m;
   }
   if (!args.objective.empty()) {

@@ -45,6 +45,8 @@ const yaml_config::Table<backend::VisualInertialInitOptions>& visual_inertial_in
 // GradientMosaicOptions with its Poisson solvers' keys (weight_floor, pcg_*, poisson_boundary, ...).
 const yaml_config::Table<mapping::GradientMosaicOptions>& gradient_mosaic_table();
 const yaml_config::Table<mapping::RotationalCmaxOptions>& rotational_cmax_table();
+// Every warp model by its name (mapping::warp_models()), for the choice keys that take one.
+std::vector<std::pair<std::string, mapping::WarpModel>> warp_model_choices();
 // CmaxOptions (mapping/cmax.h): model, objective, IWE size, blur, pyramid, BFGS stopping, pinhole, 6dof depth/plane.
 const yaml_config::Table<mapping::CmaxOptions>& cmax_table();
 // events, duration_ms, max_duration_ms, min_events, undistortion, dither_px

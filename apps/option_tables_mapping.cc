@@ -57,24 +57,25 @@ const Table<mapping::RotationalCmaxOptions>& rotational_cmax_table() {
   return t;
 }
 
+std::vector<std::pair<std::string, mapping::WarpModel>> warp_model_choices() {
+  std::vector<std::pair<std::string, mapping::WarpModel>> out;
+  for (mapping::WarpModel m : mapping::warp_models()) out.emplace_back(mapping::warp_model_name(m), m);
+  return out;
+}
+
 const Table<mapping::CmaxOptions>& cmax_table() {
   using O = mapping::CmaxOptions;
   using mapping::CmaxObjective;
-  using mapping::WarpModel;
   static const Table<O> t =
       Table<O>("contrast maximisation settings")
-          .choice("model", &O::model,
-                  {{"flow", WarpModel::kFlow},
-                   {"similarity", WarpModel::kSimilarity},
-                   {"rotation", WarpModel::kRotation},
-                   {"6dof", WarpModel::kSixDof}})
+          .choice("model", &O::model, warp_model_choices())
           .choice("objective", &O::objective,
                   {{"auto", CmaxObjective::kAuto},
                    {"variance", CmaxObjective::kVariance},
                    {"mean_square", CmaxObjective::kMeanSquare},
                    {"gradient_magnitude", CmaxObjective::kGradientMagnitude},
                    {"normalized_gradient_magnitude", CmaxObjective::kNormalizedGradientMagnitude}})
-          .note("objective", "auto: variance for flow, gradient_magnitude for rotation, normalized_gradient_magnitude for similarity and 6dof")
+          .note("objective", "auto: variance for flow and flow_accel, gradient_magnitude for rotation, normalized_gradient_magnitude for similarity, similarity_accel and 6dof")
           .integer("width", &O::width, 1, 100000)
           .integer("height", &O::height, 1, 100000)
           .number("blur_sigma_px", &O::blur_sigma_px, Range::kNonNegative, "px of each pyramid level")

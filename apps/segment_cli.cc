@@ -33,7 +33,7 @@ int main(int argc, char** argv) try {
   cli->add_option("--clusters", seg.clusters,
                   "auto (the count the scene needs, up to segmentation.max_clusters) or a fixed number of clusters");
   cli->add_option("--models", seg.models,
-                  "Candidate warp models, comma-separated (flow, similarity, rotation, 6dof): each cluster takes the "
+                  "Candidate warp models, comma-separated (flow, similarity, rotation, 6dof, flow_accel, similarity_accel): each cluster takes the "
                   "simplest that is good enough (overrides segmentation.models; default flow,similarity)");
   cli->add_option("--config", seg.config, "Segment config YAML: window, segmentation and cmax sections (--print-config lists every key)");
   cli->add_option("--calib", seg.calib,

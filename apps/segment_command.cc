@@ -30,15 +30,6 @@ using yaml_config::Table;
 using C = SegmentConfig;
 using S = mapping::SegmentationOptions;
 
-const std::vector<std::pair<std::string, mapping::WarpModel>>& model_names() {
-  static const std::vector<std::pair<std::string, mapping::WarpModel>> names = {
-      {"flow", mapping::WarpModel::kFlow},
-      {"similarity", mapping::WarpModel::kSimilarity},
-      {"rotation", mapping::WarpModel::kRotation},
-      {"6dof", mapping::WarpModel::kSixDof}};
-  return names;
-}
-
 const Table<C>& segment_config_table() {
   static const Table<C> table = [] {
     auto self = [](C& c) -> C& { return c; };
@@ -50,7 +41,7 @@ const Table<C>& segment_config_table() {
     seg.integer("clusters", &S::clusters, 0, 16)
         .note("clusters", "0: automatic, up to max_clusters")
         .integer("max_clusters", &S::max_clusters, 1, 16)
-        .choice_list("models", &S::models, model_names())
+        .choice_list("models", &S::models, warp_model_choices())
         .note("models", "the count is decided on the richest; each cluster takes the simplest good enough")
         .choice("init", &S::init, {{"kmeans", mapping::SegmentationInit::kKmeans}, {"greedy", mapping::SegmentationInit::kGreedy}})
         .integer("tile_px", &S::tile_px, 8, 10000)
@@ -157,7 +148,7 @@ SegmentConfig resolve_segment_config(const SegmentArgs& args) {
         continue;
       }
       const auto m = mapping::warp_model_from_name(word);
-      if (!m) throw InputError("--models", 0, "unknown model '" + word + "'", "a comma-separated list of flow, similarity, rotation, 6dof");
+      if (!m) throw InputError("--models", 0, "unknown model '" + word + "'", "a comma-separated list of " + mapping::warp_model_names());
       if (std::find(models.begin(), models.end(), *m) == models.end()) models.push_back(*m);
       word.clear();
     }

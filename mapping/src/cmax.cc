@@ -20,17 +20,28 @@ bool finite(double v) { return std::isfinite(v); }
 template <WarpModel M>
 inline bool warp_k(const CmaxEvents& ev, size_t k, const double* p, double shift, double* u, double* v,
                    double* Ju, double* Jv) {
-  const double dt = static_cast<double>(ev.dt_s[k]) - shift;
+  const double dt_k = static_cast<double>(ev.dt_s[k]);
+  const double dt = dt_k - shift;
   const double x = ev.x[k], y = ev.y[k];
-  if constexpr (M == WarpModel::kFlow) {
+  if constexpr (M == WarpModel::kFlow || M == WarpModel::kFlowAccel) {
     *u = x - dt * p[0];
     *v = y - dt * p[1];
     if (Ju) {
       Ju[0] = -dt, Ju[1] = 0;
       Jv[0] = 0, Jv[1] = -dt;
     }
+    if constexpr (M == WarpModel::kFlowAccel) {
+      // The trajectory x(t) = x0 + v t + a t^2 / 2 taken back from t_k to t_ref + shift.
+      const double h = 0.5 * (dt_k * dt_k - shift * shift);
+      *u -= h * p[2];
+      *v -= h * p[3];
+      if (Ju) {
+        Ju[2] = -h, Ju[3] = 0;
+        Jv[2] = 0, Jv[3] = -h;
+      }
+    }
     return true;
-  } else if constexpr (M == WarpModel::kSimilarity) {
+  } else if constexpr (M == WarpModel::kSimilarity || M == WarpModel::kSimilarityAccel) {
     const WarpGeometry& g = ev.geometry();
     const double rx = x - g.cx, ry = y - g.cy;
     *u = x - dt * (p[0] + p[2] * rx - p[3] * ry);
@@ -38,6 +49,15 @@ inline bool warp_k(const CmaxEvents& ev, size_t k, const double* p, double shift
     if (Ju) {
       Ju[0] = -dt, Ju[1] = 0, Ju[2] = -dt * rx, Ju[3] = dt * ry;
       Jv[0] = 0, Jv[1] = -dt, Jv[2] = -dt * ry, Jv[3] = -dt * rx;
+    }
+    if constexpr (M == WarpModel::kSimilarityAccel) {
+      const double h = 0.5 * (dt_k * dt_k - shift * shift);
+      *u -= h * p[4];
+      *v -= h * p[5];
+      if (Ju) {
+        Ju[4] = -h, Ju[5] = 0;
+        Jv[4] = 0, Jv[5] = -h;
+      }
     }
     return true;
   } else {
@@ -249,20 +269,34 @@ void gather_all(const CmaxEvents& ev, const double* p, double shift, double scal
 
 }  // namespace
 
+const std::vector<WarpModel>& warp_models() {
+  static const std::vector<WarpModel> all = {WarpModel::kFlow,     WarpModel::kSimilarity, WarpModel::kRotation,
+                                             WarpModel::kSixDof,   WarpModel::kFlowAccel,  WarpModel::kSimilarityAccel};
+  return all;
+}
+
 const char* warp_model_name(WarpModel m) {
   switch (m) {
     case WarpModel::kFlow: return "flow";
     case WarpModel::kSimilarity: return "similarity";
     case WarpModel::kRotation: return "rotation";
     case WarpModel::kSixDof: return "6dof";
+    case WarpModel::kFlowAccel: return "flow_accel";
+    case WarpModel::kSimilarityAccel: return "similarity_accel";
   }
   return "?";
 }
 
 std::optional<WarpModel> warp_model_from_name(const std::string& name) {
-  for (WarpModel m : {WarpModel::kFlow, WarpModel::kSimilarity, WarpModel::kRotation, WarpModel::kSixDof})
+  for (WarpModel m : warp_models())
     if (name == warp_model_name(m)) return m;
   return std::nullopt;
+}
+
+std::string warp_model_names(const char* sep) {
+  std::string out;
+  for (WarpModel m : warp_models()) out += (out.empty() ? "" : sep) + std::string(warp_model_name(m));
+  return out;
 }
 
 int warp_dof(WarpModel m) {
@@ -271,6 +305,8 @@ int warp_dof(WarpModel m) {
     case WarpModel::kSimilarity: return 4;
     case WarpModel::kRotation: return 3;
     case WarpModel::kSixDof: return 6;
+    case WarpModel::kFlowAccel: return 4;
+    case WarpModel::kSimilarityAccel: return 6;
   }
   return 0;
 }
@@ -281,13 +317,31 @@ std::vector<std::string> warp_parameter_names(WarpModel m) {
     case WarpModel::kSimilarity: return {"vx_pxps", "vy_pxps", "dilation_ps", "rotation_radps"};
     case WarpModel::kRotation: return {"wx_radps", "wy_radps", "wz_radps"};
     case WarpModel::kSixDof: return {"vx_mps", "vy_mps", "vz_mps", "wx_radps", "wy_radps", "wz_radps"};
+    case WarpModel::kFlowAccel:
+    case WarpModel::kSimilarityAccel: {
+      std::vector<std::string> n = warp_parameter_names(warp_velocity_model(m));
+      n.insert(n.end(), {"ax_pxps2", "ay_pxps2"});
+      return n;
+    }
   }
   return {};
 }
 
+WarpModel warp_velocity_model(WarpModel m) {
+  if (m == WarpModel::kFlowAccel) return WarpModel::kFlow;
+  if (m == WarpModel::kSimilarityAccel) return WarpModel::kSimilarity;
+  return m;
+}
+
+Eigen::VectorXd warp_params_at(WarpModel m, const Eigen::VectorXd& p, double dt_s) {
+  Eigen::VectorXd q = p;
+  if (warp_velocity_model(m) != m && p.size() == warp_dof(m)) q.head<2>() += dt_s * p.tail<2>();
+  return q;
+}
+
 CmaxObjective resolve_objective(CmaxObjective o, WarpModel m) {
   if (o != CmaxObjective::kAuto) return o;
-  if (m == WarpModel::kFlow) return CmaxObjective::kVariance;
+  if (warp_velocity_model(m) == WarpModel::kFlow) return CmaxObjective::kVariance;
   if (m == WarpModel::kRotation) return CmaxObjective::kGradientMagnitude;
   return CmaxObjective::kNormalizedGradientMagnitude;
 }
@@ -400,6 +454,8 @@ bool warp_event(WarpModel m, const CmaxEvents& ev, size_t k, const Eigen::Vector
     case WarpModel::kSimilarity: ok = warp_k<WarpModel::kSimilarity>(ev, k, p.data(), dt_shift_s, &u, &v, ju, jv); break;
     case WarpModel::kRotation: ok = warp_k<WarpModel::kRotation>(ev, k, p.data(), dt_shift_s, &u, &v, ju, jv); break;
     case WarpModel::kSixDof: ok = warp_k<WarpModel::kSixDof>(ev, k, p.data(), dt_shift_s, &u, &v, ju, jv); break;
+    case WarpModel::kFlowAccel: ok = warp_k<WarpModel::kFlowAccel>(ev, k, p.data(), dt_shift_s, &u, &v, ju, jv); break;
+    case WarpModel::kSimilarityAccel: ok = warp_k<WarpModel::kSimilarityAccel>(ev, k, p.data(), dt_shift_s, &u, &v, ju, jv); break;
   }
   if (!ok) return false;
   *warped = Eigen::Vector2d(u, v);
@@ -432,6 +488,8 @@ void sample_at_warped(const ImageF& img, WarpModel m, const CmaxEvents& ev, cons
     case WarpModel::kSimilarity: run(std::integral_constant<WarpModel, WarpModel::kSimilarity>()); break;
     case WarpModel::kRotation: run(std::integral_constant<WarpModel, WarpModel::kRotation>()); break;
     case WarpModel::kSixDof: run(std::integral_constant<WarpModel, WarpModel::kSixDof>()); break;
+    case WarpModel::kFlowAccel: run(std::integral_constant<WarpModel, WarpModel::kFlowAccel>()); break;
+    case WarpModel::kSimilarityAccel: run(std::integral_constant<WarpModel, WarpModel::kSimilarityAccel>()); break;
   }
 }
 
@@ -482,6 +540,8 @@ double ContrastMaximizer::plain_objective(const CmaxEvents& ev, const Eigen::Vec
     case WarpModel::kSimilarity: vote_all<WarpModel::kSimilarity>(ev, pp, dt_shift, scale, weights, pol, stride, pad, w, h, cell, fa, fb); break;
     case WarpModel::kRotation: vote_all<WarpModel::kRotation>(ev, pp, dt_shift, scale, weights, pol, stride, pad, w, h, cell, fa, fb); break;
     case WarpModel::kSixDof: vote_all<WarpModel::kSixDof>(ev, pp, dt_shift, scale, weights, pol, stride, pad, w, h, cell, fa, fb); break;
+    case WarpModel::kFlowAccel: vote_all<WarpModel::kFlowAccel>(ev, pp, dt_shift, scale, weights, pol, stride, pad, w, h, cell, fa, fb); break;
+    case WarpModel::kSimilarityAccel: vote_all<WarpModel::kSimilarityAccel>(ev, pp, dt_shift, scale, weights, pol, stride, pad, w, h, cell, fa, fb); break;
   }
   // The IWE is the padded image's interior, blurred.
   blur(pad + pw + 1, pw, img_.data(), w, tmp_.data(), w, h, kernel_);
@@ -502,6 +562,8 @@ double ContrastMaximizer::plain_objective(const CmaxEvents& ev, const Eigen::Vec
     case WarpModel::kSimilarity: gather_all<WarpModel::kSimilarity, 4>(ev, pp, dt_shift, scale, weights, pol, stride, pad, w, cell, fa, fb, g); break;
     case WarpModel::kRotation: gather_all<WarpModel::kRotation, 3>(ev, pp, dt_shift, scale, weights, pol, stride, pad, w, cell, fa, fb, g); break;
     case WarpModel::kSixDof: gather_all<WarpModel::kSixDof, 6>(ev, pp, dt_shift, scale, weights, pol, stride, pad, w, cell, fa, fb, g); break;
+    case WarpModel::kFlowAccel: gather_all<WarpModel::kFlowAccel, 4>(ev, pp, dt_shift, scale, weights, pol, stride, pad, w, cell, fa, fb, g); break;
+    case WarpModel::kSimilarityAccel: gather_all<WarpModel::kSimilarityAccel, 6>(ev, pp, dt_shift, scale, weights, pol, stride, pad, w, cell, fa, fb, g); break;
   }
   return f;
 }

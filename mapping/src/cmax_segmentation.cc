@@ -45,13 +45,15 @@ namespace {
 
 int n_params(WarpModel m) { return warp_dof(m); }
 
-// The flow (px/s) a motion gives at point (x, y): from the displacement over 1 ms.
+// The flow (px/s) a motion gives at point (x, y) at t_ref: the central difference of the warp over
+// +-1 ms (for the accelerated models the velocity at t_ref, without the acceleration's term).
 Eigen::Vector2d flow_at(WarpModel m, const Eigen::VectorXd& p, const WarpGeometry& g, double x, double y) {
   CmaxEvents probe(0, g);
   probe.push_back(static_cast<float>(x), static_cast<float>(y), 1'000'000, 1);
-  Eigen::Vector2d w;
-  if (!warp_event(m, probe, 0, p, &w)) return Eigen::Vector2d::Zero();
-  return (Eigen::Vector2d(x, y) - w) / 1e-3;
+  probe.push_back(static_cast<float>(x), static_cast<float>(y), -1'000'000, 1);
+  Eigen::Vector2d w1, w0;
+  if (!warp_event(m, probe, 0, p, &w1) || !warp_event(m, probe, 1, p, &w0)) return Eigen::Vector2d::Zero();
+  return (w0 - w1) / 2e-3;
 }
 
 // Parameters of model `to` whose flow at (x, y) matches flow v (a starting point for the optimiser).
@@ -59,22 +61,37 @@ Eigen::VectorXd params_from_flow(WarpModel to, const Eigen::Vector2d& v, const W
   Eigen::VectorXd p = Eigen::VectorXd::Zero(warp_dof(to));
   switch (to) {
     case WarpModel::kFlow:
-    case WarpModel::kSimilarity: p[0] = v.x(), p[1] = v.y(); break;
+    case WarpModel::kSimilarity:
+    case WarpModel::kFlowAccel:
+    case WarpModel::kSimilarityAccel: p[0] = v.x(), p[1] = v.y(); break;
     case WarpModel::kRotation: p[0] = v.y() / g.fy, p[1] = -v.x() / g.fx; break;
     case WarpModel::kSixDof: p[3] = v.y() / g.fy, p[4] = -v.x() / g.fx; break;
   }
   return p;
 }
 
+// Parameters of model `to` for the motion (from, p): the same velocity part where the models
+// share it (flow into similarity), else the same flow at `at`; an acceleration carries over
+// between accelerated models and is dropped otherwise.
 Eigen::VectorXd convert(WarpModel from, const Eigen::VectorXd& p, WarpModel to, const WarpGeometry& g,
                         const Eigen::Vector2d& at) {
   if (from == to) return p;
-  if (from == WarpModel::kFlow && to == WarpModel::kSimilarity) {
-    Eigen::VectorXd q = Eigen::VectorXd::Zero(4);
-    q.head<2>() = p;
-    return q;
+  const WarpModel vf = warp_velocity_model(from), vt = warp_velocity_model(to);
+  const Eigen::VectorXd pv = p.head(warp_dof(vf));
+  Eigen::VectorXd q;
+  if (vf == vt) {
+    q = pv;
+  } else if (vf == WarpModel::kFlow && vt == WarpModel::kSimilarity) {
+    q = Eigen::VectorXd::Zero(4);
+    q.head<2>() = pv;
+  } else {
+    q = params_from_flow(vt, flow_at(vf, pv, g, at.x(), at.y()), g);
   }
-  return params_from_flow(to, flow_at(from, p, g, at.x(), at.y()), g);
+  if (vt == to) return q;
+  Eigen::VectorXd out = Eigen::VectorXd::Zero(warp_dof(to));
+  out.head(q.size()) = q;
+  if (vf != from) out.tail<2>() = p.tail<2>();
+  return out;
 }
 
 // k-means (Lloyd) on 2-D points with k-means++ seeding; returns the centres.
@@ -532,9 +549,12 @@ SegmentationResult MotionSegmenter::segment(const CmaxEvents& ev, const std::vec
       // First votes: the events inside its footprint, moved by its flow since that window.
       std::vector<float> votes(n, 1.0f);
       if (k.footprint.size() > 0) {
-        const Eigen::Vector2d shift =
-            flow_at(k.model, k.params, g, k.centroid.x(), k.centroid.y()) *
-            (static_cast<double>(ev.t_ref_ns() - k.footprint_t_ns) * 1e-9);
+        // Moved by its motion since that window: the flow there times the time, plus an
+        // accelerated model's a dt^2 / 2; an accelerated model's velocity is carried forward.
+        const double since = static_cast<double>(ev.t_ref_ns() - k.footprint_t_ns) * 1e-9;
+        Eigen::Vector2d shift = flow_at(k.model, k.params, g, k.centroid.x(), k.centroid.y()) * since;
+        if (warp_velocity_model(k.model) != k.model) shift += 0.5 * since * since * k.params.tail<2>();
+        k.params = warp_params_at(k.model, k.params, since);
         const long fw = k.footprint.cols(), fh = k.footprint.rows();
         for (size_t e = 0; e < n; ++e) {
           const long x = std::lround(ev.x[e] - shift.x()), y = std::lround(ev.y[e] - shift.y());

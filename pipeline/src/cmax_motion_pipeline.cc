@@ -84,7 +84,9 @@ void CmaxMotionPipeline::estimate(std::vector<CmaxWindow> windows) {
     const bool warm = o_.warm_start && previous_.has_value();
     mapping::CmaxResult r;
     if (warm) {
-      r = warm_->maximize(ev, *previous_);
+      // The previous motion carried to this window's reference time (an accelerated model's
+      // velocity moves on by a dt; the others are unchanged).
+      r = warm_->maximize(ev, mapping::warp_params_at(o_.cmax.model, *previous_, (cw.t_ref_ns - previous_t_ref_ns_) * 1e-9));
       if (r.objective_init < r.objective_zero) {  // the previous motion no longer fits: start over from zero
         mapping::CmaxResult c = cold_->maximize(ev);
         c.iterations += r.iterations;
@@ -96,7 +98,7 @@ void CmaxMotionPipeline::estimate(std::vector<CmaxWindow> windows) {
       r = cold_->maximize(ev);
     }
     w.time_ms = std::chrono::duration<double, std::milli>(clock::now() - c0).count();
-    if (r.params.allFinite()) previous_ = r.params;
+    if (r.params.allFinite()) previous_ = r.params, previous_t_ref_ns_ = cw.t_ref_ns;
 
     w.index = cw.index;
     w.t_start_ns = cw.t_start_ns;

@@ -7,10 +7,16 @@
 // and a coarse-to-fine BFGS maximiser that starts from zero.
 //
 // Warp models (dt = t_k - t_ref, s; events and IWE in undistorted pixel coordinates, (0,0) the
-// top-left pixel centre; first order in dt, i.e. constant velocities over a short window):
+// top-left pixel centre; first order in dt, i.e. constant velocities over a short window, except
+// the two *_accel models, which add a constant translational acceleration a = (ax, ay) px/s^2):
 //   flow        p = (vx, vy) px/s:             x' = x - dt v
 //   similarity  p = (vx, vy, s, w) px/s, 1/s, rad/s, about the image centre c = (cx, cy):
 //               x' = x - dt (v + s (x - c) + w J (x - c)),  J = [[0,-1],[1,0]] (in-plane rotation)
+//   flow_accel        p = (vx, vy, ax, ay):         x' = x - dt v - dt^2 a / 2
+//   similarity_accel  p = (vx, vy, s, w, ax, ay):   x' = (similarity's x') - dt^2 a / 2
+//               v is the velocity at t_ref. Warped to t_ref + shift instead (the IWEs at the window's
+//               ends), the point follows the same trajectory: x' = x - (dt - shift) v' - (dt^2 - shift^2) a / 2
+//               with v' the first-order part (v, or v + s (x - c) + w J (x - c)).
 //   rotation    p = (wx, wy, wz) rad/s, camera frame: bearing b = ((x-cx)/fx, (y-cy)/fy, 1) of a
 //               static point is seen at t_ref along d = b + dt w x b (first order of Exp(w dt) b),
 //               projected with the pinhole: x' = cx + fx d_x / d_z, y' = cy + fy d_y / d_z
@@ -33,12 +39,24 @@
 
 namespace evio::mapping {
 
-enum class WarpModel { kFlow, kSimilarity, kRotation, kSixDof };
-const char* warp_model_name(WarpModel m);  // "flow", "similarity", "rotation", "6dof"
+enum class WarpModel { kFlow, kSimilarity, kRotation, kSixDof, kFlowAccel, kSimilarityAccel };
+// Every model, in enum order (for name tables and option lists).
+const std::vector<WarpModel>& warp_models();
+// "flow", "similarity", "rotation", "6dof", "flow_accel", "similarity_accel"
+const char* warp_model_name(WarpModel m);
 std::optional<WarpModel> warp_model_from_name(const std::string& name);
-int warp_dof(WarpModel m);  // 2, 4, 3, 6
-// Parameter names with units, in order, e.g. {"vx_pxps", "vy_pxps"}.
+// The names of every model joined with `sep`, e.g. "flow, similarity, ..." (help and error texts).
+std::string warp_model_names(const char* sep = ", ");
+int warp_dof(WarpModel m);  // 2, 4, 3, 6, 4, 6
+// Parameter names with units, in order, e.g. {"vx_pxps", "vy_pxps"}; accelerations "ax_pxps2", "ay_pxps2".
 std::vector<std::string> warp_parameter_names(WarpModel m);
+// The constant-velocity model an accelerated one extends (flow_accel -> flow, similarity_accel ->
+// similarity; its parameters are the first warp_dof of it, the acceleration the last two); m
+// itself for the others.
+WarpModel warp_velocity_model(WarpModel m);
+// The same motion's parameters referred to a reference time dt_s later (a warm start for the next
+// window): an accelerated model's velocity becomes v + a dt_s; the other models are unchanged.
+Eigen::VectorXd warp_params_at(WarpModel m, const Eigen::VectorXd& p, double dt_s);
 
 // The pinhole of the (undistorted) event coordinates, and the depth model of the 6-DoF warp.
 struct WarpGeometry {
@@ -105,11 +123,11 @@ void sample_at_warped(const ImageF& img, WarpModel m, const CmaxEvents& ev, cons
                       std::vector<float>* out);
 
 enum class CmaxObjective {
-  // Variance for flow (its warp keeps areas: no collapse); mean squared gradient magnitude for
+  // Variance for flow and flow_accel (their warps keep areas: no collapse); mean squared gradient magnitude for
   // rotation (30 s of simulated poster / boxes rotation, angular velocity RMS error: variance 1.53 /
   // 2.73 deg/s, gradient magnitude 1.60 / 1.69: it weighs edges, not blobs, and the roll about the
   // optical axis, which moves pixels least, gains most); normalised gradient magnitude for
-  // similarity and 6dof, whose dilation / forward motion can shrink all events into a point, which
+  // similarity, similarity_accel and 6dof, whose dilation / forward motion can shrink all events into a point, which
   // maximises the variance (measured: the variance objective collapses a similarity warp to
   // dilation 115/s on a scene with 1.5/s).
   kAuto,

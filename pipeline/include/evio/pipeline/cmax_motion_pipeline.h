@@ -111,6 +111,7 @@ class CmaxMotionPipeline {
   std::unique_ptr<CmaxWindower> windower_;
   std::unique_ptr<mapping::ContrastMaximizer> cold_, warm_;
   std::optional<Eigen::VectorXd> previous_;  // last estimated window's parameters
+  int64_t previous_t_ref_ns_ = 0;            // ... and its reference time
   std::vector<CmaxMotionWindow> done_;
   mutable CmaxMotionStats stats_;  // the window counts are the windower's, copied in stats()
 };
