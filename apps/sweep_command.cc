@@ -158,7 +158,9 @@ int run_sweep(const SweepArgs& args, std::ostream& out) {
                      "--resume to continue it (cells with exit code 0 are kept, the others rerun), or a new --out");
   }
   fs::create_directories(dir / "cells");
-  fs::copy_file(args.spec, dir / "spec.yaml", fs::copy_options::overwrite_existing);
+  if (!fs::exists(dir / "spec.yaml", ec) || !fs::equivalent(args.spec, dir / "spec.yaml", ec)) {  // a copy for the record
+    fs::copy_file(args.spec, dir / "spec.yaml", fs::copy_options::overwrite_existing);
+  }
 
   const auto latest = latest_sweep_records(read_sweep_records(results.string()));
   std::vector<const SweepCell*> pending;

@@ -302,8 +302,14 @@ SweepReportResult write_sweep_report(const SweepReportOptions& opts) {
              cells.latex_table(group_title(g) + ": every cell (no ground-truth error)");
     } else {
       const Table front = front_table(g);
-      md += "\n" + front_caption(g) + ":\n\n" + front.markdown();
-      tex += "\n" + front.latex_table(group_title(g) + ": " + front_caption(g));
+      const std::string none = "No successful cell has a finite " + g.error_label + ": no Pareto front.";
+      if (front.rows.empty()) {
+        md += "\n" + none + "\n";
+        tex += "\n% " + group_title(g) + ": " + none + "\n";
+      } else {
+        md += "\n" + front_caption(g) + ":\n\n" + front.markdown();
+        tex += "\n" + front.latex_table(group_title(g) + ": " + front_caption(g));
+      }
       const fs::path png = rep / "plots" / (g.file_stem() + ".png");
       std::error_code ec;
       if (res.plots && fs::exists(png, ec)) {
@@ -312,7 +318,7 @@ SweepReportResult write_sweep_report(const SweepReportOptions& opts) {
       } else {
         body += "<p class=\"missing\">Plot missing: " + html(res.plots ? "the script made no plot for this group" : res.plot_note) + ".</p>\n";
       }
-      body += "<h3>" + html(front_caption(g)) + "</h3>\n" + front.html_table();
+      body += front.rows.empty() ? "<p>" + html(none) + "</p>\n" : "<h3>" + html(front_caption(g)) + "</h3>\n" + front.html_table();
     }
     md += "\nEvery cell:\n\n" + cells.markdown();
     body += "<h3>Every cell</h3>\n" + cells.html_table();

@@ -398,6 +398,15 @@ TEST(SweepReport, TablesAndPageListEveryCellAndSayWhenPlotsAreMissing) {
   EXPECT_TRUE(fs::exists(a.out + "/report/index.html"));
 }
 
+TEST(SweepReport, SaysSoWhenNoCellHasAFiniteError) {
+  evio_test::TempDir tmp;
+  const SweepArgs a = fake_sweep(tmp, "datasets: [rec]\nalgorithms: [{algorithm: flow}]\n");  // err: null
+  ASSERT_EQ(run_quietly(a), 0);
+  const std::string md = evio_test::read_text(a.out + "/report/pareto.md");
+  EXPECT_NE(md.find("No successful cell has a finite angular velocity RMS deg/s: no Pareto front."), std::string::npos) << md;
+  EXPECT_EQ(md.find("Pareto front of"), std::string::npos) << md;
+}
+
 TEST(SweepReport, PlotsAreEmbeddedWhenMatplotlibIsThere) {
   if (std::system("/usr/bin/python3 -c 'import matplotlib' > /dev/null 2>&1") != 0) GTEST_SKIP() << "no matplotlib in /usr/bin/python3";
   evio_test::TempDir tmp;
