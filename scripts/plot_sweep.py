@@ -1,6 +1,6 @@
 #!/usr/bin/python3
 """Speed-accuracy plots of an `evio sweep`: one figure per algorithm and dataset, the headline error
-against the CPU time of every successful cell (log-scaled time), the Pareto front as a step line
+against the CPU time of every successful cell (log-scaled when it spans more than 10x), the Pareto front as a step line
 and its cells labelled with their parameters. Reads DIR/report/cells.csv (written by `evio sweep`,
 columns cell,algorithm,variant,dataset,params,exit_code,...,cpu_s,...,error_metric,error,pareto)
 and writes OUT_DIR/<algorithm>__<dataset>.png and .pdf.
@@ -59,7 +59,9 @@ def main():
             ax.step([p[0] for p in front], [p[1] for p in front], where="post", color="k", lw=1, label="Pareto front")
             for x, y, r in front:
                 ax.annotate(r["params"], (x, y), textcoords="offset points", xytext=(4, 4), fontsize=7)
-        ax.set_xscale("log")
+        xs = [p[0] for p in pts]
+        if max(xs) > 10 * min(xs):  # log time only over a wide range
+            ax.set_xscale("log")
         ax.set_xlabel("CPU time of the cell, s")
         ax.set_ylabel(rows[0]["error_metric"])
         ax.set_title("%s on %s" % (alg, dataset))
