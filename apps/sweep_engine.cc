@@ -2,7 +2,7 @@
 
 #include <fcntl.h>
 #include <signal.h>
-#include <spawn.h>
+#include <sys/prctl.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <time.h>
@@ -16,8 +16,6 @@
 #include <ctime>
 #include <stdexcept>
 #include <thread>
-
-extern char** environ;
 
 namespace evio::apps {
 
@@ -50,44 +48,53 @@ struct Running {
   SweepOutcome outcome;
 };
 
-// Starts the job in its own process group with stdin from /dev/null and stdout/stderr to its logs.
-// A program that cannot be started gives pid -1 and exit code 127 (the reason in the stderr log).
+// Starts the job in its own process group (a timeout kills the group: the child and what it
+// started) with stdin from /dev/null and stdout/stderr to its logs; the child gets SIGKILL when the
+// sweep dies (PR_SET_PDEATHSIG), so a sweep killed outright leaves no cell running. A program that
+// cannot be started exits 127 with the reason in its stderr log.
 Running spawn(const SweepJob& job, size_t index) {
   Running r;
   r.index = index;
   r.outcome.host = hostname();
   r.outcome.started_utc = utc_now();
-  r.start = Clock::now();
-  posix_spawn_file_actions_t fa;
-  posix_spawn_file_actions_init(&fa);
-  posix_spawn_file_actions_addopen(&fa, 0, "/dev/null", O_RDONLY, 0);
-  posix_spawn_file_actions_addopen(&fa, 1, job.stdout_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  posix_spawn_file_actions_addopen(&fa, 2, job.stderr_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  posix_spawnattr_t attr;
-  posix_spawnattr_init(&attr);
-  sigset_t none, defaults;
-  sigemptyset(&none);
-  sigemptyset(&defaults);
-  sigaddset(&defaults, SIGINT);
-  sigaddset(&defaults, SIGTERM);
-  sigaddset(&defaults, SIGPIPE);
-  posix_spawnattr_setsigmask(&attr, &none);
-  posix_spawnattr_setsigdefault(&attr, &defaults);
-  posix_spawnattr_setpgroup(&attr, 0);  // its own group: a timeout kills the child and what it started
-  posix_spawnattr_setflags(&attr, POSIX_SPAWN_SETPGROUP | POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF);
+  // Everything the child needs is prepared before fork (only async-signal-safe calls after it).
   std::vector<char*> argv;
   argv.push_back(const_cast<char*>(job.program.c_str()));
   for (const std::string& a : job.args) argv.push_back(const_cast<char*>(a.c_str()));
   argv.push_back(nullptr);
-  const int rc = posix_spawn(&r.pid, job.program.c_str(), &fa, &attr, argv.data(), environ);
-  posix_spawn_file_actions_destroy(&fa);
-  posix_spawnattr_destroy(&attr);
-  if (rc != 0) {
-    r.pid = -1;
+  const std::string cannot_run = "evio sweep: cannot run " + job.program + ": ";
+  const pid_t parent = getpid();
+  r.start = Clock::now();
+  r.pid = fork();
+  if (r.pid == 0) {
+    setpgid(0, 0);
+    prctl(PR_SET_PDEATHSIG, SIGKILL);
+    if (getppid() != parent) _exit(127);  // the sweep died already
+    sigset_t none;
+    sigemptyset(&none);
+    sigprocmask(SIG_SETMASK, &none, nullptr);
+    for (int sig : {SIGINT, SIGTERM, SIGPIPE}) signal(sig, SIG_DFL);
+    const int in = open("/dev/null", O_RDONLY);
+    const int out = open(job.stdout_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    const int err = open(job.stderr_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    if (in < 0 || out < 0 || err < 0) _exit(127);
+    dup2(in, 0);
+    dup2(out, 1);
+    dup2(err, 2);
+    execv(job.program.c_str(), argv.data());
+    const char* why = std::strerror(errno);
+    (void)!write(2, cannot_run.data(), cannot_run.size());
+    (void)!write(2, why, std::strlen(why));
+    (void)!write(2, "\n", 1);
+    _exit(127);
+  }
+  if (r.pid > 0) {
+    setpgid(r.pid, r.pid);  // also from here, so the group exists before a kill
+  } else {
     r.outcome.exit_code = 127;
     const int fd = open(job.stderr_path.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
     if (fd >= 0) {
-      const std::string m = "evio sweep: cannot run " + job.program + ": " + std::strerror(rc) + "\n";
+      const std::string m = cannot_run + "fork failed: " + std::strerror(errno) + "\n";
       (void)!write(fd, m.data(), m.size());
       close(fd);
     }

@@ -1,7 +1,7 @@
 // evio sweep: engines run the cells' processes. An engine takes a list of jobs (one command line
 // each, with its log files and timeout) and reports each job's outcome as it ends: exit code
 // (negative: the signal that ended it), wall and CPU time and peak RSS of the child. `local` is a
-// bounded pool of child processes on this machine (posix_spawn, wait4); engines that hand the jobs
+// bounded pool of child processes on this machine (fork/exec, wait4); engines that hand the jobs
 // to GNU parallel or Slurm are meant to implement the same interface.
 #pragma once
 

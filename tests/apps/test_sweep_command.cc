@@ -6,12 +6,14 @@
 // --resume, and the report (Markdown, CSV, LaTeX, HTML) listing every cell.
 #include "sweep_command.h"
 
+#include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <set>
 #include <sstream>
 
@@ -234,7 +236,8 @@ TEST(SweepResults, ConcurrentAppendsFromProcessesNeverInterleave) {
 
 // Stand-ins for evio-<algorithm> in a folder: DATASET --out DIR -q [--marker FILE] [--set k=v]...
 // --set err=X writes X as the flow error (and the corners count), fail=1 exits 1, and --marker FILE
-// hangs (30 s) when FILE does not exist yet, after creating it, so a rerun succeeds.
+// hangs (30 s, as the same process) when FILE does not exist yet, after writing its pid there, so a
+// rerun succeeds.
 std::string fake_programs(const evio_test::TempDir& tmp) {
   const std::string dir = tmp.file("bin");
   fs::create_directories(dir);
@@ -245,7 +248,7 @@ std::string fake_programs(const evio_test::TempDir& tmp) {
       "  --set) case \"$2\" in err=*) err=${2#err=};; fail=*) fail=${2#fail=};; esac; shift 2;;\n"
       "  *) shift;; esac; done\n"
       "mkdir -p \"$out\"\necho \"fake run on $ds\"\n"
-      "if [ -n \"$marker\" ] && [ ! -e \"$marker\" ]; then : > \"$marker\"; sleep 30; fi\n"
+      "if [ -n \"$marker\" ] && [ ! -e \"$marker\" ]; then echo $$ > \"$marker\"; exec sleep 30; fi\n"
       "if [ \"$fail\" = 1 ]; then echo 'evio: error: failing on purpose' >&2; exit 1; fi\n"
       "printf '{\"groundtruth\": {\"rms_error_degps\": %s}, \"duration_s\": 2, \"windows\": 3, \"corners\": %s}\\n' "
       "\"$err\" \"$err\" > \"$out/stats.json\"\n";
@@ -350,6 +353,67 @@ TEST(SweepRun, TimedOutCellIsRecordedWithItsSignalAndRerunByResume) {
   latest = latest_sweep_records(all);
   for (const auto& [id, r] : latest) EXPECT_EQ(r.exit_code, 0) << id;
   EXPECT_TRUE(fs::exists(a.out + "/report/index.html"));
+}
+
+TEST(SweepRun, InterruptedSweepKillsItsCellsRecordsNoneOfThemAndResumeRunsThem) {
+  evio_test::TempDir tmp;
+  SweepArgs a = fake_sweep(tmp, "datasets: [rec]\nalgorithms:\n"
+                                "  - {algorithm: flow, variant: slow, args: [--marker, '{spec_dir}/marker'], grid: {err: [2]}}\n");
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) _exit(run_quietly(a));
+  // Once the cell hangs (its marker exists), interrupt the sweep as Ctrl-C would.
+  for (int i = 0; i < 500 && !fs::exists(tmp.file("marker")); ++i) usleep(10000);
+  ASSERT_TRUE(fs::exists(tmp.file("marker")));
+  usleep(50000);
+  kill(pid, SIGINT);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 130);
+  EXPECT_TRUE(read_sweep_records(a.out + "/results.jsonl").empty());
+  a.resume = true;
+  EXPECT_EQ(run_quietly(a), 0);
+  const std::vector<SweepRecord> recs = read_sweep_records(a.out + "/results.jsonl");
+  ASSERT_EQ(recs.size(), 1u);
+  EXPECT_EQ(recs[0].exit_code, 0);
+}
+
+// A process that has ended (gone, or a zombie waiting for its new parent to reap it).
+bool ended(pid_t pid) {
+  std::ifstream stat("/proc/" + std::to_string(pid) + "/stat");
+  std::string text((std::istreambuf_iterator<char>(stat)), std::istreambuf_iterator<char>());
+  const size_t paren = text.rfind(')');
+  return text.empty() || (paren != std::string::npos && paren + 2 < text.size() && text[paren + 2] == 'Z');
+}
+
+TEST(SweepRun, SweepKilledOutrightTakesItsCellsWithItAndResumeRunsThem) {
+  evio_test::TempDir tmp;
+  SweepArgs a = fake_sweep(tmp, "datasets: [rec]\nalgorithms:\n"
+                                "  - {algorithm: flow, variant: slow, args: [--marker, '{spec_dir}/marker'], grid: {err: [2]}}\n");
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) _exit(run_quietly(a));
+  pid_t cell = 0;
+  for (int i = 0; i < 500 && cell <= 0; ++i) {
+    usleep(10000);
+    std::ifstream(tmp.file("marker")) >> cell;
+  }
+  ASSERT_GT(cell, 0);
+  kill(pid, SIGKILL);
+  waitpid(pid, nullptr, 0);
+  bool gone = false;
+  for (int i = 0; i < 500 && !gone; ++i) {
+    gone = ended(cell);
+    if (!gone) usleep(10000);
+  }
+  EXPECT_TRUE(gone) << "the cell " << cell << " outlived the sweep";
+  if (!gone) kill(cell, SIGKILL);
+  a.resume = true;
+  EXPECT_EQ(run_quietly(a), 0);
+  const std::vector<SweepRecord> recs = read_sweep_records(a.out + "/results.jsonl");
+  ASSERT_EQ(recs.size(), 1u);
+  EXPECT_EQ(recs[0].exit_code, 0);
 }
 
 TEST(SweepRun, UnknownEngineIsAnError) {
