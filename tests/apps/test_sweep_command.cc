@@ -355,28 +355,43 @@ TEST(SweepRun, TimedOutCellIsRecordedWithItsSignalAndRerunByResume) {
   EXPECT_TRUE(fs::exists(a.out + "/report/index.html"));
 }
 
-TEST(SweepRun, InterruptedSweepKillsItsCellsRecordsNoneOfThemAndResumeRunsThem) {
-  evio_test::TempDir tmp;
-  SweepArgs a = fake_sweep(tmp, "datasets: [rec]\nalgorithms:\n"
-                                "  - {algorithm: flow, variant: slow, args: [--marker, '{spec_dir}/marker'], grid: {err: [2]}}\n");
+// A sweep of one cell that hangs, run by a child process: its pid, and the cell's once it hangs
+// (0 if it never does).
+std::pair<pid_t, pid_t> start_hanging_sweep(const evio_test::TempDir& tmp, SweepArgs* a) {
+  *a = fake_sweep(tmp, "datasets: [rec]\nalgorithms:\n"
+                       "  - {algorithm: flow, variant: slow, args: [--marker, '{spec_dir}/marker'], grid: {err: [2]}}\n");
   const pid_t pid = fork();
-  ASSERT_GE(pid, 0);
-  if (pid == 0) _exit(run_quietly(a));
-  // Once the cell hangs (its marker exists), interrupt the sweep as Ctrl-C would.
-  for (int i = 0; i < 500 && !fs::exists(tmp.file("marker")); ++i) usleep(10000);
-  ASSERT_TRUE(fs::exists(tmp.file("marker")));
-  usleep(50000);
-  kill(pid, SIGINT);
-  int status = 0;
-  waitpid(pid, &status, 0);
-  ASSERT_TRUE(WIFEXITED(status));
-  EXPECT_EQ(WEXITSTATUS(status), 130);
-  EXPECT_TRUE(read_sweep_records(a.out + "/results.jsonl").empty());
+  if (pid == 0) _exit(run_quietly(*a));
+  pid_t cell = 0;
+  for (int i = 0; i < 500 && cell <= 0; ++i) {
+    usleep(10000);
+    std::ifstream(tmp.file("marker")) >> cell;
+  }
+  return {pid, cell};
+}
+
+// --resume runs the one cell, which succeeds this time, and records it.
+void expect_resume_records_the_cell(SweepArgs a) {
   a.resume = true;
   EXPECT_EQ(run_quietly(a), 0);
   const std::vector<SweepRecord> recs = read_sweep_records(a.out + "/results.jsonl");
   ASSERT_EQ(recs.size(), 1u);
   EXPECT_EQ(recs[0].exit_code, 0);
+}
+
+TEST(SweepRun, InterruptedSweepKillsItsCellsRecordsNoneOfThemAndResumeRunsThem) {
+  evio_test::TempDir tmp;
+  SweepArgs a;
+  const auto [pid, cell] = start_hanging_sweep(tmp, &a);
+  ASSERT_GT(pid, 0);
+  ASSERT_GT(cell, 0);
+  kill(pid, SIGINT);  // as Ctrl-C would
+  int status = 0;
+  waitpid(pid, &status, 0);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 130);
+  EXPECT_TRUE(read_sweep_records(a.out + "/results.jsonl").empty());
+  expect_resume_records_the_cell(a);
 }
 
 // A process that has ended (gone, or a zombie waiting for its new parent to reap it).
@@ -389,16 +404,9 @@ bool ended(pid_t pid) {
 
 TEST(SweepRun, SweepKilledOutrightTakesItsCellsWithItAndResumeRunsThem) {
   evio_test::TempDir tmp;
-  SweepArgs a = fake_sweep(tmp, "datasets: [rec]\nalgorithms:\n"
-                                "  - {algorithm: flow, variant: slow, args: [--marker, '{spec_dir}/marker'], grid: {err: [2]}}\n");
-  const pid_t pid = fork();
-  ASSERT_GE(pid, 0);
-  if (pid == 0) _exit(run_quietly(a));
-  pid_t cell = 0;
-  for (int i = 0; i < 500 && cell <= 0; ++i) {
-    usleep(10000);
-    std::ifstream(tmp.file("marker")) >> cell;
-  }
+  SweepArgs a;
+  const auto [pid, cell] = start_hanging_sweep(tmp, &a);
+  ASSERT_GT(pid, 0);
   ASSERT_GT(cell, 0);
   kill(pid, SIGKILL);
   waitpid(pid, nullptr, 0);
@@ -409,11 +417,7 @@ TEST(SweepRun, SweepKilledOutrightTakesItsCellsWithItAndResumeRunsThem) {
   }
   EXPECT_TRUE(gone) << "the cell " << cell << " outlived the sweep";
   if (!gone) kill(cell, SIGKILL);
-  a.resume = true;
-  EXPECT_EQ(run_quietly(a), 0);
-  const std::vector<SweepRecord> recs = read_sweep_records(a.out + "/results.jsonl");
-  ASSERT_EQ(recs.size(), 1u);
-  EXPECT_EQ(recs[0].exit_code, 0);
+  expect_resume_records_the_cell(a);
 }
 
 TEST(SweepRun, UnknownEngineIsAnError) {
