@@ -187,16 +187,18 @@ Table front_table(const Group& g) {
   return t;
 }
 
-Table cells_table(const Group& g) {
+// form: printf form of the numbers (shortened for the pages, full for the CSV).
+Table cells_table(const Group& g, const char* form = nullptr) {
+  auto f = [form](double v, const char* page_form) { return fmt(v, form ? form : page_form); };
   Table t{{"cell", "variant", "params", "exit", "wall s", "CPU s", "real-time factor", "peak RSS MiB"}, {}};
   for (const std::string& m : g.metric_names) t.header.push_back(m);
   t.header.push_back("Pareto");
   for (size_t i = 0; i < g.rows.size(); ++i) {
     const SweepRecord& r = *g.rows[i];
-    std::vector<std::string> row = {r.cell, r.variant, params_text(r), exit_text(r), fmt(r.wall_s, "%.2f"),
-                                    fmt(r.cpu_s, "%.2f"), fmt(r.duration_s > 0 ? r.wall_s / r.duration_s : NAN, "%.2f"),
-                                    fmt(r.peak_rss_mb, "%.0f")};
-    for (const std::string& m : g.metric_names) row.push_back(fmt(r.metric(m)));
+    std::vector<std::string> row = {r.cell, r.variant, params_text(r), exit_text(r), f(r.wall_s, "%.2f"),
+                                    f(r.cpu_s, "%.2f"), f(r.duration_s > 0 ? r.wall_s / r.duration_s : NAN, "%.2f"),
+                                    f(r.peak_rss_mb, "%.0f")};
+    for (const std::string& m : g.metric_names) row.push_back(f(r.metric(m), "%.4g"));
     row.push_back(g.on_front[i] ? "yes" : "");
     t.rows.push_back(std::move(row));
   }
@@ -322,10 +324,11 @@ SweepReportResult write_sweep_report(const SweepReportOptions& opts) {
     }
     md += "\nEvery cell:\n\n" + cells.markdown();
     body += "<h3>Every cell</h3>\n" + cells.html_table();
+    const Table full = cells_table(g, "%.9g");
     std::string gcsv;
-    for (size_t i = 0; i < cells.header.size(); ++i) gcsv += (i ? "," : "") + csv_field(cells.header[i]);
+    for (size_t i = 0; i < full.header.size(); ++i) gcsv += (i ? "," : "") + csv_field(full.header[i]);
     gcsv += "\n";
-    for (const auto& row : cells.rows) {
+    for (const auto& row : full.rows) {
       for (size_t i = 0; i < row.size(); ++i) gcsv += (i ? "," : "") + csv_field(row[i]);
       gcsv += "\n";
     }
