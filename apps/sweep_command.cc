@@ -105,6 +105,7 @@ void generate_datasets(const SweepSpec& spec, const std::vector<const SweepCell*
 class StopOnSignals {
  public:
   StopOnSignals() {
+    clear_sweep_stop();
     struct sigaction sa {};
     sa.sa_handler = [](int) { request_sweep_stop(); };
     sigemptyset(&sa.sa_mask);

@@ -192,5 +192,6 @@ SweepOutcome run_job(const SweepJob& job) {
 
 void request_sweep_stop() { g_stop = 1; }
 bool sweep_stop_requested() { return g_stop != 0; }
+void clear_sweep_stop() { g_stop = 0; }
 
 }  // namespace evio::apps

@@ -48,7 +48,9 @@ std::unique_ptr<SweepEngine> make_sweep_engine(const std::string& name, int jobs
 SweepOutcome run_job(const SweepJob& job);
 
 // Set from a SIGINT/SIGTERM handler (async-signal-safe): engines stop and kill their children.
+// clear_sweep_stop() before a new sweep in the same process.
 void request_sweep_stop();
 bool sweep_stop_requested();
+void clear_sweep_stop();
 
 }  // namespace evio::apps
