@@ -57,14 +57,22 @@ def main():
         front = sorted((p for p in pts if p[2]["pareto"] == "1"), key=lambda p: p[0])
         if front:
             ax.step([p[0] for p in front], [p[1] for p in front], where="post", color="k", lw=1, label="Pareto front")
-            for x, y, r in front:
-                ax.annotate(r["params"], (x, y), textcoords="offset points", xytext=(4, 4), fontsize=7)
+            # Front cells labelled by their values only (the keys are in the title), alternately
+            # above and below the line so that neighbours do not overlap.
+            for k, (x, y, r) in enumerate(front):
+                values = ", ".join(p.split("=", 1)[-1] for p in r["params"].split(", "))
+                label = (r["variant"] + ": " if r["variant"] else "") + values
+                ax.annotate(label, (x, y), textcoords="offset points", xytext=(4, 6 if k % 2 == 0 else -12), fontsize=7)
         xs = [p[0] for p in pts]
         if max(xs) > 10 * min(xs):  # log time only over a wide range
             ax.set_xscale("log")
+        ys = [p[1] for p in pts]
+        if min(ys) > 0 and max(ys) > 10 * min(ys):  # log error too over a wide range
+            ax.set_yscale("log")
+        keys = [p.split("=", 1)[0] for p in rows[0]["params"].split(", ") if "=" in p]
         ax.set_xlabel("CPU time of the cell, s")
         ax.set_ylabel(rows[0]["error_metric"])
-        ax.set_title("%s on %s" % (alg, dataset))
+        ax.set_title("%s on %s%s" % (alg, dataset, ("\nfront labelled by " + ", ".join(keys)) if keys else ""), fontsize=10)
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8)
         fig.tight_layout()
