@@ -45,7 +45,12 @@ std::vector<std::string> cell_arguments(const SweepCell& c, const fs::path& cell
       (c.simulated || fs::exists(gt, ec))) {
     a.insert(a.end(), {"--gt", gt.string()});
   }
-  for (const auto& [k, v] : c.params) a.insert(a.end(), {"--set", k + "=" + v});
+  for (const auto& [k, v] : c.params) {
+    a.emplace_back("--set");
+    a.push_back(k);
+    a.back() += '=';
+    a.back() += v;
+  }
   return a;
 }
 

@@ -38,7 +38,12 @@ std::string fmt(double v, const char* form = "%.4g") {
 
 std::string params_text(const SweepRecord& r) {
   std::string s;
-  for (const auto& [k, v] : r.params) s += (s.empty() ? "" : ", ") + k + "=" + v;
+  for (const auto& [k, v] : r.params) {
+    if (!s.empty()) s += ", ";
+    s += k;
+    s += '=';
+    s += v;
+  }
   return s.empty() ? "(defaults)" : s;
 }
 

@@ -65,7 +65,7 @@ class SpecReader {
   }
 
   std::string name(const YAML::Node& n, const std::string& what) const {
-    const std::string s = scalar(n, what);
+    std::string s = scalar(n, what);
     const bool ok = !s.empty() && std::all_of(s.begin(), s.end(), [](char c) {
       return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.' || c == '+';
     });
@@ -87,7 +87,12 @@ class SpecReader {
     if (!n.IsMap()) fail(n, what + " is not a mapping", form);
     for (const auto& kv : n) {
       const std::string k = kv.first.Scalar();
-      if (!allowed.count(k)) fail(kv.first, "unknown key '" + k + "' in " + what, form);
+      if (!allowed.count(k)) {
+        std::string why = "unknown key '" + k;
+        why += "' in ";
+        why += what;
+        fail(kv.first, why, form);
+      }
     }
   }
 
@@ -267,7 +272,12 @@ std::vector<SweepCell> expand_sweep_cells(const SweepSpec& spec, const std::stri
         std::string key = c.algorithm + "\n" + c.variant + "\n" + identity + "\nargs";
         for (const std::string& s : a.args) key += "\n" + s;
         key += "\nparams";
-        for (const auto& [k, v] : c.params) key += "\n" + k + "=" + v;
+        for (const auto& [k, v] : c.params) {
+          key += '\n';
+          key += k;
+          key += '=';
+          key += v;
+        }
         char hex[20];
         std::snprintf(hex, sizeof(hex), "%08llx", static_cast<unsigned long long>(fnv1a(key) & 0xffffffffull));
         c.id = c.algorithm + (c.variant.empty() ? "" : "-" + c.variant) + "-" + c.dataset + "-" + hex;
