@@ -19,10 +19,7 @@
 #include "evio/evaluation/run_summary.h"
 #include "evio/calib/log.h"
 #include "evio/sensors/time.h"
-
-#ifndef EVIO_SCRIPTS_DIR
-#define EVIO_SCRIPTS_DIR ""
-#endif
+#include "script_path.h"
 
 namespace evio::apps {
 namespace fs = std::filesystem;
@@ -65,25 +62,6 @@ std::string shell_quote(const std::string& s) {
   std::string o = "'";
   for (char c : s) o += c == '\'' ? std::string("'\\''") : std::string(1, c);
   return o + "'";
-}
-
-// The plot script: given, else next to the sources, else <prefix>/share/evio/scripts.
-std::string find_plot_script(const std::string& given) {
-  if (!given.empty()) return given;
-  std::vector<fs::path> candidates;
-  if (std::string(EVIO_SCRIPTS_DIR).size() > 0) candidates.push_back(fs::path(EVIO_SCRIPTS_DIR) / "plot_trajectory.py");
-  std::error_code ec;
-  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
-  // Installed: <prefix>/libexec/evio/evio-eval (or a program in <prefix>/bin) -> <prefix>/share/evio/scripts.
-  if (!ec) {
-    for (const fs::path& prefix : {exe.parent_path().parent_path().parent_path(), exe.parent_path().parent_path()}) {
-      candidates.push_back(prefix / "share" / "evio" / "scripts" / "plot_trajectory.py");
-    }
-  }
-  for (const fs::path& c : candidates) {
-    if (fs::exists(c, ec)) return c.string();
-  }
-  return {};
 }
 
 const char* kPlotHint =
@@ -346,7 +324,7 @@ int run_eval(const EvalArgs& args, std::ostream& out) {
       << "*_aligned.tum, *_groundtruth.tum, *_errors.csv\n";
   if (args.plot.empty()) return 0;
 
-  const std::string script = find_plot_script(args.plot_script);
+  const std::string script = find_evio_script("plot_trajectory.py", args.plot_script);
   if (script.empty()) {
     log_warning("evio eval --plot: scripts/plot_trajectory.py not found (give it with --plot-script); numeric "
                 "outputs are in " + dir);

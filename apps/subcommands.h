@@ -56,6 +56,10 @@ inline constexpr SubcommandInfo kSubcommands[] = {
      "Image reconstruction from events and APS frames, per pixel and per event (high-pass, complementary filter "
      "Scheerlinck et al. ACCV 2018, asynchronous Kalman filter Wang et al. ICCV 2021): images/ (PNG + float TIFF log "
      "intensity), images.txt, stats.json, optional MP4"},
+    {"sweep",
+     "Speed-accuracy sweep: datasets x algorithms x parameter grids from a spec YAML, one `evio <algorithm>` process "
+     "per cell (local process pool, --resume), results.jsonl (exit code, wall/CPU time, peak RSS, error metrics) and a "
+     "report (Pareto fronts as Markdown, CSV, LaTeX, plots, one HTML page)"},
 };
 
 // The summary of a subcommand, or nullptr for an unknown name.

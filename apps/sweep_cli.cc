@@ -1,0 +1,46 @@
+// evio sweep: the command line of `evio sweep` (run as evio-sweep by the `evio` dispatcher).
+#include <cstdio>
+#include <iostream>
+
+#include "cli_common.h"
+#include "sweep_command.h"
+
+int main(int argc, char** argv) try {
+  evio::apps::CommandLine cli("sweep");
+  evio::apps::SweepArgs sweep;
+  cli->footer(
+      "Spec (README, section `evio sweep`): datasets (recordings by path, or simulator scenes generated once into\n"
+      "DIR/data/), algorithms (vio, mosaic, corners, flow, segment, reconstruct) with fixed args and parameter grids\n"
+      "of config keys (passed as --set key=value). Each cell runs as `evio <algorithm>` in DIR/cells/<cell>/ (logs,\n"
+      "command.txt, out/). DIR/results.jsonl: one JSON line per finished cell (cell, algorithm, dataset, params,\n"
+      "exit_code (negative: the signal), wall_s, cpu_s, peak_rss_mb, metrics). DIR/report/: pareto.md, pareto.tex,\n"
+      "cells.csv, per-group CSVs, plots/ and index.html (self-contained). Exit code 1 when a cell failed (recorded;\n"
+      "--resume reruns it), 130 when interrupted (--resume runs the rest).");
+  CLI::Option* spec_opt = cli->add_option("SPEC", sweep.spec, "Sweep spec YAML")->check(CLI::ExistingFile);
+  CLI::Option* out_opt = cli->add_option("-o,--out", sweep.out, "Sweep folder (created; results.jsonl, cells/, data/, report/)");
+  CLI::Option* report_opt = cli->add_option("--report", sweep.out, "Only write DIR/report/ from DIR/results.jsonl (no SPEC)");
+  report_opt->excludes(spec_opt)->excludes(out_opt);
+  cli->add_option("-j,--jobs", sweep.jobs, "Cells run at once (default: the number of cores)")->check(CLI::PositiveNumber);
+  cli->add_option("--engine", sweep.engine, "How cells run: local (a bounded process pool on this machine)");
+  cli->add_flag("--resume", sweep.resume,
+                "Continue the sweep in DIR: cells recorded with exit code 0 are skipped, failed, killed and unrecorded "
+                "cells run (again)");
+  cli->add_option("--timeout", sweep.timeout_s, "Per-cell wall-time limit, s (0: none), instead of the spec's timeout_s; a "
+                                                "cell past it is killed (SIGKILL) and recorded with exit code -9")
+      ->check(CLI::NonNegativeNumber);
+  cli->add_flag("--list", sweep.list, "Print each cell's id and command, run nothing");
+  cli->add_flag("--no-report", sweep.no_report, "Do not write the report at the end");
+  cli->add_option("--python", sweep.python, "Python with matplotlib for scripts/plot_sweep.py")->capture_default_str();
+  return cli.run(argc, argv, [&] {
+    sweep.report_only = report_opt->count() > 0;
+    if (!sweep.report_only && (sweep.spec.empty() || sweep.out.empty())) {
+      std::fprintf(stderr, "evio sweep: SPEC and --out DIR are required (or --report DIR)\nRun with --help for more information.\n");
+      return 2;
+    }
+    sweep.progress = !cli.quiet();
+    return evio::apps::run_sweep(sweep, std::cout);
+  });
+} catch (const std::exception& e) {  // setting the options up failed (a programming error)
+  std::fprintf(stderr, "evio: internal error: %s\n", e.what());
+  return 3;
+}

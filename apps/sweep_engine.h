@@ -1,0 +1,56 @@
+// evio sweep: engines run the cells' processes. An engine takes a list of jobs (one command line
+// each, with its log files and timeout) and reports each job's outcome as it ends: exit code
+// (negative: the signal that ended it), wall and CPU time and peak RSS of the child. `local` is a
+// bounded pool of child processes on this machine (fork/exec, wait4); engines that hand the jobs
+// to GNU parallel or Slurm are meant to implement the same interface.
+#pragma once
+
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace evio::apps {
+
+struct SweepJob {
+  std::string program;            // executable path
+  std::vector<std::string> args;  // arguments after the program name
+  std::string stdout_path;        // created/truncated; the child's stdout
+  std::string stderr_path;        // created/truncated; the child's stderr
+  double timeout_s = 0;           // wall time after which the child's process group is killed; 0: none
+};
+
+struct SweepOutcome {
+  int exit_code = 0;        // the exit status, or -signal when a signal ended the child (-9 after a timeout)
+  bool timed_out = false;   // killed by the engine after timeout_s
+  double wall_s = 0;        // spawn to exit, s (polled every 20 ms)
+  double cpu_s = 0;         // user + system CPU time of the child and its waited-for descendants, s
+  double peak_rss_mb = 0;   // the child's peak resident set size (ru_maxrss), MiB
+  std::string host;         // the machine it ran on
+  std::string started_utc;  // ISO 8601 start time
+};
+
+class SweepEngine {
+ public:
+  virtual ~SweepEngine() = default;
+  virtual std::string name() const = 0;
+  // Runs every job; calls done(index into jobs, outcome) on the calling thread as each job ends, in
+  // the order they end. Returns early (without calling done for the jobs it stopped) once
+  // sweep_stop_requested() is true, after killing the jobs still running.
+  virtual void run(const std::vector<SweepJob>& jobs, const std::function<void(size_t, const SweepOutcome&)>& done) = 0;
+};
+
+// The engine called `name` ("local"); jobs: at most that many cells at once (<= 0: the number of
+// cores). Throws std::invalid_argument naming the engines that exist for any other name.
+std::unique_ptr<SweepEngine> make_sweep_engine(const std::string& name, int jobs);
+
+// Runs one job to its end on this machine (what the local engine does per cell).
+SweepOutcome run_job(const SweepJob& job);
+
+// Set from a SIGINT/SIGTERM handler (async-signal-safe): engines stop and kill their children.
+// clear_sweep_stop() before a new sweep in the same process.
+void request_sweep_stop();
+bool sweep_stop_requested();
+void clear_sweep_stop();
+
+}  // namespace evio::apps

@@ -1,0 +1,359 @@
+#include "sweep_report.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+#include "evio/calib/error.h"
+#include "script_path.h"
+#include "sweep_engine.h"
+#include "sweep_results.h"
+#include "sweep_spec.h"
+
+namespace evio::apps {
+namespace fs = std::filesystem;
+
+namespace {
+
+// The cells of one algorithm on one dataset, fastest first (failed cells last).
+struct Group {
+  std::string algorithm, dataset, error_metric, error_label, note;
+  std::vector<const SweepRecord*> rows;
+  std::vector<std::string> metric_names;  // union over the rows, in first-seen order
+  std::vector<bool> on_front;             // per row
+  std::string file_stem() const { return algorithm + "__" + dataset; }
+  double error(size_t i) const { return error_metric.empty() ? NAN : rows[i]->metric(error_metric); }
+};
+
+std::string fmt(double v, const char* form = "%.4g") {
+  if (!std::isfinite(v)) return "-";
+  char buf[40];
+  std::snprintf(buf, sizeof(buf), form, v);
+  return buf;
+}
+
+std::string params_text(const SweepRecord& r) {
+  std::string s;
+  for (const auto& [k, v] : r.params) {
+    if (!s.empty()) s += ", ";
+    s += k;
+    s += '=';
+    s += v;
+  }
+  return s.empty() ? "(defaults)" : s;
+}
+
+std::string exit_text(const SweepRecord& r) {
+  return std::to_string(r.exit_code) + (r.timed_out ? " (timeout)" : r.exit_code < 0 ? " (signal)" : "");
+}
+
+std::vector<Group> make_groups(const std::map<std::string, SweepRecord>& latest) {
+  std::map<std::pair<size_t, std::string>, Group> by;  // (algorithm order, dataset)
+  const auto& algs = sweep_algorithms();
+  for (const auto& [id, r] : latest) {
+    const size_t order = static_cast<size_t>(std::find(algs.begin(), algs.end(), r.algorithm) - algs.begin());
+    Group& g = by[{order, r.dataset}];
+    g.algorithm = r.algorithm;
+    g.dataset = r.dataset;
+    g.rows.push_back(&r);
+    if (g.error_metric.empty() && !r.error_metric.empty()) g.error_metric = r.error_metric;
+    if (g.note.empty()) g.note = r.note;
+    for (const auto& m : r.metrics) {
+      if (std::find(g.metric_names.begin(), g.metric_names.end(), m.first) == g.metric_names.end()) g.metric_names.push_back(m.first);
+    }
+  }
+  std::vector<Group> out;
+  for (auto& [key, g] : by) {
+    std::stable_sort(g.rows.begin(), g.rows.end(), [](const SweepRecord* a, const SweepRecord* b) {
+      if ((a->exit_code == 0) != (b->exit_code == 0)) return a->exit_code == 0;
+      return a->cpu_s < b->cpu_s;
+    });
+    if (key.first < algs.size()) g.error_label = sweep_algorithm_info(g.algorithm).error_label;  // else an unknown name
+    if (g.error_label.empty()) g.error_label = g.error_metric;
+    std::vector<std::pair<double, double>> te;
+    for (size_t i = 0; i < g.rows.size(); ++i) {
+      te.emplace_back(g.rows[i]->exit_code == 0 ? g.rows[i]->cpu_s : NAN, g.error(i));
+    }
+    g.on_front.assign(g.rows.size(), false);
+    for (size_t i : pareto_front(te)) g.on_front[i] = true;
+    out.push_back(std::move(g));
+  }
+  return out;
+}
+
+std::string csv_field(const std::string& s) {
+  if (s.find_first_of(",\"\n") == std::string::npos) return s;
+  std::string o = "\"";
+  for (char c : s) o += c == '"' ? std::string("\"\"") : std::string(1, c);
+  return o + "\"";
+}
+
+std::string latex(const std::string& s) {
+  std::string o;
+  for (char c : s) {
+    switch (c) {
+      case '_': case '%': case '&': case '#': case '$': case '{': case '}': o += '\\'; o += c; break;
+      case '~': o += "\\textasciitilde{}"; break;
+      case '^': o += "\\textasciicircum{}"; break;
+      case '\\': o += "\\textbackslash{}"; break;
+      default: o += c;
+    }
+  }
+  return o;
+}
+
+std::string html(const std::string& s) {
+  std::string o;
+  for (char c : s) {
+    switch (c) {
+      case '<': o += "&lt;"; break;
+      case '>': o += "&gt;"; break;
+      case '&': o += "&amp;"; break;
+      case '"': o += "&quot;"; break;
+      default: o += c;
+    }
+  }
+  return o;
+}
+
+std::string base64(const std::string& bytes) {
+  static const char* k = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string o;
+  size_t i = 0;
+  for (; i + 2 < bytes.size(); i += 3) {
+    const unsigned v = (static_cast<unsigned char>(bytes[i]) << 16) | (static_cast<unsigned char>(bytes[i + 1]) << 8) |
+                       static_cast<unsigned char>(bytes[i + 2]);
+    o += {k[v >> 18], k[(v >> 12) & 63], k[(v >> 6) & 63], k[v & 63]};
+  }
+  if (i + 1 == bytes.size()) {
+    const unsigned v = static_cast<unsigned char>(bytes[i]) << 16;
+    o += {k[v >> 18], k[(v >> 12) & 63], '=', '='};
+  } else if (i + 2 == bytes.size()) {
+    const unsigned v = (static_cast<unsigned char>(bytes[i]) << 16) | (static_cast<unsigned char>(bytes[i + 1]) << 8);
+    o += {k[v >> 18], k[(v >> 12) & 63], k[(v >> 6) & 63], '='};
+  }
+  return o;
+}
+
+// A table as rows of cells; rendered in each format.
+struct Table {
+  std::vector<std::string> header;
+  std::vector<std::vector<std::string>> rows;
+
+  std::string markdown() const {
+    std::string s = "|";
+    for (const auto& h : header) s += " " + h + " |";
+    s += "\n|";
+    for (size_t i = 0; i < header.size(); ++i) s += "---|";
+    s += "\n";
+    for (const auto& r : rows) {
+      s += "|";
+      for (const auto& c : r) s += " " + c + " |";
+      s += "\n";
+    }
+    return s;
+  }
+  std::string html_table() const {
+    std::string s = "<table>\n<tr>";
+    for (const auto& h : header) s += "<th>" + html(h) + "</th>";
+    s += "</tr>\n";
+    for (const auto& r : rows) {
+      s += "<tr>";
+      for (const auto& c : r) s += "<td>" + html(c) + "</td>";
+      s += "</tr>\n";
+    }
+    return s + "</table>\n";
+  }
+  std::string latex_table(const std::string& caption) const {
+    std::string s = "\\begin{table}[ht]\n\\centering\n\\caption{" + latex(caption) + "}\n\\begin{tabular}{" +
+                    std::string(header.size(), 'l') + "}\n\\hline\n";
+    for (size_t i = 0; i < header.size(); ++i) s += (i ? " & " : "") + latex(header[i]);
+    s += " \\\\\n\\hline\n";
+    for (const auto& r : rows) {
+      for (size_t i = 0; i < r.size(); ++i) s += (i ? " & " : "") + latex(r[i]);
+      s += " \\\\\n";
+    }
+    return s + "\\hline\n\\end{tabular}\n\\end{table}\n";
+  }
+};
+
+Table front_table(const Group& g) {
+  Table t{{"variant", "params", g.error_label, "CPU s", "wall s", "peak RSS MiB", "cell"}, {}};
+  for (size_t i = 0; i < g.rows.size(); ++i) {
+    if (!g.on_front[i]) continue;
+    const SweepRecord& r = *g.rows[i];
+    t.rows.push_back({r.variant, params_text(r), fmt(g.error(i)), fmt(r.cpu_s, "%.2f"), fmt(r.wall_s, "%.2f"),
+                      fmt(r.peak_rss_mb, "%.0f"), r.cell});
+  }
+  return t;
+}
+
+// form: printf form of the numbers (shortened for the pages, full for the CSV).
+Table cells_table(const Group& g, const char* form = nullptr) {
+  auto f = [form](double v, const char* page_form) { return fmt(v, form ? form : page_form); };
+  Table t{{"cell", "variant", "params", "exit", "wall s", "CPU s", "real-time factor", "peak RSS MiB"}, {}};
+  for (const std::string& m : g.metric_names) t.header.push_back(m);
+  t.header.push_back("Pareto");
+  for (size_t i = 0; i < g.rows.size(); ++i) {
+    const SweepRecord& r = *g.rows[i];
+    std::vector<std::string> row = {r.cell, r.variant, params_text(r), exit_text(r), f(r.wall_s, "%.2f"),
+                                    f(r.cpu_s, "%.2f"), f(r.duration_s > 0 ? r.wall_s / r.duration_s : NAN, "%.2f"),
+                                    f(r.peak_rss_mb, "%.0f")};
+    for (const std::string& m : g.metric_names) row.push_back(f(r.metric(m), "%.4g"));
+    row.push_back(g.on_front[i] ? "yes" : "");
+    t.rows.push_back(std::move(row));
+  }
+  return t;
+}
+
+std::string group_title(const Group& g) { return g.algorithm + " on " + g.dataset; }
+
+std::string front_caption(const Group& g) {
+  return g.error_metric.empty() ? "" : "Pareto front of " + g.error_label + " against CPU time";
+}
+
+}  // namespace
+
+std::vector<size_t> pareto_front(const std::vector<std::pair<double, double>>& time_error) {
+  std::vector<size_t> idx;
+  for (size_t i = 0; i < time_error.size(); ++i) {
+    if (std::isfinite(time_error[i].first) && std::isfinite(time_error[i].second)) idx.push_back(i);
+  }
+  std::stable_sort(idx.begin(), idx.end(), [&](size_t a, size_t b) { return time_error[a] < time_error[b]; });
+  std::vector<size_t> front;
+  double best = INFINITY;
+  for (size_t i : idx) {
+    if (time_error[i].second < best) {
+      best = time_error[i].second;
+      front.push_back(i);
+    }
+  }
+  return front;
+}
+
+SweepReportResult write_sweep_report(const SweepReportOptions& opts) {
+  const fs::path dir(opts.dir);
+  const fs::path results = dir / "results.jsonl";
+  const auto latest = latest_sweep_records(read_sweep_records(results.string()));
+  if (latest.empty()) throw InputError(results.string(), 0, "no result record to report", "a results.jsonl written by `evio sweep`");
+  const std::vector<Group> groups = make_groups(latest);
+  const fs::path rep = dir / "report";
+  fs::create_directories(rep / "plots");
+  SweepReportResult res;
+  res.cells = static_cast<int>(latest.size());
+  int failed = 0;
+  for (const auto& [id, r] : latest) failed += r.exit_code != 0;
+  std::string title = opts.title;
+  if (title.empty()) title = "evio sweep: " + fs::absolute(dir).lexically_normal().filename().string();
+  const std::string summary = std::to_string(latest.size()) + " cells (" + std::to_string(failed) + " failed) from " +
+                              results.string() + ". Time: the CPU time of each cell's process (user + system, s); wall " +
+                              "time and peak RSS as measured by the sweep. Pareto front: the cells no other cell beats in " +
+                              "both error and CPU time.";
+
+  // CSV: every cell, with its group's headline error (what the plot script reads).
+  std::string csv = "cell,algorithm,variant,dataset,params,exit_code,timed_out,wall_s,cpu_s,peak_rss_mb,real_time_factor,"
+                    "error_metric,error,pareto\n";
+  for (const Group& g : groups) {
+    for (size_t i = 0; i < g.rows.size(); ++i) {
+      const SweepRecord& r = *g.rows[i];
+      csv += csv_field(r.cell) + "," + r.algorithm + "," + csv_field(r.variant) + "," + csv_field(r.dataset) + "," +
+             csv_field(params_text(r)) + "," + std::to_string(r.exit_code) + "," + (r.timed_out ? "1" : "0") + "," +
+             fmt(r.wall_s, "%.6g") + "," + fmt(r.cpu_s, "%.6g") + "," + fmt(r.peak_rss_mb, "%.6g") + "," +
+             fmt(r.duration_s > 0 ? r.wall_s / r.duration_s : NAN, "%.6g") + "," + g.error_metric + "," +
+             fmt(g.error(i), "%.9g") + "," + (g.on_front[i] ? "1" : "0") + "\n";
+    }
+  }
+  sweep_write_file(rep / "cells.csv", csv);
+  res.files.push_back((rep / "cells.csv").string());
+
+  // Plots: one PNG (and PDF) per group with an error metric, by the project's matplotlib script.
+  const std::string script = find_evio_script("plot_sweep.py", opts.plot_script);
+  bool any_error = false;
+  for (const Group& g : groups) any_error |= !g.error_metric.empty();
+  if (!any_error) {
+    res.plot_note = "no algorithm in this sweep reports an error against ground truth, so there is nothing to plot";
+  } else if (script.empty()) {
+    res.plot_note = "scripts/plot_sweep.py was not found";
+  } else {
+    SweepJob job{opts.python, {script, (rep / "cells.csv").string(), (rep / "plots").string()},
+                 (rep / "plot.log").string(), (rep / "plot_errors.log").string(), 300};
+    const SweepOutcome o = run_job(job);
+    if (o.exit_code == 0) {
+      res.plots = true;
+    } else {
+      std::string err = sweep_read_file(job.stderr_path);
+      while (!err.empty() && err.back() == '\n') err.pop_back();
+      const size_t nl = err.rfind('\n');
+      res.plot_note = opts.python + " " + script + " failed (exit code " + std::to_string(o.exit_code) + ")" +
+                      (err.empty() ? "" : ": " + err.substr(nl == std::string::npos ? 0 : nl + 1)) +
+                      "; the plots need Debian's python3-matplotlib (sudo apt-get install python3-matplotlib)";
+    }
+  }
+
+  std::string md = "# " + title + "\n\n" + summary + "\n";
+  if (!res.plot_note.empty()) md += "\nPlots are missing: " + res.plot_note + ".\n";
+  std::string tex = "% " + title + " (evio sweep --report)\n% " + summary + "\n";
+  std::string body;
+  for (const Group& g : groups) {
+    md += "\n## " + group_title(g) + "\n\n" + g.note + "\n";
+    body += "<h2 id=\"" + html(g.file_stem()) + "\">" + html(group_title(g)) + "</h2>\n<p>" + html(g.note) + "</p>\n";
+    const Table cells = cells_table(g);
+    if (g.error_metric.empty()) {
+      md += "\nNo ground-truth error from this command: no Pareto front, stats only.\n";
+      body += "<p>No ground-truth error from this command: no Pareto front, stats only.</p>\n";
+      tex += "\n% " + group_title(g) + ": no ground-truth error from this command; every cell:\n" +
+             cells.latex_table(group_title(g) + ": every cell (no ground-truth error)");
+    } else {
+      const Table front = front_table(g);
+      const std::string none = "No successful cell has a finite " + g.error_label + ": no Pareto front.";
+      if (front.rows.empty()) {
+        md += "\n" + none + "\n";
+        tex += "\n% " + group_title(g) + ": " + none + "\n";
+      } else {
+        md += "\n" + front_caption(g) + ":\n\n" + front.markdown();
+        tex += "\n" + front.latex_table(group_title(g) + ": " + front_caption(g));
+      }
+      const fs::path png = rep / "plots" / (g.file_stem() + ".png");
+      std::error_code ec;
+      if (res.plots && fs::exists(png, ec)) {
+        md += "\n![" + group_title(g) + "](plots/" + g.file_stem() + ".png)\n";
+        body += "<img alt=\"" + html(group_title(g)) + "\" src=\"data:image/png;base64," + base64(sweep_read_file(png)) + "\">\n";
+      } else {
+        body += "<p class=\"missing\">Plot missing: " + html(res.plots ? "the script made no plot for this group" : res.plot_note) + ".</p>\n";
+      }
+      body += front.rows.empty() ? "<p>" + html(none) + "</p>\n" : "<h3>" + html(front_caption(g)) + "</h3>\n" + front.html_table();
+    }
+    md += "\nEvery cell:\n\n" + cells.markdown();
+    body += "<h3>Every cell</h3>\n" + cells.html_table();
+    const Table full = cells_table(g, "%.9g");
+    std::string gcsv;
+    for (size_t i = 0; i < full.header.size(); ++i) gcsv += (i ? "," : "") + csv_field(full.header[i]);
+    gcsv += "\n";
+    for (const auto& row : full.rows) {
+      for (size_t i = 0; i < row.size(); ++i) gcsv += (i ? "," : "") + csv_field(row[i]);
+      gcsv += "\n";
+    }
+    sweep_write_file(rep / (g.file_stem() + ".csv"), gcsv);
+    res.files.push_back((rep / (g.file_stem() + ".csv")).string());
+  }
+  sweep_write_file(rep / "pareto.md", md);
+  sweep_write_file(rep / "pareto.tex", tex);
+  std::string page = "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>" + html(title) +
+                     "</title>\n<style>body{font-family:sans-serif;margin:2em;max-width:80em}table{border-collapse:collapse;"
+                     "margin:0.5em 0 1.5em}td,th{border:1px solid #bbb;padding:2px 6px;font-size:90%;text-align:left}"
+                     "th{background:#eee}img{max-width:100%}.missing{color:#a00}</style>\n</head>\n<body>\n<h1>" +
+                     html(title) + "</h1>\n<p>" + html(summary) + "</p>\n";
+  if (!res.plot_note.empty()) page += "<p class=\"missing\">Plots are missing: " + html(res.plot_note) + ".</p>\n";
+  page += "<ul>\n";
+  for (const Group& g : groups) page += "<li><a href=\"#" + html(g.file_stem()) + "\">" + html(group_title(g)) + "</a></li>\n";
+  page += "</ul>\n" + body + "</body>\n</html>\n";
+  sweep_write_file(rep / "index.html", page);
+  for (const char* f : {"pareto.md", "pareto.tex", "index.html"}) res.files.push_back((rep / f).string());
+  return res;
+}
+
+}  // namespace evio::apps

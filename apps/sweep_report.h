@@ -1,0 +1,36 @@
+// evio sweep: the report of a sweep folder's results.jsonl. Per algorithm and dataset, the Pareto
+// front of the headline error against CPU time (cells that no other cell beats in both), as
+// Markdown, CSV and LaTeX tables; plots by scripts/plot_sweep.py (matplotlib); one self-contained
+// HTML page with the plots embedded as data URIs and every table.
+#pragma once
+
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace evio::apps {
+
+// Indices of the Pareto-optimal points of (time, error) pairs, fastest first: a point is kept when
+// no other point has time <= and error <= with one of them strictly smaller. Points with a
+// non-finite coordinate are left out.
+std::vector<size_t> pareto_front(const std::vector<std::pair<double, double>>& time_error);
+
+struct SweepReportOptions {
+  std::string dir;                      // the sweep folder (results.jsonl in it; report/ is written)
+  std::string title;                    // report title (default: the folder name)
+  std::string python = "/usr/bin/python3";  // runs scripts/plot_sweep.py (needs matplotlib)
+  std::string plot_script;              // default: scripts/plot_sweep.py of the sources or the install
+};
+
+struct SweepReportResult {
+  std::vector<std::string> files;  // written, in DIR/report/
+  int cells = 0;                   // latest records reported
+  bool plots = false;              // the plot script ran and made the plots
+  std::string plot_note;           // why there are no plots
+};
+
+// Reads DIR/results.jsonl and writes DIR/report/{pareto.md, cells.csv, pareto.tex, index.html,
+// plots/*.png}. Throws InputError when there is no record to report.
+SweepReportResult write_sweep_report(const SweepReportOptions& opts);
+
+}  // namespace evio::apps

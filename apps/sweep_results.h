@@ -1,0 +1,60 @@
+// evio sweep: one cell's result record (a line of results.jsonl), the metrics each algorithm's
+// outputs give (error against ground truth where the command evaluates it, its own stats
+// otherwise), and the atomic append / tolerant read of results.jsonl.
+#pragma once
+
+#include <cmath>
+#include <map>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace evio::apps {
+
+struct SweepRecord {
+  std::string cell, algorithm, variant, dataset, dataset_path;
+  std::vector<std::pair<std::string, std::string>> params;  // config key -> YAML value
+  std::vector<std::string> args;
+  int exit_code = 0;          // negative: killed by that signal
+  bool timed_out = false;
+  double wall_s = 0, cpu_s = 0, peak_rss_mb = 0;
+  double duration_s = NAN;    // the data's duration from the cell's stats.json, s (NaN: unknown)
+  std::vector<std::pair<std::string, double>> metrics;  // name -> value (NaN: null)
+  std::string error_metric;   // the headline error in metrics (empty: the command does not evaluate)
+  std::string note;           // where the metrics come from / why there is no error metric
+  std::string engine, host, started_utc;
+
+  double metric(const std::string& name) const;  // NaN when absent
+};
+
+// How an algorithm's cell is measured.
+struct SweepAlgorithmInfo {
+  std::string name;
+  bool gt_flag = false;       // pass --gt DATASET/groundtruth.txt when it exists and args do not set --gt
+  std::string error_metric;   // headline error (lower is better); empty: none
+  std::string error_label;    // e.g. "ATE RMSE m"
+  std::string note;           // what the metrics are
+};
+const SweepAlgorithmInfo& sweep_algorithm_info(const std::string& algorithm);
+
+// Reads the metrics of a finished cell from its output folder (stats.json, eval.json): fills
+// metrics, error_metric, duration_s and note. Missing files or keys give null metrics.
+void read_cell_metrics(const std::string& algorithm, const std::string& out_dir, SweepRecord* r);
+
+// The record as one JSON line, '\n' included.
+std::string sweep_record_json(const SweepRecord& r);
+// Appends the line with one write() on an O_APPEND descriptor under an exclusive flock, so records of
+// concurrent cells (or concurrent sweeps) never interleave. Throws std::runtime_error on failure.
+void append_sweep_record(const std::string& results_path, const SweepRecord& r);
+// Every parsable record in file order (a torn or garbled line is skipped with a warning naming it);
+// an absent file gives none.
+std::vector<SweepRecord> read_sweep_records(const std::string& results_path);
+// Whole-file text I/O of the sweep's own files: read gives "" for a missing file; write throws
+// InputError naming the file when it cannot be written.
+std::string sweep_read_file(const std::string& path);
+void sweep_write_file(const std::string& path, const std::string& text);
+
+// The last record of each cell.
+std::map<std::string, SweepRecord> latest_sweep_records(const std::vector<SweepRecord>& records);
+
+}  // namespace evio::apps

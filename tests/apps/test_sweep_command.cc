@@ -1,0 +1,491 @@
+// `evio sweep`: spec parsing and its errors (file:line and the expected form), cell expansion,
+// the Pareto front, results.jsonl records and their atomic appends from concurrent processes, and
+// whole sweeps through the local engine with stand-in programs (shell scripts named evio-<alg>
+// that write a stats.json, fail or hang on request): every cell recorded once under --jobs 2,
+// failed and timed-out cells recorded (a killed cell with a negative exit code) and rerun by
+// --resume, and the report (Markdown, CSV, LaTeX, HTML) listing every cell.
+#include "sweep_command.h"
+
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <set>
+#include <sstream>
+
+#include <gtest/gtest.h>
+
+#include "evio/calib/error.h"
+#include "evio_test/temp_dir.h"
+#include "evio_test/text_file.h"
+#include "sweep_engine.h"
+#include "sweep_report.h"
+#include "sweep_results.h"
+#include "sweep_spec.h"
+
+namespace evio::apps {
+namespace {
+
+namespace fs = std::filesystem;
+
+// The error message of parsing `text` as a spec in dir (empty when it parses).
+std::string spec_error(const std::string& text, const std::string& dir) {
+  try {
+    parse_sweep_spec(text, "spec.yaml", dir);
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return {};
+}
+
+TEST(SweepSpec, ParsesDatasetsAlgorithmsAndGrids) {
+  evio_test::TempDir tmp;
+  fs::create_directories(tmp.file("rec"));
+  tmp.write("scene.yaml", "x: 1\n");
+  const SweepSpec s = parse_sweep_spec(
+      "name: t\ntimeout_s: 5\ndatasets:\n  - rec\n  - {name: sim, scene: scene.yaml, duration: 0.5, seed: 3, set: {a.b: [1, 2]}}\n"
+      "algorithms:\n  - algorithm: vio\n    variant: small\n    args: [--config, '{spec_dir}/c.yaml']\n"
+      "    grid: {frames.events_per_frame: [5000, 15000], window.size: 5}\n    timeout_s: 9\n"
+      "  - {algorithm: corners, datasets: [sim]}\n",
+      "spec.yaml", tmp.path());
+  EXPECT_EQ(s.name, "t");
+  EXPECT_EQ(s.timeout_s, 5);
+  ASSERT_EQ(s.datasets.size(), 2u);
+  EXPECT_EQ(s.datasets[0].name, "rec");
+  EXPECT_FALSE(s.datasets[0].simulated());
+  EXPECT_EQ(s.datasets[1].name, "sim");
+  EXPECT_EQ(s.datasets[1].duration_s, "0.5");
+  EXPECT_EQ(s.datasets[1].set, std::vector<std::string>{"a.b=[1, 2]"});
+  EXPECT_EQ(simulate_arguments(s.datasets[1], "/o"),
+            (std::vector<std::string>{"simulate", tmp.file("scene.yaml"), "--out", "/o", "--duration", "0.5", "--seed", "3", "--set", "a.b=[1, 2]"}));
+  ASSERT_EQ(s.algorithms.size(), 2u);
+  EXPECT_EQ(s.algorithms[0].variant, "small");
+  ASSERT_EQ(s.algorithms[0].grid.size(), 2u);
+  EXPECT_EQ(s.algorithms[0].grid[0].second, (std::vector<std::string>{"5000", "15000"}));
+  EXPECT_EQ(s.algorithms[0].grid[1].second, std::vector<std::string>{"5"});
+  EXPECT_EQ(s.algorithms[0].timeout_s, 9);
+  EXPECT_EQ(s.algorithms[1].datasets, std::vector<std::string>{"sim"});
+}
+
+TEST(SweepSpec, ErrorsNameFileLineAndExpectedForm) {
+  evio_test::TempDir tmp;
+  fs::create_directories(tmp.file("rec"));
+  const std::string ds = "datasets: [rec]\n";
+  struct Case {
+    std::string text, error;
+  };
+  const std::vector<Case> cases = {
+      {"datasets: [rec\n", "spec.yaml:"},  // YAML syntax
+      {"- 1\n", "spec.yaml:1: the spec is not a mapping"},
+      {ds + "algorithms: []\n", "spec.yaml:2: `algorithms:` is missing or not a non-empty list"},
+      {ds + "algorithms:\n  - algorithm: vio\nfoo: 1\n", "spec.yaml:4: unknown key 'foo' in the spec"},
+      {"datasets: [nothere]\nalgorithms: [{algorithm: vio}]\n", "spec.yaml:1: dataset path " + tmp.file("nothere") + ": no such file"},
+      {ds + "algorithms:\n  - algorithm: vioo\n", "spec.yaml:3: unknown algorithm 'vioo' (expected: one of vio, mosaic, corners, flow, segment, reconstruct)"},
+      {ds + "algorithms:\n  - {algorithm: vio, datasets: [x]}\n", "spec.yaml:3: unknown dataset 'x'"},
+      {ds + "algorithms:\n  - {algorithm: vio, args: [--out, x]}\n", "spec.yaml:3: args sets --out"},
+      {ds + "algorithms:\n  - algorithm: vio\n    grid: {'a b': [1]}\n", "spec.yaml:4: grid key 'a b' is not a config key"},
+      {ds + "algorithms:\n  - algorithm: vio\n    grid:\n      a.b: []\n", "spec.yaml:5: grid key 'a.b' has no values"},
+      {ds + "algorithms:\n  - {algorithm: vio, timeout_s: soon}\n", "spec.yaml:3: timeout_s 'soon' is not a number of seconds"},
+      {"datasets: [rec, rec]\nalgorithms: [{algorithm: vio}]\n", "spec.yaml:1: two datasets named 'rec'"},
+      {"datasets: [{name: a, path: rec, duration: 1}]\nalgorithms: [{algorithm: vio}]\n", "duration, seed and set apply to a `scene` only"},
+      {"datasets: [{name: 'a/b', path: rec}]\nalgorithms: [{algorithm: vio}]\n", "name 'a/b' is not a plain name"},
+      {ds + "algorithms:\n  - algorithm: vio\n  - algorithm: vio\n", "spec.yaml:4: the cell vio-rec-"},
+  };
+  for (const Case& c : cases) {
+    std::string e = spec_error(c.text, tmp.path());
+    if (e.empty()) {  // the duplicate cell is found by the expansion
+      try {
+        expand_sweep_cells(parse_sweep_spec(c.text, "spec.yaml", tmp.path()), tmp.file("data"));
+      } catch (const InputError& x) {
+        e = x.what();
+      }
+    }
+    EXPECT_NE(e.find(c.error), std::string::npos) << "spec:\n" << c.text << "error: " << e;
+    EXPECT_NE(e.find("expected"), std::string::npos) << e;
+  }
+  EXPECT_NE(spec_error("", tmp.path()).find("the spec is not a mapping"), std::string::npos);
+}
+
+TEST(SweepCells, GridProductInOrderWithStableIds) {
+  evio_test::TempDir tmp;
+  fs::create_directories(tmp.file("rec"));
+  tmp.write("scene.yaml", "x: 1\n");
+  const std::string text =
+      "datasets: [rec, {name: sim, scene: scene.yaml}]\nalgorithms:\n"
+      "  - {algorithm: flow, args: ['{dataset}/x', '{spec_dir}'], grid: {a: [1, 2, 3], b: [x, y]}}\n"
+      "  - {algorithm: corners, datasets: [sim], timeout_s: 2}\n";
+  const SweepSpec s = parse_sweep_spec(text, "spec.yaml", tmp.path());
+  const std::vector<SweepCell> cells = expand_sweep_cells(s, tmp.file("data"));
+  ASSERT_EQ(cells.size(), 2u * 6u + 1u);
+  EXPECT_EQ(cells[0].params, (std::vector<std::pair<std::string, std::string>>{{"a", "1"}, {"b", "x"}}));
+  EXPECT_EQ(cells[1].params, (std::vector<std::pair<std::string, std::string>>{{"a", "1"}, {"b", "y"}}));
+  EXPECT_EQ(cells[5].params, (std::vector<std::pair<std::string, std::string>>{{"a", "3"}, {"b", "y"}}));
+  EXPECT_EQ(cells[0].dataset, "rec");
+  EXPECT_EQ(cells[6].dataset, "sim");
+  EXPECT_TRUE(cells[6].simulated);
+  EXPECT_EQ(cells[6].dataset_path, tmp.file("data") + "/sim");
+  EXPECT_EQ(cells[0].args, (std::vector<std::string>{tmp.file("rec") + "/x", tmp.path()}));
+  EXPECT_EQ(cells[12].algorithm, "corners");
+  EXPECT_EQ(cells[12].timeout_s, 2);
+  std::set<std::string> ids;
+  for (const SweepCell& c : cells) {
+    ids.insert(c.id);
+    EXPECT_EQ(c.id.rfind(c.algorithm + "-" + c.dataset + "-", 0), 0u) << c.id;
+  }
+  EXPECT_EQ(ids.size(), cells.size());
+  // The same spec gives the same ids (what --resume matches); another value another id.
+  EXPECT_EQ(expand_sweep_cells(parse_sweep_spec(text, "other.yaml", tmp.path()), tmp.file("data"))[3].id, cells[3].id);
+  std::string changed = text;
+  changed.replace(changed.find("[1, 2, 3]"), 9, "[1, 2, 4]");
+  const auto cells2 = expand_sweep_cells(parse_sweep_spec(changed, "spec.yaml", tmp.path()), tmp.file("data"));
+  EXPECT_EQ(cells2[0].id, cells[0].id);
+  EXPECT_NE(cells2[4].id, cells[4].id);
+}
+
+TEST(SweepPareto, KeepsCellsNoOtherBeatsInTimeAndError) {
+  // (time, error): 0 (1, 5) front, 1 (2, 3) front, 2 (3, 4) dominated by 1, 3 (2, 3.5) dominated by 1,
+  // 4 (5, 1) front, 5 NaN error left out, 6 (5, 1) equal to 4: not strictly better.
+  const std::vector<std::pair<double, double>> p = {{1, 5}, {2, 3}, {3, 4}, {2, 3.5}, {5, 1}, {0.5, NAN}, {5, 1}};
+  EXPECT_EQ(pareto_front(p), (std::vector<size_t>{0, 1, 4}));
+  EXPECT_TRUE(pareto_front({}).empty());
+}
+
+SweepRecord example_record(const std::string& cell, int exit_code) {
+  SweepRecord r;
+  r.cell = cell;
+  r.algorithm = "flow";
+  r.dataset = "d \"quoted\"";
+  r.params = {{"window.events", "30000"}, {"cmax.model", "rotation"}, {"list", "[1, 2]"}};
+  r.args = {"--model", "rotation"};
+  r.exit_code = exit_code;
+  r.timed_out = exit_code == -9;
+  r.wall_s = 1.5;
+  r.cpu_s = 1.25;
+  r.peak_rss_mb = 33;
+  r.duration_s = 2;
+  r.metrics = {{"angular_velocity_rms_degps", 1.3125}, {"windows", NAN}};
+  r.error_metric = "angular_velocity_rms_degps";
+  r.note = "a note";
+  return r;
+}
+
+TEST(SweepResults, RecordIsOneJsonLineThatReadsBack) {
+  const SweepRecord r = example_record("flow-d-00000001", -9);
+  const std::string line = sweep_record_json(r);
+  ASSERT_EQ(line.back(), '\n');
+  EXPECT_EQ(line.find('\n'), line.size() - 1);
+  for (const char* key : {"\"cell\": ", "\"algorithm\": ", "\"dataset\": ", "\"params\": {", "\"exit_code\": -9", "\"wall_s\": 1.5",
+                          "\"cpu_s\": 1.25", "\"peak_rss_mb\": 33", "\"metrics\": {", "\"windows\": null", "\"window.events\": 30000",
+                          "\"cmax.model\": \"rotation\"", "\"real_time_factor\": 0.75"}) {
+    EXPECT_NE(line.find(key), std::string::npos) << key << " in " << line;
+  }
+  evio_test::TempDir tmp;
+  const std::string path = tmp.file("results.jsonl");
+  append_sweep_record(path, r);
+  { std::ofstream(path, std::ios::app) << "{\"cell\": \"torn"; }  // a torn line is skipped
+  append_sweep_record(path, example_record("flow-d-00000001", 0));
+  const std::vector<SweepRecord> back = read_sweep_records(path);
+  ASSERT_EQ(back.size(), 2u);  // the torn line is skipped, the record after it is whole
+  EXPECT_EQ(back[0].exit_code, -9);
+  EXPECT_TRUE(back[0].timed_out);
+  EXPECT_EQ(back[0].dataset, "d \"quoted\"");
+  EXPECT_EQ(back[0].params, r.params);
+  EXPECT_EQ(back[0].args, r.args);
+  EXPECT_EQ(back[0].metric("angular_velocity_rms_degps"), 1.3125);
+  EXPECT_TRUE(std::isnan(back[0].metric("windows")));
+  EXPECT_EQ(back[0].error_metric, "angular_velocity_rms_degps");
+  EXPECT_EQ(back[1].exit_code, 0);
+  EXPECT_EQ(latest_sweep_records(back).at("flow-d-00000001").exit_code, 0);
+}
+
+TEST(SweepResults, ConcurrentAppendsFromProcessesNeverInterleave) {
+  evio_test::TempDir tmp;
+  const std::string path = tmp.file("results.jsonl");
+  const int kProcs = 4, kLines = 100;
+  std::vector<pid_t> pids;
+  for (int p = 0; p < kProcs; ++p) {
+    const pid_t pid = fork();
+    ASSERT_GE(pid, 0);
+    if (pid == 0) {
+      for (int i = 0; i < kLines; ++i) {
+        SweepRecord r = example_record("cell-" + std::to_string(p) + "-" + std::to_string(i), 0);
+        r.args.assign(1, std::string(9000, 'a' + p));  // longer than PIPE_BUF
+        append_sweep_record(path, r);
+      }
+      _exit(0);
+    }
+    pids.push_back(pid);
+  }
+  for (pid_t pid : pids) {
+    int status = 0;
+    waitpid(pid, &status, 0);
+    EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0);
+  }
+  const std::vector<SweepRecord> back = read_sweep_records(path);
+  ASSERT_EQ(back.size(), static_cast<size_t>(kProcs * kLines));
+  for (const SweepRecord& r : back) {
+    ASSERT_EQ(r.args.size(), 1u);
+    EXPECT_EQ(r.args[0], std::string(9000, r.args[0][0]));
+  }
+  EXPECT_EQ(latest_sweep_records(back).size(), static_cast<size_t>(kProcs * kLines));
+}
+
+// Stand-ins for evio-<algorithm> in a folder: DATASET --out DIR -q [--marker FILE] [--set k=v]...
+// --set err=X writes X as the flow error (and the corners count), fail=1 exits 1, and --marker FILE
+// hangs (30 s, as the same process) when FILE does not exist yet, after writing its pid there, so a
+// rerun succeeds.
+std::string fake_programs(const evio_test::TempDir& tmp) {
+  const std::string dir = tmp.file("bin");
+  fs::create_directories(dir);
+  const std::string script =
+      "#!/bin/sh\nds=$1; shift; out=; err=null; fail=; marker=\n"
+      "while [ $# -gt 0 ]; do case \"$1\" in\n"
+      "  --out) out=$2; shift 2;;\n  --marker) marker=$2; shift 2;;\n"
+      "  --set) case \"$2\" in err=*) err=${2#err=};; fail=*) fail=${2#fail=};; esac; shift 2;;\n"
+      "  *) shift;; esac; done\n"
+      "mkdir -p \"$out\"\necho \"fake run on $ds\"\n"
+      "if [ -n \"$marker\" ] && [ ! -e \"$marker\" ]; then echo $$ > \"$marker\"; exec sleep 30; fi\n"
+      "if [ \"$fail\" = 1 ]; then echo 'evio: error: failing on purpose' >&2; exit 1; fi\n"
+      "printf '{\"groundtruth\": {\"rms_error_degps\": %s}, \"duration_s\": 2, \"windows\": 3, \"corners\": %s}\\n' "
+      "\"$err\" \"$err\" > \"$out/stats.json\"\n";
+  for (const char* alg : {"flow", "corners"}) {
+    const std::string p = dir + "/evio-" + alg;
+    std::ofstream(p) << script;
+    fs::permissions(p, fs::perms::owner_all);
+  }
+  return dir;
+}
+
+SweepArgs fake_sweep(const evio_test::TempDir& tmp, const std::string& spec_text) {
+  fs::create_directories(tmp.file("rec"));
+  SweepArgs a;
+  a.spec = tmp.write("spec.yaml", spec_text);
+  a.out = tmp.file("sweep");
+  a.jobs = 2;
+  a.programs_dir = fake_programs(tmp);
+  a.python = tmp.file("no_python");
+  a.progress = false;
+  return a;
+}
+
+int run_quietly(const SweepArgs& a, std::string* error = nullptr) {
+  std::ostringstream out;
+  try {
+    return run_sweep(a, out);
+  } catch (const InputError& e) {
+    if (error) *error = e.what();
+    return 1;
+  }
+}
+
+TEST(SweepRun, JobsTwoRecordsEveryCellOnceWithItsOutcomeAndMetrics) {
+  evio_test::TempDir tmp;
+  const SweepArgs a = fake_sweep(tmp,
+                                 "datasets: [rec]\nalgorithms:\n  - {algorithm: flow, grid: {err: [1, 2, 3, 4, 5, 6]}}\n"
+                                 "  - {algorithm: corners, grid: {err: [7], fail: [0, 1]}}\n");
+  std::string error;
+  EXPECT_EQ(run_quietly(a, &error), 1);
+  EXPECT_NE(error.find("1 of 8 cells failed"), std::string::npos) << error;
+  const std::vector<SweepRecord> recs = read_sweep_records(a.out + "/results.jsonl");
+  ASSERT_EQ(recs.size(), 8u);
+  std::set<std::string> cells;
+  for (const SweepRecord& r : recs) {
+    cells.insert(r.cell);
+    EXPECT_TRUE(fs::exists(a.out + "/cells/" + r.cell + "/stdout.log"));
+    EXPECT_TRUE(fs::exists(a.out + "/cells/" + r.cell + "/command.txt"));
+    EXPECT_GE(r.wall_s, 0);
+    EXPECT_GE(r.cpu_s, 0);
+    EXPECT_GT(r.peak_rss_mb, 0);
+    EXPECT_EQ(r.engine, "local");
+    const bool fails = r.params.size() == 2 && r.params[1].second == "1";
+    EXPECT_EQ(r.exit_code, fails ? 1 : 0) << r.cell;
+    if (r.algorithm == "flow") {
+      EXPECT_EQ(r.metric("angular_velocity_rms_degps"), std::stod(r.params[0].second));
+      EXPECT_EQ(r.duration_s, 2);
+      EXPECT_EQ(r.error_metric, "angular_velocity_rms_degps");
+    } else {
+      EXPECT_TRUE(r.error_metric.empty());
+      if (!fails) {
+        EXPECT_EQ(r.metric("corners"), 7);
+      }
+    }
+  }
+  EXPECT_EQ(cells.size(), 8u);
+  EXPECT_NE(evio_test::read_text(a.out + "/cells/" + recs[0].cell + "/stdout.log").find("fake run on " + tmp.file("rec")), std::string::npos);
+
+  // Without --resume the folder is not reused; with it only the failed cell runs again.
+  EXPECT_EQ(run_quietly(a, &error), 1);
+  EXPECT_NE(error.find("has results already"), std::string::npos) << error;
+  SweepArgs resume = a;
+  resume.resume = true;
+  EXPECT_EQ(run_quietly(resume, &error), 1);
+  EXPECT_EQ(read_sweep_records(a.out + "/results.jsonl").size(), 9u);
+}
+
+TEST(SweepRun, TimedOutCellIsRecordedWithItsSignalAndRerunByResume) {
+  evio_test::TempDir tmp;
+  SweepArgs a = fake_sweep(tmp, "datasets: [rec]\nalgorithms:\n  - {algorithm: flow, grid: {err: [1]}}\n"
+                                "  - {algorithm: flow, variant: slow, args: [--marker, '{spec_dir}/marker'], grid: {err: [2]}}\n");
+  a.timeout_s = 0.5;
+  std::string error;
+  EXPECT_EQ(run_quietly(a, &error), 1);
+  auto latest = latest_sweep_records(read_sweep_records(a.out + "/results.jsonl"));
+  ASSERT_EQ(latest.size(), 2u);
+  int killed = 0;
+  for (const auto& [id, r] : latest) {
+    if (r.variant == "slow") {
+      EXPECT_EQ(r.exit_code, -9);
+      EXPECT_TRUE(r.timed_out);
+      ++killed;
+    } else {
+      EXPECT_EQ(r.exit_code, 0);
+    }
+  }
+  EXPECT_EQ(killed, 1);
+  a.resume = true;
+  EXPECT_EQ(run_quietly(a, &error), 0) << error;
+  const std::vector<SweepRecord> all = read_sweep_records(a.out + "/results.jsonl");
+  EXPECT_EQ(all.size(), 3u);  // only the killed cell ran again
+  latest = latest_sweep_records(all);
+  for (const auto& [id, r] : latest) EXPECT_EQ(r.exit_code, 0) << id;
+  EXPECT_TRUE(fs::exists(a.out + "/report/index.html"));
+}
+
+// A sweep of one cell that hangs, run by a child process: its pid, and the cell's once it hangs
+// (0 if it never does).
+std::pair<pid_t, pid_t> start_hanging_sweep(const evio_test::TempDir& tmp, SweepArgs* a) {
+  *a = fake_sweep(tmp, "datasets: [rec]\nalgorithms:\n"
+                       "  - {algorithm: flow, variant: slow, args: [--marker, '{spec_dir}/marker'], grid: {err: [2]}}\n");
+  const pid_t pid = fork();
+  if (pid == 0) _exit(run_quietly(*a));
+  pid_t cell = 0;
+  for (int i = 0; i < 500 && cell <= 0; ++i) {
+    usleep(10000);
+    std::ifstream(tmp.file("marker")) >> cell;
+  }
+  return {pid, cell};
+}
+
+// --resume runs the one cell, which succeeds this time, and records it.
+void expect_resume_records_the_cell(SweepArgs a) {
+  a.resume = true;
+  EXPECT_EQ(run_quietly(a), 0);
+  const std::vector<SweepRecord> recs = read_sweep_records(a.out + "/results.jsonl");
+  ASSERT_EQ(recs.size(), 1u);
+  EXPECT_EQ(recs[0].exit_code, 0);
+}
+
+TEST(SweepRun, InterruptedSweepKillsItsCellsRecordsNoneOfThemAndResumeRunsThem) {
+  evio_test::TempDir tmp;
+  SweepArgs a;
+  const auto [pid, cell] = start_hanging_sweep(tmp, &a);
+  ASSERT_GT(pid, 0);
+  ASSERT_GT(cell, 0);
+  kill(pid, SIGINT);  // as Ctrl-C would
+  int status = 0;
+  waitpid(pid, &status, 0);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 130);
+  EXPECT_TRUE(read_sweep_records(a.out + "/results.jsonl").empty());
+  expect_resume_records_the_cell(a);
+}
+
+// A process that has ended (gone, or a zombie waiting for its new parent to reap it).
+bool ended(pid_t pid) {
+  std::ifstream stat("/proc/" + std::to_string(pid) + "/stat");
+  std::string text((std::istreambuf_iterator<char>(stat)), std::istreambuf_iterator<char>());
+  const size_t paren = text.rfind(')');
+  return text.empty() || (paren != std::string::npos && paren + 2 < text.size() && text[paren + 2] == 'Z');
+}
+
+TEST(SweepRun, SweepKilledOutrightTakesItsCellsWithItAndResumeRunsThem) {
+  evio_test::TempDir tmp;
+  SweepArgs a;
+  const auto [pid, cell] = start_hanging_sweep(tmp, &a);
+  ASSERT_GT(pid, 0);
+  ASSERT_GT(cell, 0);
+  kill(pid, SIGKILL);
+  waitpid(pid, nullptr, 0);
+  bool gone = false;
+  for (int i = 0; i < 500 && !gone; ++i) {
+    gone = ended(cell);
+    if (!gone) usleep(10000);
+  }
+  EXPECT_TRUE(gone) << "the cell " << cell << " outlived the sweep";
+  if (!gone) kill(cell, SIGKILL);
+  expect_resume_records_the_cell(a);
+}
+
+TEST(SweepRun, UnknownEngineIsAnError) {
+  evio_test::TempDir tmp;
+  SweepArgs a = fake_sweep(tmp, "datasets: [rec]\nalgorithms: [{algorithm: flow}]\n");
+  a.engine = "slurm";
+  std::string error;
+  EXPECT_EQ(run_quietly(a, &error), 1);
+  EXPECT_NE(error.find("--engine slurm: unknown or not implemented (implemented: local"), std::string::npos) << error;
+  EXPECT_FALSE(fs::exists(a.out + "/results.jsonl"));
+}
+
+TEST(SweepReport, TablesAndPageListEveryCellAndSayWhenPlotsAreMissing) {
+  evio_test::TempDir tmp;
+  SweepArgs a = fake_sweep(tmp, "name: fake sweep\ndatasets: [rec]\nalgorithms:\n  - {algorithm: flow, grid: {err: [3, 1, 2]}}\n"
+                                "  - {algorithm: corners, grid: {err: [5]}}\n");
+  ASSERT_EQ(run_quietly(a), 0);
+  const auto latest = latest_sweep_records(read_sweep_records(a.out + "/results.jsonl"));
+  const std::string md = evio_test::read_text(a.out + "/report/pareto.md");
+  const std::string csv = evio_test::read_text(a.out + "/report/cells.csv");
+  const std::string tex = evio_test::read_text(a.out + "/report/pareto.tex");
+  const std::string page = evio_test::read_text(a.out + "/report/index.html");
+  for (const auto& [id, r] : latest) {
+    EXPECT_NE(md.find(id), std::string::npos) << id;
+    EXPECT_NE(csv.find(id), std::string::npos) << id;
+    EXPECT_NE(page.find(id), std::string::npos) << id;
+  }
+  EXPECT_NE(md.find("# fake sweep"), std::string::npos);
+  EXPECT_NE(md.find("## flow on rec"), std::string::npos);
+  EXPECT_NE(md.find("Pareto front of angular velocity RMS deg/s against CPU time"), std::string::npos);
+  EXPECT_NE(md.find("## corners on rec"), std::string::npos);
+  EXPECT_NE(md.find("No ground-truth error from this command"), std::string::npos);
+  EXPECT_NE(tex.find("\\begin{tabular}"), std::string::npos);
+  EXPECT_NE(tex.find("flow on rec"), std::string::npos);
+  EXPECT_NE(page.find("Plots are missing"), std::string::npos);
+  EXPECT_EQ(page.find("<script"), std::string::npos);
+  EXPECT_TRUE(fs::exists(a.out + "/report/flow__rec.csv"));
+  EXPECT_TRUE(fs::exists(a.out + "/report/corners__rec.csv"));
+  // The report mode rewrites it from results.jsonl alone.
+  fs::remove_all(a.out + "/report");
+  SweepArgs r;
+  r.out = a.out;
+  r.report_only = true;
+  r.python = a.python;
+  ASSERT_EQ(run_quietly(r), 0);
+  EXPECT_TRUE(fs::exists(a.out + "/report/index.html"));
+}
+
+TEST(SweepReport, SaysSoWhenNoCellHasAFiniteError) {
+  evio_test::TempDir tmp;
+  const SweepArgs a = fake_sweep(tmp, "datasets: [rec]\nalgorithms: [{algorithm: flow}]\n");  // err: null
+  ASSERT_EQ(run_quietly(a), 0);
+  const std::string md = evio_test::read_text(a.out + "/report/pareto.md");
+  EXPECT_NE(md.find("No successful cell has a finite angular velocity RMS deg/s: no Pareto front."), std::string::npos) << md;
+  EXPECT_EQ(md.find("Pareto front of"), std::string::npos) << md;
+}
+
+TEST(SweepReport, PlotsAreEmbeddedWhenMatplotlibIsThere) {
+  if (std::system("/usr/bin/python3 -c 'import matplotlib' > /dev/null 2>&1") != 0) GTEST_SKIP() << "no matplotlib in /usr/bin/python3";
+  evio_test::TempDir tmp;
+  SweepArgs a = fake_sweep(tmp, "datasets: [rec]\nalgorithms:\n  - {algorithm: flow, grid: {err: [3, 1]}}\n");
+  a.python = "/usr/bin/python3";
+  ASSERT_EQ(run_quietly(a), 0);
+  EXPECT_TRUE(fs::exists(a.out + "/report/plots/flow__rec.png"));
+  const std::string page = evio_test::read_text(a.out + "/report/index.html");
+  EXPECT_NE(page.find("<img alt=\"flow on rec\" src=\"data:image/png;base64,iVBORw0KGgo"), std::string::npos);
+  EXPECT_EQ(page.find("Plots are missing"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace evio::apps
