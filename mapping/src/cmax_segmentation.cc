@@ -22,7 +22,6 @@ struct MotionSegmenter::State {
   std::vector<std::vector<float>> w;  // w[j][k]: association of event k with cluster j
   std::map<WarpModel, std::unique_ptr<ContrastMaximizer>> cm;  // one per model (level 0 only)
   std::vector<float> support;         // per event: the clusters' blurred IWEs at its warped positions, summed
-  std::vector<int> best_other;        // per cluster: the other cluster whose motion explains its events best
   std::vector<int> nearest;           // per cluster: the other cluster whose motion is closest on its events
   int alternations = 0;
   int evaluations = 0;
@@ -254,7 +253,6 @@ void MotionSegmenter::compute_gains(const CmaxEvents& ev, State* s) {
       if (s->w[j][k] > s->w[best][k]) best = j;
     mine[best].push_back(static_cast<uint32_t>(k));
   }
-  s->best_other.assign(N, -1);
   for (size_t j = 0; j < N; ++j) {
     SegmentCluster& c = s->cl[j];
     const CmaxEvents sub = ev.select(mine[j]);
@@ -267,12 +265,12 @@ void MotionSegmenter::compute_gains(const CmaxEvents& ev, State* s) {
     for (size_t i = 0; i < N; ++i)
       if (i != j) {
         const double v = f(s->cl[i].model, s->cl[i].params);
-        if (v > c.objective_other) c.objective_other = v, s->best_other[j] = static_cast<int>(i);
+        c.objective_other = std::max(c.objective_other, v);
       }
     c.gain = (N > 1 && c.objective_other > 0) ? c.objective / c.objective_other - 1.0 : 0.0;
   }
   // Where a removed cluster's events go: the cluster whose flow is closest to its own at its
-  // events (mean flow difference over up to 256 of them). Not best_other: under the normalised
+  // events (mean flow difference over up to 256 of them). Not the best-scoring other: under the normalised
   // objective a near-still motion scores about 1 on any events, often above the right motion
   // slightly off, and would take over an object's events (and then its motion).
   s->nearest.assign(N, -1);
