@@ -16,16 +16,14 @@
 #include "evio/mapping/event_harris.h"
 #include "evio/sensors/ecd.h"
 #include "evio_test/real_data.h"
+#include "evio_test/timed_frame.h"
 
 namespace evio::mapping {
 namespace {
 
 constexpr double kTwoPi = 6.283185307179586;
 
-struct TimedFrame {
-  int64_t t_ns;
-  std::vector<uint8_t> pixels;  // W x H row-major
-};
+using evio_test::TimedFrame;
 
 struct Stream {
   int w = 0, h = 0;
@@ -80,7 +78,7 @@ void run_stream(const Stream& s, F* f, bool frames, const std::vector<int64_t>& 
   for (int64_t t : readouts) {
     while (frames && k < s.frames.size() && s.frames[k].t_ns < t) {
       events_before(s.frames[k].t_ns, true);
-      f->add_frame(s.frames[k].t_ns, GreyView{s.frames[k].pixels.data(), s.w, s.h, s.w});
+      f->add_frame(s.frames[k].t_ns, evio_test::view(s.frames[k], s.w, s.h));
       ++k;
     }
     events_before(t, false);

@@ -16,6 +16,7 @@
 #include "evio/mapping/reconstruction.h"
 #include "evio/sensors/ecd.h"
 #include "evio_test/real_data.h"
+#include "evio_test/timed_frame.h"
 #include "evio_test/simulated_reconstruction.h"
 
 namespace evio::mapping {
@@ -23,12 +24,9 @@ namespace {
 
 constexpr double kTwoPi = 6.283185307179586;
 
-struct TimedFrame {
-  int64_t t_ns;
-  std::vector<uint8_t> pixels;  // W x H row-major
-};
+using evio_test::TimedFrame;
+using evio_test::view;
 
-GreyView view(const TimedFrame& f, int w, int h) { return GreyView{f.pixels.data(), w, h, w}; }
 
 // The published complementary filter (dvs_image_reconstruction's update equations), in double:
 // per event b = exp(-alpha dt), L = b L + (1 - b) L_F + c; a frame at t_k is applied before the
