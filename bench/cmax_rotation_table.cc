@@ -30,6 +30,7 @@
 #include "evio/sensors/dataset.h"
 #include "evio/sensors/dataset_calibration.h"
 #include "evio/sensors/trajectory.h"
+#include "tool_args.h"
 
 namespace {
 
@@ -67,13 +68,7 @@ int main(int argc, char** argv) {
   int64_t t_start = INT64_MIN, t_end = INT64_MAX;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "%s needs a value\n", a.c_str());
-        std::exit(2);
-      }
-      return argv[++i];
-    };
+    auto next = [&] { return next_arg(argc, argv, &i); };
     if (a == "--gt") gt_path = next();
     else if (a == "--calib") calib = next();
     else if (a == "--t-start") t_start = seconds_ns(next());

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "evio_test/simulated_reconstruction.h"
+#include "tool_args.h"
 
 int main(int argc, char** argv) {
   std::vector<std::string> scenes, sets;
@@ -19,13 +20,7 @@ int main(int argc, char** argv) {
   std::string csv;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "%s needs a value\n", a.c_str());
-        std::exit(2);
-      }
-      return argv[++i];
-    };
+    auto next = [&] { return next_arg(argc, argv, &i); };
     if (a == "--duration") duration = std::atof(next().c_str());
     else if (a == "--period") period = std::atof(next().c_str());
     else if (a == "--cutoff-hz") cutoff = std::atof(next().c_str());
