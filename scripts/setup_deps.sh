@@ -13,6 +13,7 @@ packages=(
   liblz4-dev libzstd-dev libbz2-dev hdf5-filter-plugin-blosc-serial
   clang libclang-rt-14-dev
   python3-numpy python3-matplotlib
+  chromium
 )
 if [ $# -gt 0 ]; then
   packages=("$@")
