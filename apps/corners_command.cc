@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <memory>
 #include <ostream>
 #include <sstream>
@@ -34,25 +35,40 @@ struct TrackLengths {
   double mean_duration_s = 0;
 };
 
-TrackLengths summarise(const std::vector<frontend::CornerTrack>& tracks) {
-  TrackLengths r;
-  r.count = tracks.size();
-  if (tracks.empty()) return r;
-  std::vector<double> len;
-  double dur = 0;
-  for (const auto& t : tracks) {
-    len.push_back(static_cast<double>(t.points.size()));
-    dur += static_cast<double>(t.t_end_ns() - t.t_begin_ns()) * 1e-9;
+// Track lengths as the tracks end: a count per length (memory bounded by the longest track, not by
+// the number of tracks).
+class TrackLengthCounter {
+ public:
+  void add(const frontend::CornerTrack& t) {
+    ++by_length_[t.points.size()];
+    ++count_;
+    points_ += t.points.size();
+    duration_s_ += static_cast<double>(t.t_end_ns() - t.t_begin_ns()) * 1e-9;
   }
-  std::sort(len.begin(), len.end());
-  for (double l : len) r.mean += l;
-  r.mean /= static_cast<double>(len.size());
-  const size_t n = len.size();
-  r.median = n % 2 ? len[n / 2] : 0.5 * (len[n / 2 - 1] + len[n / 2]);
-  r.max = len.back();
-  r.mean_duration_s = dur / static_cast<double>(n);
-  return r;
-}
+  TrackLengths summary() const {
+    TrackLengths r;
+    r.count = count_;
+    if (count_ == 0) return r;
+    r.mean = static_cast<double>(points_) / static_cast<double>(count_);
+    r.max = static_cast<double>(by_length_.rbegin()->first);
+    r.mean_duration_s = duration_s_ / static_cast<double>(count_);
+    // The median: the middle length (the mean of the two middle ones for an even count).
+    const auto nth = [this](size_t k) {  // k-th smallest length, 0-based
+      for (const auto& [len, n] : by_length_) {
+        if (k < n) return static_cast<double>(len);
+        k -= n;
+      }
+      return 0.0;
+    };
+    r.median = count_ % 2 ? nth(count_ / 2) : 0.5 * (nth(count_ / 2 - 1) + nth(count_ / 2));
+    return r;
+  }
+
+ private:
+  std::map<size_t, size_t> by_length_;
+  size_t count_ = 0, points_ = 0;
+  double duration_s_ = 0;
+};
 
 }  // namespace
 
@@ -212,14 +228,41 @@ int run_corners(const CornersArgs& args, std::ostream& out) {
   bool zero_one = true;  // polarity convention of the input, known after the first chunk
   std::fputs("# t[s] x y p   (eFAST corner events, polarity as in the input)\n", corners_file.get());
 
-  std::vector<frontend::CornerTrack> tracks;
+  // tracks.txt: one line per track point, each track written when it ends (not kept in memory).
+  std::unique_ptr<TextOut> tracks_file;
+  if (tracker) {
+    tracks_file = std::make_unique<TextOut>((fs::path(args.out) / "tracks.txt").string());
+    std::fputs(cal ? "# track_id t[s] x y x_undistorted y_undistorted   (px; smoothed track positions; tracks in the order they ended)\n"
+                   : "# track_id t[s] x y   (px; smoothed track positions; tracks in the order they ended)\n",
+               tracks_file->get());
+  }
+  TrackLengthCounter lengths;
+  char line[96];
+  const auto write_tracks = [&](std::vector<frontend::CornerTrack> ended) {
+    for (const auto& t : ended) {
+      lengths.add(t);
+      for (const auto& p : t.points) {
+        *format_seconds(p.t_ns, line) = '\0';
+        std::fprintf(tracks_file->get(), "%lld %s %.3f %.3f", static_cast<long long>(t.id), line, p.x, p.y);
+        if (cal) {
+          const auto& k = cal->camera.intrinsics();
+          Eigen::Vector2d n;
+          if (cal->camera.undistort(Eigen::Vector2d((p.x - k.cx) / k.fx, (p.y - k.cy) / k.fy), &n)) {
+            std::fprintf(tracks_file->get(), " %.3f %.3f", k.fx * n.x() + k.cx, k.fy * n.y() + k.cy);
+          } else {
+            std::fputs(" nan nan", tracks_file->get());
+          }
+        }
+        std::fputc('\n', tracks_file->get());
+      }
+    }
+  };
   Progress progress("evio corners", args.progress, "events");
   EventBuffer chunk;
   int64_t events = 0;
   int64_t t_first = 0, t_last = 0;
   double processing_s = 0, overlay_s = 0;  // overlay drawing/PNG time is not processing time
   bool first_chunk = true;
-  char line[96];
   for (;;) {
     chunk.clear();
     const size_t got = reader->read_events(&chunk, size_t{1} << 20);
@@ -249,44 +292,20 @@ int run_corners(const CornersArgs& args, std::ostream& out) {
       std::fprintf(corners_file.get(), "%s %d %d %d\n", line, e.x, e.y, e.polarity > 0 ? 1 : (zero_one ? 0 : -1));
       if (overlay) overlay->add_corner(e);
     }
-    for (auto& t : front.take_finished_tracks()) tracks.push_back(std::move(t));
+    std::vector<frontend::CornerTrack> ended = front.take_finished_tracks();
     processing_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (tracker) write_tracks(std::move(ended));  // not processing time (as the overlays)
     progress.update(reader->progress(), events, std::to_string(front.stats().corners) + " corners");
   }
   corners_file.close();
   if (tracker) {
-    for (auto& t : front.finish()) tracks.push_back(std::move(t));
-    std::sort(tracks.begin(), tracks.end(), [](const auto& a, const auto& b) { return a.id < b.id; });
+    write_tracks(front.finish());
+    tracks_file->close();
   }
   if (overlay && events > 0) overlay->write(nullptr);
 
-  // tracks.txt: one line per track point.
-  if (tracker) {
-    TextOut f((fs::path(args.out) / "tracks.txt").string());
-    std::fputs(cal ? "# track_id t[s] x y x_undistorted y_undistorted   (px; smoothed track positions)\n"
-                   : "# track_id t[s] x y   (px; smoothed track positions)\n",
-               f.get());
-    for (const auto& t : tracks) {
-      for (const auto& p : t.points) {
-        *format_seconds(p.t_ns, line) = '\0';
-        std::fprintf(f.get(), "%lld %s %.3f %.3f", static_cast<long long>(t.id), line, p.x, p.y);
-        if (cal) {
-          const auto& k = cal->camera.intrinsics();
-          Eigen::Vector2d n;
-          if (cal->camera.undistort(Eigen::Vector2d((p.x - k.cx) / k.fx, (p.y - k.cy) / k.fy), &n)) {
-            std::fprintf(f.get(), " %.3f %.3f", k.fx * n.x() + k.cx, k.fy * n.y() + k.cy);
-          } else {
-            std::fputs(" nan nan", f.get());
-          }
-        }
-        std::fputc('\n', f.get());
-      }
-    }
-    f.close();
-  }
-
   const double duration_s = events > 1 ? static_cast<double>(t_last - t_first) * 1e-9 : 0.0;
-  const TrackLengths tl = summarise(tracks);
+  const TrackLengths tl = lengths.summary();
   const frontend::EfastStats& es = front.efast_stats();
   const int64_t corners = front.stats().corners, outside = front.stats().outside;
   const double reduction = corners > 0 ? static_cast<double>(events) / static_cast<double>(corners) : 0.0;

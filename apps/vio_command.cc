@@ -4,8 +4,10 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <deque>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <optional>
 #include <ostream>
 #include <sstream>
@@ -131,20 +133,43 @@ std::string vio_config_text(const VioConfig& c) { return config_text(vio_config_
 
 namespace {
 
-void write_tum(const std::string& path, const std::vector<VioState>& states) {
-  std::ofstream f(path);
-  if (!f) throw InputError(path, 0, "cannot create the file", "a writable output folder");
-  f << "# t[s] x y z qx qy qz qw  (body/IMU pose T_w_b, world gravity along -z)\n";
-  char line[256];
-  for (const VioState& s : states) {
+// An output file of states written as the pipeline streams them (trajectory.tum and
+// trajectory_causal.tum in TUM form, keyframes.txt with velocity and biases).
+class StateFile {
+ public:
+  StateFile(std::string path, bool full) : path_(std::move(path)), full_(full), f_(path_) {
+    if (!f_) throw InputError(path_, 0, "cannot create the file", "a writable output folder");
+    f_ << (full_ ? "# t[s] x y z qx qy qz qw vx vy vz bgx bgy bgz bax bay baz  (T_w_b, v_w m/s, biases rad/s and m/s^2)\n"
+                 : "# t[s] x y z qx qy qz qw  (body/IMU pose T_w_b, world gravity along -z)\n");
+  }
+  void add(const VioState& s) {
+    char line[512];
     const Eigen::Quaterniond& q = s.T_w_b.rotation;
     const Eigen::Vector3d& p = s.T_w_b.translation;
-    std::snprintf(line, sizeof(line), "%s %.9f %.9f %.9f %.9f %.9f %.9f %.9f\n", format_seconds(s.t_ns).c_str(), p.x(),
-                  p.y(), p.z(), q.x(), q.y(), q.z(), q.w());
-    f << line;
+    if (full_) {
+      std::snprintf(line, sizeof(line), "%s %.9f %.9f %.9f %.9f %.9f %.9f %.9f %.6f %.6f %.6f %.7f %.7f %.7f %.6f %.6f %.6f\n",
+                    format_seconds(s.t_ns).c_str(), p.x(), p.y(), p.z(), q.x(), q.y(), q.z(), q.w(), s.v_w.x(), s.v_w.y(),
+                    s.v_w.z(), s.bias_gyro.x(), s.bias_gyro.y(), s.bias_gyro.z(), s.bias_accel.x(), s.bias_accel.y(),
+                    s.bias_accel.z());
+    } else {
+      std::snprintf(line, sizeof(line), "%s %.9f %.9f %.9f %.9f %.9f %.9f %.9f\n", format_seconds(s.t_ns).c_str(), p.x(),
+                    p.y(), p.z(), q.x(), q.y(), q.z(), q.w());
+    }
+    f_ << line;
+    ++count_;
   }
-  if (!f) throw InputError(path, 0, "write failed (disk full?)", "a writable output folder");
-}
+  void close() {
+    f_.close();
+    if (!f_) throw InputError(path_, 0, "write failed (disk full?)", "a writable output folder");
+  }
+  int64_t count() const { return count_; }
+
+ private:
+  std::string path_;
+  bool full_;
+  std::ofstream f_;
+  int64_t count_ = 0;
+};
 
 std::string init_description(pipeline::VioInitMethod m) {
   switch (m) {
@@ -193,7 +218,17 @@ int run_vio(const VioArgs& args, std::ostream& out) {
   }
   if (!cal) throw InputError(args.dataset, 0, "no camera calibration", "--calib FILE (Kalibr camchain YAML or ECD calib.txt)");
   if (!cal->has_T_c_b) log_warning("camera-IMU extrinsics unknown: T_c_b = identity");
-  std::vector<ImuSample> imu = reader->read_imu();
+  // The IMU streams in with the events (read_imu_samples: memory bounded on long recordings):
+  // `imu` holds what was read and not yet given to the pipeline.
+  std::deque<ImuSample> imu;
+  bool imu_done = false;
+  std::vector<ImuSample> imu_chunk;
+  const auto read_imu_chunk = [&] {
+    imu_chunk.clear();
+    if (reader->read_imu_samples(&imu_chunk, 4096) == 0) imu_done = true;
+    imu.insert(imu.end(), imu_chunk.begin(), imu_chunk.end());
+  };
+  read_imu_chunk();
   if (imu.size() < 10) throw InputError(args.dataset, 0, "the dataset has no IMU samples", "a recording with IMU");
   fs::create_directories(args.out);
   {
@@ -239,8 +274,28 @@ int run_vio(const VioArgs& args, std::ostream& out) {
       obs_file << line;
     }
   });
-  for (const ImuSample& m : imu) vio.add_imu(m);
-  imu = {};  // the pipeline keeps what it needs
+  // The output states go to their files as soon as they are final (memory bounded by the sliding
+  // window, not by the recording's length).
+  StateFile trajectory_file((fs::path(args.out) / "trajectory.tum").string(), false);
+  StateFile causal_file((fs::path(args.out) / "trajectory_causal.tum").string(), false);
+  StateFile keyframes_file((fs::path(args.out) / "keyframes.txt").string(), true);
+  vio.set_state_callback([&](pipeline::VioPipeline::StateKind kind, const VioState& s) {
+    switch (kind) {
+      case pipeline::VioPipeline::StateKind::kTrajectory: trajectory_file.add(s); break;
+      case pipeline::VioPipeline::StateKind::kCausal: causal_file.add(s); break;
+      case pipeline::VioPipeline::StateKind::kKeyframe: keyframes_file.add(s); break;
+    }
+  });
+  // The IMU goes in with the events, up to 1 s ahead of each chunk (the pipeline keeps only what
+  // it still needs; the result does not depend on the interleaving), all first for APS inputs.
+  const auto add_imu_until = [&](int64_t t_imu_ns) {
+    for (;;) {
+      for (; !imu.empty() && imu.front().t_ns <= t_imu_ns; imu.pop_front()) vio.add_imu(imu.front());
+      if (!imu.empty() || imu_done) break;
+      read_imu_chunk();
+    }
+  };
+  if (cfg.inputs != pipeline::VioInputs::kEvents) add_imu_until(std::numeric_limits<int64_t>::max());
   const auto wall0 = std::chrono::steady_clock::now();
   if (cfg.inputs != pipeline::VioInputs::kEvents) {
     // Every APS frame before the events (the events+aps merge needs the frame times around each
@@ -264,6 +319,7 @@ int run_vio(const VioArgs& args, std::ostream& out) {
     chunk.clear();
     if (reader->read_events(&chunk, size_t{1} << 18) == 0) break;
     const EventSpan span = chunk.span();
+    add_imu_until(span.back().t_ns + cal->time_shift_ns + 1'000'000'000);
     vio.add_events(span);
     if (events == 0) t_first = span.front().t_ns;
     t_last = span.back().t_ns;
@@ -272,7 +328,11 @@ int run_vio(const VioArgs& args, std::ostream& out) {
     const double seq = static_cast<double>(t_last - t_first) * 1e-9;
     progress.update(reader->progress(), events, "real-time factor " + num(seq > 0 ? elapsed / seq : 0.0));
   }
+  add_imu_until(std::numeric_limits<int64_t>::max());
   const pipeline::VioResult r = vio.finish();
+  trajectory_file.close();
+  causal_file.close();
+  keyframes_file.close();
   const double processing_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
   const pipeline::VioStats& vs = r.stats;
   const double duration_s =
@@ -280,27 +340,14 @@ int run_vio(const VioArgs& args, std::ostream& out) {
                                                                   : vs.t_last_event_ns - vs.t_first_event_ns) * 1e-9;
   if (!r.initialized) {
     log_debug("vio: " + r.init_failure);
+    std::error_code ec;  // no state came: no trajectory files
+    for (const char* f : {"trajectory.tum", "trajectory_causal.tum", "keyframes.txt"}) fs::remove(fs::path(args.out) / f, ec);
     throw InputError(args.dataset, 0, "could not initialise (no still start and the visual-inertial alignment failed)",
                      "a recording that starts still or moves with enough features in the first seconds");
   }
   const std::string init_method = init_description(r.init_method);
 
   // Outputs.
-  write_tum((fs::path(args.out) / "trajectory.tum").string(), r.trajectory);
-  write_tum((fs::path(args.out) / "trajectory_causal.tum").string(), r.trajectory_causal);
-  {
-    std::ofstream f((fs::path(args.out) / "keyframes.txt").string());
-    f << "# t[s] x y z qx qy qz qw vx vy vz bgx bgy bgz bax bay baz  (T_w_b, v_w m/s, biases rad/s and m/s^2)\n";
-    for (const VioState& s : r.keyframes) {
-      char line[512];
-      const Eigen::Quaterniond& q = s.T_w_b.rotation;
-      std::snprintf(line, sizeof(line), "%s %.9f %.9f %.9f %.9f %.9f %.9f %.9f %.6f %.6f %.6f %.7f %.7f %.7f %.6f %.6f %.6f\n",
-                    format_seconds(s.t_ns).c_str(), s.T_w_b.translation.x(), s.T_w_b.translation.y(), s.T_w_b.translation.z(),
-                    q.x(), q.y(), q.z(), q.w(), s.v_w.x(), s.v_w.y(), s.v_w.z(), s.bias_gyro.x(), s.bias_gyro.y(),
-                    s.bias_gyro.z(), s.bias_accel.x(), s.bias_accel.y(), s.bias_accel.z());
-      f << line;
-    }
-  }
   std::vector<mapping::MapPoint> pts;
   for (const auto& [id, p] : r.landmarks) pts.push_back({p, static_cast<float>(id)});
   mapping::write_landmark_map((fs::path(args.out) / "map.ply").string(), pts);

@@ -132,8 +132,14 @@ struct VioPipeline::Impl {
   ObservationCallback on_observations;
   ObservationFilter observation_filter;
   FrameMotionOracle frame_motion_oracle;
-  std::vector<backend::FramePrediction> predictions;  // per trajectory_causal state
-  std::map<int64_t, VioState> final_keyframes;         // every keyframe's last optimised state
+  // Output states: to on_state, or collected in result. A frame's trajectory state waits in
+  // `predictions` until the keyframes around it have left the window (release()); final_keyframes
+  // holds the keyframes' last optimised states from the oldest anchor still needed on.
+  VioPipeline::StateCallback on_state;
+  std::deque<backend::FramePrediction> predictions;  // per causal state not yet released
+  std::map<int64_t, VioState> final_keyframes;
+  int64_t last_causal_t = std::numeric_limits<int64_t>::min();
+  int64_t last_keyframe_out = std::numeric_limits<int64_t>::min();
   bool finished = false;
 
   // IMU (IMU clock): every sample still needed by the initialisation, the estimator or the
@@ -224,13 +230,53 @@ struct VioPipeline::Impl {
 
   // ---- back-end -------------------------------------------------------------------------------
 
+  void output(VioPipeline::StateKind kind, const VioState& s) {
+    if (on_state) {
+      on_state(kind, s);
+      return;
+    }
+    switch (kind) {
+      case VioPipeline::StateKind::kTrajectory: result.trajectory.push_back(s); break;
+      case VioPipeline::StateKind::kCausal: result.trajectory_causal.push_back(s); break;
+      case VioPipeline::StateKind::kKeyframe: result.keyframes.push_back(s); break;
+    }
+  }
+
+  // Outputs the trajectory states of the frames at or before t_final (IMU clock) and the keyframes
+  // at or before it: every keyframe there is final, and so is the mismatch each frame's interval
+  // spreads (repropagate_trajectory: a frame at or before a final keyframe was predicted from a
+  // final keyframe towards a final one). Keeps the keyframes the remaining frames are anchored on.
+  void release(int64_t t_final) {
+    size_t n = 0;
+    while (n < predictions.size() && predictions[n].state.t_ns <= t_final) ++n;
+    if (n > 0) {
+      const std::vector<backend::FramePrediction> ready(predictions.begin(), predictions.begin() + static_cast<std::ptrdiff_t>(n));
+      for (const VioState& s : backend::repropagate_trajectory(ready, final_keyframes, est->options().gravity_w)) {
+        output(VioPipeline::StateKind::kTrajectory, s);
+      }
+      predictions.erase(predictions.begin(), predictions.begin() + static_cast<std::ptrdiff_t>(n));
+    }
+    int64_t keep = t_final;
+    for (const backend::FramePrediction& f : predictions) {
+      if (f.predicted) keep = std::min(keep, f.anchor.t_ns);
+    }
+    for (auto it = final_keyframes.begin(); it != final_keyframes.end() && it->first <= t_final;) {
+      if (it->first > last_keyframe_out) {
+        output(VioPipeline::StateKind::kKeyframe, it->second);
+        last_keyframe_out = it->first;
+      }
+      it = it->first < keep ? final_keyframes.erase(it) : std::next(it);
+    }
+  }
+
   void feed(const FeatureObservations& f) {
     while (next_imu < imu.size() && imu[next_imu].t_ns <= f.t_ns + opt.imu_lookahead_ns) est->add_imu(imu[next_imu++]);
     const bool kf = est->add_frame(f);
     // One state per new state time (a frame the estimator skipped adds none).
     const VioState& ls = est->latest_state();
-    if (result.trajectory_causal.empty() || ls.t_ns > result.trajectory_causal.back().t_ns) {
-      result.trajectory_causal.push_back(ls);
+    if (ls.t_ns > last_causal_t) {
+      last_causal_t = ls.t_ns;
+      output(VioPipeline::StateKind::kCausal, ls);
       backend::FramePrediction fp;
       fp.state = ls;
       const auto& lp = est->last_prediction();
@@ -243,7 +289,13 @@ struct VioPipeline::Impl {
     }
     if (kf) {
       for (const auto& [id, p] : est->landmarks()) result.landmarks[id] = p;
-      for (const VioState& k : est->keyframe_states()) final_keyframes[k.t_ns] = k;
+      const std::vector<VioState> window = est->keyframe_states();
+      for (const VioState& k : window) final_keyframes[k.t_ns] = k;
+      // The keyframes before the window's oldest are final (no solve changes them again).
+      const auto first_in_window = window.empty() ? final_keyframes.end() : final_keyframes.find(window.front().t_ns);
+      if (first_in_window != final_keyframes.begin() && first_in_window != final_keyframes.end()) {
+        release(std::prev(first_in_window)->first);
+      }
     }
   }
 
@@ -644,6 +696,8 @@ void VioPipeline::set_initial_state_provider(InitialStateProvider provider) { im
 void VioPipeline::set_observation_callback(ObservationCallback callback) { impl_->on_observations = std::move(callback); }
 void VioPipeline::set_observation_filter(ObservationFilter filter) { impl_->observation_filter = std::move(filter); }
 void VioPipeline::set_frame_motion_oracle(FrameMotionOracle oracle) { impl_->frame_motion_oracle = std::move(oracle); }
+void VioPipeline::set_state_callback(StateCallback callback) { impl_->on_state = std::move(callback); }
+size_t VioPipeline::buffered_states() const { return impl_->predictions.size() + impl_->final_keyframes.size(); }
 
 bool VioPipeline::initialized() const { return impl_->est != nullptr; }
 
@@ -730,9 +784,7 @@ VioResult VioPipeline::finish() {
   if (p.est) {
     st.window = p.est->stats();
     for (const VioState& k : p.est->keyframe_states()) p.final_keyframes[k.t_ns] = k;
-    p.result.keyframes.clear();
-    for (const auto& [t, k] : p.final_keyframes) p.result.keyframes.push_back(k);
-    p.result.trajectory = backend::repropagate_trajectory(p.predictions, p.final_keyframes, p.est->options().gravity_w);
+    p.release(std::numeric_limits<int64_t>::max());
     // Motion-model segments from the keyframes' models.
     for (const auto& [t, rotation_only] : st.window.motion_model) {
       const std::string m = rotation_only ? "rotation_only" : "6dof";

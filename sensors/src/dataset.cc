@@ -1,5 +1,6 @@
 #include "evio/sensors/dataset.h"
 
+#include <algorithm>
 #include <cctype>
 #include <cerrno>
 #include <cstdio>
@@ -119,6 +120,19 @@ size_t DatasetReader::read_subpixel_events(std::vector<SubpixelEvent>* out, size
   return n;
 }
 
+size_t DatasetReader::read_imu_samples(std::vector<ImuSample>* out, size_t max_samples) {
+  if (!imu_stream_) imu_stream_ = read_imu();
+  const size_t n = std::min(max_samples, imu_stream_->size() - imu_stream_next_);
+  out->insert(out->end(), imu_stream_->begin() + static_cast<std::ptrdiff_t>(imu_stream_next_),
+              imu_stream_->begin() + static_cast<std::ptrdiff_t>(imu_stream_next_ + n));
+  imu_stream_next_ += n;
+  if (imu_stream_next_ == imu_stream_->size()) {  // all handed out: free them
+    *imu_stream_ = std::vector<ImuSample>();
+    imu_stream_next_ = 0;
+  }
+  return n;
+}
+
 namespace {
 
 // ECD folder, or a bare events file (then only events).
@@ -149,6 +163,11 @@ class EcdDatasetReader final : public DatasetReader {
   std::vector<ImuSample> read_imu() override {
     return folder_.imu.empty() ? std::vector<ImuSample>() : read_ecd_imu(folder_.imu, side_options());
   }
+  size_t read_imu_samples(std::vector<ImuSample>* out, size_t max_samples) override {
+    if (folder_.imu.empty()) return 0;
+    if (!imu_stream_) imu_stream_ = std::make_unique<EcdImuReader>(folder_.imu, side_options());
+    return imu_stream_->read(out, max_samples);
+  }
   std::vector<Frame> read_frames() override {
     return folder_.images.empty() ? std::vector<Frame>() : read_ecd_image_list(folder_.images, side_options());
   }
@@ -175,6 +194,7 @@ class EcdDatasetReader final : public DatasetReader {
   DatasetOptions options_;
   EcdFolder folder_;
   std::unique_ptr<EcdEventReader> events_;
+  std::unique_ptr<EcdImuReader> imu_stream_;
 };
 
 }  // namespace

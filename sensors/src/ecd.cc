@@ -383,35 +383,40 @@ std::vector<SubpixelEvent> read_ecd_subpixel_events(const std::string& path, con
 // ---------------------------------------------------------------------------------------------
 // imu.txt
 
-std::vector<ImuSample> read_ecd_imu(const std::string& path, const TextReadOptions& options, ReadReport* report) {
-  ReadReport local;
-  ReadReport& r = report != nullptr ? *report : local;
-  r = ReadReport();
-  r.path = path;
-  LineReader lines(path);
-  const int e = detail::prepare_time_unit(path, options, 0, "IMU", 0.1, 1e5, 10, &r);
-  detail::BadLineHandler handler(path, options.on_bad_line, &r);
-  const std::string form = std::string("`t ax ay az gx gy gz`: time in ") + time_unit_name(r.time_unit) +
+EcdImuReader::EcdImuReader(const std::string& path, const TextReadOptions& options) : options_(options), lines_(path) {
+  report_.path = path;
+  exponent_ = detail::prepare_time_unit(path, options_, 0, "IMU", 0.1, 1e5, 10, &report_);
+}
+
+size_t EcdImuReader::read(std::vector<ImuSample>* out, size_t max_samples) {
+  if (finished_) return 0;
+  detail::BadLineHandler handler(report_.path, options_.on_bad_line, &report_);
+  const std::string form = std::string("`t ax ay az gx gy gz`: time in ") + time_unit_name(report_.time_unit) +
                            ", accelerometer in m/s^2, gyroscope in rad/s";
-  std::vector<ImuSample> out;
+  size_t n = 0;
   std::string_view line;
-  int64_t last = INT64_MIN;
-  while (lines.next(&line)) {
+  while (n < max_samples) {
+    if (!lines_.next(&line)) {
+      finished_ = true;
+      report_.lines = lines_.line_number();
+      handler.finish();
+      break;
+    }
     if (detail::is_comment_or_blank(line)) continue;
     const char* p = skip_space(line.data(), line.data() + line.size());
     const char* end = line.data() + line.size();
     ImuSample s;
     double v[6];
-    bool ok = detail::parse_time(p, end, e, &s.t_ns) && (p == end || is_space(*p));
+    bool ok = detail::parse_time(p, end, exponent_, &s.t_ns) && (p == end || is_space(*p));
     for (int i = 0; ok && i < 6; ++i) {
       p = skip_space(p, end);
       ok = detail::parse_double(p, end, &v[i]) && (p == end || is_space(*p));
     }
     if (ok) p = skip_space(p, end);
     if (!ok || p != end) {
-      const int n = detail::count_tokens(line);
-      handler.bad("malformed", lines.line_number(),
-                  (n != 7 ? "expected 7 columns, found " + std::to_string(n) : std::string("a value is not a number")) +
+      const int k = detail::count_tokens(line);
+      handler.bad("malformed", lines_.line_number(),
+                  (k != 7 ? "expected 7 columns, found " + std::to_string(k) : std::string("a value is not a number")) +
                       " in " + quote_line(line),
                   form);
       continue;
@@ -419,24 +424,32 @@ std::vector<ImuSample> read_ecd_imu(const std::string& path, const TextReadOptio
     bool finite = true;
     for (double x : v) finite = finite && std::isfinite(x);
     if (!finite) {
-      handler.bad("non-finite", lines.line_number(), "NaN or infinite IMU value in " + quote_line(line), form);
+      handler.bad("non-finite", lines_.line_number(), "NaN or infinite IMU value in " + quote_line(line), form);
       continue;
     }
-    if (s.t_ns <= last) {
-      handler.bad("time order", lines.line_number(),
+    if (s.t_ns <= last_t_ns_) {
+      handler.bad("time order", lines_.line_number(),
                   "timestamp " + format_seconds(s.t_ns) + " s is not after the previous sample's " +
-                      format_seconds(last) + " s",
+                      format_seconds(last_t_ns_) + " s",
                   form + ", strictly increasing time");
       continue;
     }
-    last = s.t_ns;
+    last_t_ns_ = s.t_ns;
     s.accel = Eigen::Vector3d(v[0], v[1], v[2]);
     s.gyro = Eigen::Vector3d(v[3], v[4], v[5]);
-    out.push_back(s);
+    out->push_back(s);
+    ++n;
   }
-  r.records = static_cast<int64_t>(out.size());
-  r.lines = lines.line_number();
-  handler.finish();
+  report_.records += static_cast<int64_t>(n);
+  return n;
+}
+
+std::vector<ImuSample> read_ecd_imu(const std::string& path, const TextReadOptions& options, ReadReport* report) {
+  EcdImuReader reader(path, options);
+  std::vector<ImuSample> out;
+  while (reader.read(&out, size_t{1} << 16) > 0) {
+  }
+  if (report != nullptr) *report = reader.report();
   return out;
 }
 

@@ -69,7 +69,7 @@ TEST(Dataset, RejectsInvalidOptions) {
 }
 
 // Integer events only: exercises DatasetReader's default read_subpixel_events.
-class FakeIntegerReader final : public DatasetReader {
+class FakeIntegerReader : public DatasetReader {
  public:
   explicit FakeIntegerReader(std::vector<Event> events) : events_(std::move(events)) {}
   DatasetFormat format() const override { return DatasetFormat::kAedat2; }
@@ -106,6 +106,42 @@ TEST(DatasetSubpixel, DefaultConvertsIntegerEvents) {
   EXPECT_EQ(out[0].y, 2.0f);
   EXPECT_EQ(out[0].polarity, -1);
   EXPECT_EQ(out[2].x, 65535.0f);
+}
+
+// read_imu_samples streams the IMU: an ECD folder reads imu.txt in chunks, other readers hand out
+// read_imu()'s samples (the default); both give read_imu()'s samples, then 0.
+class FakeImuReader final : public FakeIntegerReader {
+ public:
+  FakeImuReader() : FakeIntegerReader({}) {}
+  std::vector<ImuSample> read_imu() override {
+    std::vector<ImuSample> imu(10);
+    for (int i = 0; i < 10; ++i) imu[i].t_ns = 1000 * (i + 1);
+    return imu;
+  }
+};
+
+TEST(DatasetImuStream, EcdFolderAndDefaultStreamTheSamplesOfReadImu) {
+  evio_test::TempDir dir;
+  dir.write("events.txt", "0.001 1 2 0\n");
+  std::string text;
+  for (int i = 1; i <= 25; ++i) text += "0.0" + std::to_string(10 + i) + " 0 0 9.8 0 0 " + std::to_string(i) + "\n";
+  dir.write("imu.txt", text);
+  auto ecd = open_dataset(dir.path());
+  FakeImuReader fake;
+  for (DatasetReader* r : {ecd.get(), static_cast<DatasetReader*>(&fake)}) {
+    const std::vector<ImuSample> whole = r->read_imu();
+    std::vector<ImuSample> streamed;
+    size_t n = 0, calls = 0;
+    while ((n = r->read_imu_samples(&streamed, 4)) > 0) {
+      EXPECT_LE(n, 4u);
+      ++calls;
+    }
+    EXPECT_EQ(r->read_imu_samples(&streamed, 4), 0u);
+    ASSERT_EQ(streamed.size(), whole.size());
+    EXPECT_EQ(calls, (whole.size() + 3) / 4);
+    for (size_t i = 0; i < whole.size(); ++i) EXPECT_EQ(streamed[i].t_ns, whole[i].t_ns) << i;
+  }
+  EXPECT_EQ(ecd->read_imu().size(), 25u);  // read_imu is independent of the stream
 }
 
 TEST(DatasetSubpixel, EcdFileAndFolderReadSubpixelEvents) {

@@ -329,6 +329,36 @@ TEST(EcdImu, ReadsAndValidates) {
   expect_err("0.1 0 0 x 0 0 0\n", {":1:", "a value is not a number"});
 }
 
+// EcdImuReader streams imu.txt in chunks (how `evio vio` reads a long recording): the chunks are the
+// whole read's samples, each at most the size asked for, and the end comes as 0.
+TEST(EcdImu, StreamingInChunksEqualsWholeRead) {
+  TempDir dir;
+  std::string text = "# t ax ay az gx gy gz\n";
+  for (int i = 0; i < 1000; ++i) {
+    text += std::to_string(i) + ".00" + std::to_string(i % 10) + " 0.1 0.2 9.8 0.01 0.02 " + std::to_string(i) + "\n";
+  }
+  const std::string path = dir.write("imu.txt", text);
+  const auto whole = read_ecd_imu(path);
+  ASSERT_EQ(whole.size(), 1000u);
+  EcdImuReader reader(path);
+  std::vector<ImuSample> streamed;
+  for (;;) {
+    std::vector<ImuSample> chunk;
+    const size_t n = reader.read(&chunk, 64);
+    ASSERT_EQ(n, chunk.size());
+    ASSERT_LE(n, 64u);
+    if (n == 0) break;
+    streamed.insert(streamed.end(), chunk.begin(), chunk.end());
+  }
+  EXPECT_EQ(reader.read(&streamed, 64), 0u);  // stays at the end
+  ASSERT_EQ(streamed.size(), whole.size());
+  for (size_t i = 0; i < whole.size(); ++i) {
+    EXPECT_EQ(streamed[i].t_ns, whole[i].t_ns);
+    EXPECT_EQ(streamed[i].gyro, whole[i].gyro);
+  }
+  EXPECT_EQ(reader.report().records, 1000);
+}
+
 TEST(EcdImages, ListsFramesAndRejectsMissingFiles) {
   TempDir dir;
   Frame f;

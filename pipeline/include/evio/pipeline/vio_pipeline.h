@@ -228,6 +228,8 @@ struct VioResult {
   // The same frames as estimated at the time (causal: what an online user had; jumps at keyframes).
   std::vector<VioState> trajectory_causal;
   std::vector<VioState> keyframes;                   // every keyframe's last optimised state, time order
+  // (With VioPipeline::set_state_callback the three lists above stay empty: their states went to
+  // the callback.)
   std::map<int64_t, Eigen::Vector3d> landmarks;      // the window's landmarks after every keyframe (world, m), by track id, latest value
   std::vector<VioSegment> motion_models;             // runs of keyframes with the same motion model
   std::vector<VioSegment> tracking_lost;             // event-rate drops and runs with too few tracks
@@ -243,6 +245,9 @@ class VioPipeline {
   // reference time) and the median z-depth (m) of the tracks of `frame` (the bearings of the latest
   // tracked event frame) for the event frames' translation compensation, in place of the estimate's, and optionally a scene plane (n, d: n . P = d in the camera frame,
   // d > 0; left at d = 0 for none) for per-event depth; false: use the estimate's.
+  // Which output list a streamed state belongs to (VioResult::trajectory, trajectory_causal, keyframes).
+  enum class StateKind { kTrajectory, kCausal, kKeyframe };
+  using StateCallback = std::function<void(StateKind kind, const VioState& state)>;
   using FrameMotionOracle =
       std::function<bool(const FeatureObservations& frame, Eigen::Vector3d* v_c, double* depth_m, Eigen::Vector4d* plane_c)>;
 
@@ -265,6 +270,15 @@ class VioPipeline {
   // compensation takes its velocity and depth from `oracle` (e.g. the ground truth) when it
   // answers; an error budget of the compensation's inputs.
   void set_frame_motion_oracle(FrameMotionOracle oracle);
+  // Streams the output states instead of collecting them in VioResult (bounded memory on long
+  // recordings): each kind in time order, every state once, as soon as it is final. Causal states
+  // come with their frame; trajectory states and keyframes once the keyframes around them have
+  // left the sliding window (their last optimised values); the rest from finish(). The states are
+  // the ones VioResult would hold. Set before the first input.
+  void set_state_callback(StateCallback callback);
+  // States held for the trajectory until their keyframes are final (bounded by the window's span,
+  // not the recording's length; for tests).
+  size_t buffered_states() const;
 
   // IMU samples in time order (IMU clock; t_imu = t_cam + camera.time_shift_ns). They may all come
   // first or be interleaved with add_events: events wait until the IMU covers them (imu_wait_ns).

@@ -115,6 +115,11 @@ class DatasetReader {
   // Whole-stream accessors; empty / nullopt when the dataset has none. They are independent of
   // the event stream's position.
   virtual std::vector<ImuSample> read_imu() = 0;
+  // The IMU as a stream, for long recordings: appends up to max_samples samples in time order and
+  // returns how many, 0 at the end; independent of the event stream and of read_imu(). ECD folders
+  // read imu.txt as they go (memory bounded by max_samples); the default hands out read_imu()'s
+  // samples, loaded whole on the first call.
+  virtual size_t read_imu_samples(std::vector<ImuSample>* out, size_t max_samples);
   // Frames in time order. Containers fill Frame::image; file-based formats (ECD) give Frame::path
   // only, to be decoded with load_frame_image().
   virtual std::vector<Frame> read_frames() = 0;
@@ -123,6 +128,10 @@ class DatasetReader {
   virtual std::optional<calib::CameraCalibration> read_calibration() = 0;
   // Streams/topics inside the container with their types; empty for single-stream formats.
   virtual std::vector<StreamInfo> streams() const { return {}; }
+
+ private:
+  std::optional<std::vector<ImuSample>> imu_stream_;  // the default read_imu_samples()
+  size_t imu_stream_next_ = 0;
 };
 
 std::unique_ptr<DatasetReader> open_dataset(const std::string& path, const DatasetOptions& options = {});

@@ -77,6 +77,27 @@ class EcdEventReader {
   bool subpixel_ = false;  // the last call was read_subpixel (for the expected form in messages)
 };
 
+// Streaming reader of imu.txt (`t ax ay az gx gy gz`: accelerometer m/s^2, gyroscope rad/s). The
+// constructor resolves the time unit (TextReadOptions::time_unit, checked against the first
+// records); malformed, non-finite and out-of-order lines are bad lines (TextReadOptions::on_bad_line).
+class EcdImuReader {
+ public:
+  explicit EcdImuReader(const std::string& path, const TextReadOptions& options = {});
+
+  // Appends up to max_samples samples in time order to *out and returns how many; 0 means end of
+  // file (the report is final then, and skipped-line counts have been logged).
+  size_t read(std::vector<ImuSample>* out, size_t max_samples);
+  const ReadReport& report() const { return report_; }
+
+ private:
+  TextReadOptions options_;
+  LineReader lines_;
+  ReadReport report_;
+  int exponent_ = 9;
+  int64_t last_t_ns_ = INT64_MIN;
+  bool finished_ = false;
+};
+
 // Whole-file convenience wrappers.
 EventBuffer read_ecd_events(const std::string& path, const TextReadOptions& options = {},
                             ReadReport* report = nullptr);
