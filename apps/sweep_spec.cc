@@ -6,6 +6,8 @@
 #include <cctype>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <set>
@@ -73,8 +75,23 @@ class SpecReader {
     return s;
   }
 
+  // `{env:NAME}` replaced by the environment variable NAME (e.g. where the real data lives); an unset or
+  // empty variable is an error at the node's line.
+  std::string with_env(const YAML::Node& n, std::string s) const {
+    for (size_t p = s.find("{env:"); p != std::string::npos; p = s.find("{env:", p)) {
+      const size_t end = s.find('}', p);
+      if (end == std::string::npos) fail(n, "'" + s + "' has an unclosed {env:", "{env:NAME}, NAME an environment variable");
+      const std::string var = s.substr(p + 5, end - p - 5);
+      const char* v = std::getenv(var.c_str());
+      if (v == nullptr || *v == '\0') fail(n, "'" + s + "' needs the environment variable " + var + ", which is not set", "export " + var + "=VALUE");
+      s.replace(p, end + 1 - p, v);
+      p += std::strlen(v);
+    }
+    return s;
+  }
+
   std::string existing_path(const YAML::Node& n, const std::string& what) const {
-    const std::string s = scalar(n, what);
+    const std::string s = with_env(n, scalar(n, what));
     fs::path p(s);
     if (p.is_relative()) p = fs::path(dir_) / p;
     p = p.lexically_normal();
@@ -114,9 +131,9 @@ class SpecReader {
       if (n["seed"]) d.seed = scalar(n["seed"], "seed");
       if (n["set"]) {
         if (n["set"].IsMap()) {
-          for (const auto& kv : n["set"]) d.set.push_back(kv.first.Scalar() + "=" + value_text(kv.second));
+          for (const auto& kv : n["set"]) d.set.push_back(kv.first.Scalar() + "=" + with_env(kv.second, value_text(kv.second)));
         } else {
-          d.set = strings(n["set"], "set");
+          for (const std::string& s : strings(n["set"], "set")) d.set.push_back(with_env(n["set"], s));
         }
       }
       if (n["name"]) d.name = name(n["name"], "name");
@@ -151,7 +168,7 @@ class SpecReader {
       }
     }
     if (n["args"]) {
-      a.args = strings(n["args"], "args");
+      for (const std::string& s : strings(n["args"], "args")) a.args.push_back(with_env(n["args"], s));
       for (const std::string& s : a.args) {
         if (s == "-o" || s == "--out" || s.rfind("--out=", 0) == 0) fail(n["args"], "args sets --out", "arguments other than --out (each cell's folder is its --out)");
       }

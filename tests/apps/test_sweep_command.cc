@@ -11,6 +11,7 @@
 #include <unistd.h>
 
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -69,6 +70,28 @@ TEST(SweepSpec, ParsesDatasetsAlgorithmsAndGrids) {
   EXPECT_EQ(s.algorithms[0].grid[1].second, std::vector<std::string>{"5"});
   EXPECT_EQ(s.algorithms[0].timeout_s, 9);
   EXPECT_EQ(s.algorithms[1].datasets, std::vector<std::string>{"sim"});
+}
+
+TEST(SweepSpec, EnvironmentVariablesInPathsSetAndArgs) {
+  evio_test::TempDir tmp;
+  fs::create_directories(tmp.file("real/rec"));
+  tmp.write("scene.yaml", "x: 1\n");
+  ::setenv("EVIO_SWEEP_TEST_DATA", tmp.file("real").c_str(), 1);
+  const SweepSpec s = parse_sweep_spec(
+      "datasets:\n  - {name: r, path: '{env:EVIO_SWEEP_TEST_DATA}/rec'}\n"
+      "  - {name: sim, scene: scene.yaml, set: {trajectory.path: '{env:EVIO_SWEEP_TEST_DATA}/t.csv'}}\n"
+      "  - {name: sim2, scene: scene.yaml, set: ['a={env:EVIO_SWEEP_TEST_DATA}']}\n"
+      "algorithms:\n  - {algorithm: vio, args: [--calib, '{env:EVIO_SWEEP_TEST_DATA}/c.yaml']}\n",
+      "spec.yaml", tmp.path());
+  EXPECT_EQ(s.datasets[0].path, tmp.file("real/rec"));
+  EXPECT_EQ(s.datasets[1].set, std::vector<std::string>{"trajectory.path=" + tmp.file("real") + "/t.csv"});
+  EXPECT_EQ(s.datasets[2].set, std::vector<std::string>{"a=" + tmp.file("real")});
+  EXPECT_EQ(s.algorithms[0].args, (std::vector<std::string>{"--calib", tmp.file("real") + "/c.yaml"}));
+  ::unsetenv("EVIO_SWEEP_TEST_DATA");
+  const std::string e = spec_error("datasets:\n  - {name: r, path: '{env:EVIO_SWEEP_TEST_DATA}/rec'}\nalgorithms: [{algorithm: vio}]\n", tmp.path());
+  EXPECT_NE(e.find("spec.yaml:2: '{env:EVIO_SWEEP_TEST_DATA}/rec' needs the environment variable EVIO_SWEEP_TEST_DATA, which is not set"),
+            std::string::npos) << e;
+  EXPECT_NE(e.find("expected: export EVIO_SWEEP_TEST_DATA=VALUE"), std::string::npos) << e;
 }
 
 TEST(SweepSpec, ErrorsNameFileLineAndExpectedForm) {
@@ -152,6 +175,24 @@ TEST(SweepPareto, KeepsCellsNoOtherBeatsInTimeAndError) {
   const std::vector<std::pair<double, double>> p = {{1, 5}, {2, 3}, {3, 4}, {2, 3.5}, {5, 1}, {0.5, NAN}, {5, 1}};
   EXPECT_EQ(pareto_front(p), (std::vector<size_t>{0, 1, 4}));
   EXPECT_TRUE(pareto_front({}).empty());
+}
+
+TEST(SweepResults, VioMetricsReadBothTrajectoriesOfEvalJson) {
+  evio_test::TempDir tmp;
+  tmp.write("eval.json",
+            "{\"estimates\": [{\"ate\": {\"trans_m\": {\"rmse\": 0.02}}, \"mean_position_error_percent\": 0.25,"
+            " \"yaw_drift_deg_per_m\": 0.03, \"final_yaw_error_deg\": -0.5},"
+            " {\"mean_position_error_percent\": 0.375}]}\n");
+  tmp.write("stats.json", "{\"sequence_duration_s\": 10, \"keyframes\": 40}\n");
+  SweepRecord r;
+  read_cell_metrics("vio", tmp.path(), &r);
+  EXPECT_EQ(r.metric("ate_rmse_m"), 0.02);
+  EXPECT_EQ(r.metric("mean_position_error_percent"), 0.25);
+  EXPECT_EQ(r.metric("mean_position_error_percent_causal"), 0.375);  // trajectory_causal.tum
+  EXPECT_EQ(r.metric("final_yaw_error_deg"), -0.5);
+  EXPECT_EQ(r.metric("keyframes"), 40);
+  EXPECT_TRUE(std::isnan(r.metric("rotation_only_keyframes")));
+  EXPECT_EQ(r.duration_s, 10);
 }
 
 SweepRecord example_record(const std::string& cell, int exit_code) {
