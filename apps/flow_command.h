@@ -46,7 +46,7 @@ struct FlowArgs {
   std::string calib;               // optional Kalibr camchain or ECD calib.txt
   std::string gt;                  // optional ground truth (TUM or csv); default: the dataset's own
   std::string out;                 // output folder (created)
-  std::string model;               // --model: overrides cmax.model when not empty
+  std::string model;               // --model: overrides cmax.model (and clears models) when not empty; "auto": model selection
   std::string objective;           // --objective: overrides cmax.objective when not empty
   int64_t window_events = 0;       // --window-events (> 0 overrides window.events and clears window.ms)
   int64_t window_ns = 0;           // --window-ms (> 0 overrides window.ms)
