@@ -45,8 +45,10 @@ const Table<C>& flow_config_table() {
     Table<C> cmax("contrast maximisation settings");
     cmax.include(cmax_table(), &C::cmax, {"width", "height", "fx", "fy", "cx", "cy"});  // those: the camera's
     Table<C> top("flow settings");
-    top.choice_list("models", &C::models, warp_model_choices())
-        .note("models", "model selection per window among these (empty: cmax.model); --model auto: flow, similarity, rotation if calibrated")
+    top.boolean("model_selection", &C::model_selection)
+        .note("model_selection", "choose the model per window among candidates (--model auto); false: cmax.model")
+        .choice_list("candidates", &C::candidates, warp_model_choices())
+        .note("candidates", "model_selection's; rotation and 6dof only with a calibrated camera")
         .number("model_gain_per_parameter", &C::model_gain_per_parameter, Range::kNonNegative, "")
         .note("model_gain_per_parameter", "relative objective gain a richer model needs per extra parameter")
         .section("window", window, self)
@@ -97,10 +99,9 @@ std::string flow_config_text(const FlowConfig& c) {
 FlowConfig resolve_flow_config(const FlowArgs& args) {
   FlowConfig cfg = load_flow_config(args.config, args.set);
   if (args.model == "auto") {
-    // The candidates for any camera: flow and similarity; run_flow adds rotation when calibrated.
-    cfg.models = {mapping::WarpModel::kFlow, mapping::WarpModel::kSimilarity};
+    cfg.model_selection = true;
   } else if (!args.model.empty()) {
-    cfg.models.clear();
+    cfg.model_selection = false;
     const auto m = mapping::warp_model_from_name(args.model);
     if (!m) throw InputError("--model", 0, "unknown model '" + args.model + "'", "auto, " + mapping::warp_model_names());
     cfg.cmax.model = *m;
@@ -130,10 +131,19 @@ int run_flow(const FlowArgs& args, std::ostream& out) {
     throw InputError("--t-end", 0, "--t-end must be after --t-start", "--t-start S --t-end S with S in seconds");
   if (args.png_every < 1) throw InputError("--png-every", 0, "must be >= 1", "a positive window count");
   CmaxInput input = open_cmax_input(args.dataset, args.dataset_options, args.calib,
-                                    cfg.models.empty() ? std::vector<mapping::WarpModel>{cfg.cmax.model} : cfg.models);
-  // --model auto: rotation is a candidate when the camera is calibrated (its warp needs the pinhole).
-  if (args.model == "auto" && input.camera) cfg.models.push_back(mapping::WarpModel::kRotation);
-  const bool selecting = !cfg.models.empty();
+                                    cfg.model_selection ? std::vector<mapping::WarpModel>{} : std::vector<mapping::WarpModel>{cfg.cmax.model});
+  // Model selection: the candidates, the 3-D warps only with a calibrated camera (they need the pinhole).
+  std::vector<std::string> dropped;
+  cfg.models.clear();
+  if (cfg.model_selection) {
+    for (mapping::WarpModel m : cfg.candidates) {
+      const bool three_d = m == mapping::WarpModel::kRotation || m == mapping::WarpModel::kSixDof;
+      if (three_d && !input.camera) dropped.push_back(mapping::warp_model_name(m));
+      else cfg.models.push_back(m);
+    }
+    if (cfg.models.empty()) throw InputError("candidates", 0, "no candidate model without a camera calibration", "flow or similarity among the candidates, or --calib");
+  }
+  const bool selecting = cfg.model_selection;
   // The model of motion.csv's columns: the one model, or the richest candidate (a window's own
   // model's parameters first, the rest empty).
   const mapping::WarpModel model = selecting ? mapping::sort_warp_models(cfg.models).back() : cfg.cmax.model;
@@ -335,7 +345,9 @@ int run_flow(const FlowArgs& args, std::ostream& out) {
       j << "{\"selection\": \"auto\", \"rule\": \"the simplest candidate unless a richer one's relative objective gain "
            "exceeds gain_per_parameter per extra parameter (as evio segment per cluster)\", \"objective\": "
         << str(objective) << ", \"gain_per_parameter\": " << num(cfg.model_gain_per_parameter)
-        << ", \"windows\": " << st.windows << ", \"candidates\": [";
+        << ", \"windows\": " << st.windows << ", \"dropped_uncalibrated\": [";
+      for (size_t i = 0; i < dropped.size(); ++i) j << (i ? ", " : "") << str(dropped[i]);
+      j << "], \"candidates\": [";
       t << "auto over " << st.windows << " windows:";
       for (size_t i = 0; i < candidates.size(); ++i) {
         const double n = static_cast<double>(st.chosen[i]);

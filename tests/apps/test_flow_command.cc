@@ -373,6 +373,9 @@ std::map<std::string, int> auto_model_wins(const std::string& scene, double dura
   EXPECT_EQ(run_flow(a, out), 0);
   std::printf("%s: %s", scene.c_str(), out.str().c_str());
   *stats = read_text(a.out + "/stats.json");
+  const std::string cfg = read_text(a.out + "/flow_config.yaml");  // reads back, selection on
+  EXPECT_NE(cfg.find("model_selection: true"), std::string::npos) << cfg;
+  EXPECT_EQ(flow_config_text(load_flow_config(a.out + "/flow_config.yaml")), cfg);
   const std::string csv = read_text(a.out + "/model_selection.csv");
   EXPECT_EQ(first_line(csv), "t_start_s,t_end_s,chosen,flow_objective,flow_gain,flow_score,rotation_objective,rotation_gain,"
                              "rotation_score,similarity_objective,similarity_gain,similarity_score");
