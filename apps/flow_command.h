@@ -14,6 +14,10 @@
 //   6dof        p0 p1 p2 = vx vy vz m/s (camera velocity, camera frame, at cmax.depth_m or the
 //               plane), p3 p4 p5 = wx wy wz rad/s
 // contrast_* are the objective (cmax.objective resolved) at zero motion and at the estimate.
+// With --model auto (model_selection): the model is chosen per window (mapping::choose_warp_model,
+// as `evio segment` per cluster); motion.csv has the richest candidate's columns (a window's own
+// parameters first, the rest empty) and model_selection.csv each candidate's objective, gain and
+// score per window; stats.json's "model" block counts the windows each candidate won.
 #pragma once
 
 #include <cstdint>
