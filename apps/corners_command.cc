@@ -314,7 +314,13 @@ int run_corners(const CornersArgs& args, std::ostream& out) {
   {
     TextOut f((fs::path(args.out) / "stats.json").string());
     std::ostringstream j;
-    j << "{\n  \"dataset\": \"" << json_escape(args.dataset) << "\",\n  \"sensor\": [" << sensor.width << ", " << sensor.height
+    // The model block: eFAST tests each event on its own (no frames, no model to choose); what ran.
+    const std::string stages = std::string("eFAST per event") + (tracker ? (cfg.descriptors ? " + DART + tracker" : " + tracker") : "");
+    j << "{\n  \"model\": {\"summary\": \"" << json_escape(stages + ": per-event detector, no frames, no model choice")
+      << "\", \"detector\": \"efast\", \"filter_sae\": " << (cfg.efast.filter_sae ? "true" : "false")
+      << ", \"tracker\": " << (tracker ? "true" : "false") << ", \"descriptors\": " << (cfg.descriptors ? "true" : "false")
+      << ", \"frames\": null}";
+    j << ",\n  \"dataset\": \"" << json_escape(args.dataset) << "\",\n  \"sensor\": [" << sensor.width << ", " << sensor.height
       << "],\n  \"events\": " << events << ",\n  \"events_outside_sensor\": " << outside
       << ",\n  \"corners\": " << corners << ",\n  \"reduction_rate\": " << json_number(reduction)
       << ",\n  \"ns_per_event\": " << json_number(ns_per_event) << ",\n  \"duration_s\": " << json_number(duration_s)

@@ -16,12 +16,18 @@ int main(int argc, char** argv) try {
       "(m/s, camera frame, at cmax.depth_m or the plane) then wx wy wz (rad/s); flow_accel and similarity_accel: those of\n"
       "flow and similarity (velocities at the window's mid-time) then ax ay (px/s^2). contrast_*: the objective at zero\n"
       "motion and at the estimate. With the rotation model and a ground truth (--gt or the dataset's) or IMU:\n"
-      "motion_eval.csv (reference angular velocities per window, errors in deg/s).");
+      "motion_eval.csv (reference angular velocities per window, errors in deg/s).\n"
+      "--model auto: per window, every candidate (flow, similarity, and rotation when the camera is calibrated; or the\n"
+      "config's candidates) is fitted with one objective (normalized_gradient_magnitude unless --objective) and the\n"
+      "simplest wins unless a richer one raises the objective by more than model_gain_per_parameter (default 0.01,\n"
+      "relative) per extra parameter, the rule evio segment applies per cluster. motion.csv then has the richest\n"
+      "candidate's columns (a window's own parameters first); model_selection.csv: per window the chosen model and\n"
+      "each candidate's objective, gain over the simplest and score; stats.json \"model\": windows won per candidate.");
   CLI::Option* dataset_opt = cli->add_option("DATASET", flow.dataset, "Dataset (any format evio reads; sub-pixel ECD text too)");
   CLI::Option* out_opt = cli->add_option("-o,--out", flow.out, "Output folder (created)");
-  cli->add_option("--model", flow.model, "Warp model (overrides cmax.model; default flow)")
+  cli->add_option("--model", flow.model, "Warp model, or auto: choose per window (overrides cmax.model and model_selection; default flow)")
       ->check(CLI::IsMember([] {
-        std::vector<std::string> names;
+        std::vector<std::string> names = {"auto"};
         for (evio::mapping::WarpModel m : evio::mapping::warp_models()) names.push_back(evio::mapping::warp_model_name(m));
         return names;
       }()));

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <optional>
 #include <ostream>
 #include <sstream>
 
@@ -44,7 +45,13 @@ const Table<C>& flow_config_table() {
     Table<C> cmax("contrast maximisation settings");
     cmax.include(cmax_table(), &C::cmax, {"width", "height", "fx", "fy", "cx", "cy"});  // those: the camera's
     Table<C> top("flow settings");
-    top.section("window", window, self)
+    top.boolean("model_selection", &C::model_selection)
+        .note("model_selection", "choose the model per window among candidates (--model auto); false: cmax.model")
+        .choice_list("candidates", &C::candidates, warp_model_choices())
+        .note("candidates", "model_selection's; rotation and 6dof only with a calibrated camera")
+        .number("model_gain_per_parameter", &C::model_gain_per_parameter, Range::kNonNegative, "")
+        .note("model_gain_per_parameter", "relative objective gain a richer model needs per extra parameter")
+        .section("window", window, self)
         .include(cmax_window_table(), &C::window,
                  {"events", "duration_ms", "max_duration_ms", "min_events"})  // the top-level keys
         .section("cmax", cmax, self)
@@ -65,6 +72,8 @@ struct WindowRecord {
   double time_ms = 0;
   int iterations = 0;
 };
+
+double windows_d(int64_t n) { return static_cast<double>(n); }
 
 double median(std::vector<double> v) {
   if (v.empty()) return 0;
@@ -89,9 +98,12 @@ std::string flow_config_text(const FlowConfig& c) {
 
 FlowConfig resolve_flow_config(const FlowArgs& args) {
   FlowConfig cfg = load_flow_config(args.config, args.set);
-  if (!args.model.empty()) {
+  if (args.model == "auto") {
+    cfg.model_selection = true;
+  } else if (!args.model.empty()) {
+    cfg.model_selection = false;
     const auto m = mapping::warp_model_from_name(args.model);
-    if (!m) throw InputError("--model", 0, "unknown model '" + args.model + "'", mapping::warp_model_names());
+    if (!m) throw InputError("--model", 0, "unknown model '" + args.model + "'", "auto, " + mapping::warp_model_names());
     cfg.cmax.model = *m;
   }
   if (!args.objective.empty()) {
@@ -118,10 +130,24 @@ int run_flow(const FlowArgs& args, std::ostream& out) {
   if (args.t_start_ns && args.t_end_ns && *args.t_end_ns <= *args.t_start_ns)
     throw InputError("--t-end", 0, "--t-end must be after --t-start", "--t-start S --t-end S with S in seconds");
   if (args.png_every < 1) throw InputError("--png-every", 0, "must be >= 1", "a positive window count");
-  const mapping::WarpModel model = cfg.cmax.model;
-  const bool rotation = model == mapping::WarpModel::kRotation;
-
-  CmaxInput input = open_cmax_input(args.dataset, args.dataset_options, args.calib, {model});
+  CmaxInput input = open_cmax_input(args.dataset, args.dataset_options, args.calib,
+                                    cfg.model_selection ? std::vector<mapping::WarpModel>{} : std::vector<mapping::WarpModel>{cfg.cmax.model});
+  // Model selection: the candidates, the 3-D warps only with a calibrated camera (they need the pinhole).
+  std::vector<std::string> dropped;
+  cfg.models.clear();
+  if (cfg.model_selection) {
+    for (mapping::WarpModel m : cfg.candidates) {
+      const bool three_d = m == mapping::WarpModel::kRotation || m == mapping::WarpModel::kSixDof;
+      if (three_d && !input.camera) dropped.push_back(mapping::warp_model_name(m));
+      else cfg.models.push_back(m);
+    }
+    if (cfg.models.empty()) throw InputError("candidates", 0, "no candidate model without a camera calibration", "flow or similarity among the candidates, or --calib");
+  }
+  const bool selecting = cfg.model_selection;
+  // The model of motion.csv's columns: the one model, or the richest candidate (a window's own
+  // model's parameters first, the rest empty).
+  const mapping::WarpModel model = selecting ? mapping::sort_warp_models(cfg.models).back() : cfg.cmax.model;
+  const bool rotation = !selecting && model == mapping::WarpModel::kRotation;
   DatasetReader* reader = input.reader.get();
   const std::optional<calib::PinholeCamera>& camera = input.camera;
   const SensorSize sensor = input.sensor;
@@ -151,6 +177,19 @@ int run_flow(const FlowArgs& args, std::ostream& out) {
     std::fputs(h.c_str(), csv.get());
   }
 
+  // Model selection: model_selection.csv, one row per window with every candidate's numbers.
+  const std::vector<mapping::WarpModel>& candidates = pipe.models();
+  std::vector<double> gain_sum(candidates.size(), 0.0), score_sum(candidates.size(), 0.0);
+  std::optional<TextOut> sel_csv;
+  if (selecting) {
+    sel_csv.emplace((fs::path(args.out) / "model_selection.csv").string());
+    std::string h = "t_start_s,t_end_s,chosen";
+    for (mapping::WarpModel m : candidates) {
+      const std::string n = mapping::warp_model_name(m);
+      h += "," + n + "_objective," + n + "_gain," + n + "_score";
+    }
+    std::fputs((h + "\n").c_str(), sel_csv->get());
+  }
   std::vector<WindowRecord> records;
   int64_t pngs = 0;
   const bool signed_iwe = cfg.cmax.use_polarity;
@@ -160,7 +199,10 @@ int run_flow(const FlowArgs& args, std::ostream& out) {
       *format_seconds(w.t_start_ns, t0) = '\0';
       *format_seconds(w.t_end_ns, t1) = '\0';
       std::fprintf(csv.get(), "%s,%s,%s", t0, t1, mapping::warp_model_name(w.model));
-      for (int i = 0; i < dof; ++i) std::fprintf(csv.get(), ",%.9g", w.params[i]);
+      for (int i = 0; i < dof; ++i) {
+        if (i < w.params.size()) std::fprintf(csv.get(), ",%.9g", w.params[i]);
+        else std::fputc(',', csv.get());
+      }
       std::fprintf(csv.get(), ",%.9g,%.9g,%d,%.3f\n", w.objective_zero, w.objective, w.iterations, w.time_ms);
       if (args.png && w.index % args.png_every == 0) {
         const double scale = robust_scale(w.iwe);
@@ -170,6 +212,16 @@ int run_flow(const FlowArgs& args, std::ostream& out) {
         std::snprintf(name, sizeof(name), "window_%06lld_after.png", static_cast<long long>(w.index));
         write_iwe_png((fs::path(iwe_dir) / name).string(), w.iwe, scale, signed_iwe);
         pngs += 2;
+      }
+      if (sel_csv) {
+        std::fprintf(sel_csv->get(), "%s,%s,%s", t0, t1, mapping::warp_model_name(w.model));
+        for (size_t i = 0; i < w.trials.size(); ++i) {
+          const mapping::ModelTrial& t = w.trials[i];
+          std::fprintf(sel_csv->get(), ",%.9g,%.9g,%.9g", t.objective, t.gain, t.score);
+          gain_sum[i] += t.gain;
+          score_sum[i] += t.score;
+        }
+        std::fputc('\n', sel_csv->get());
       }
       records.push_back({w.t_start_ns, w.t_end_ns, w.params, w.time_ms, w.iterations});
     }
@@ -183,6 +235,7 @@ int run_flow(const FlowArgs& args, std::ostream& out) {
   const int64_t events = totals.events, t_first = totals.t_first_ns, t_last = totals.t_last_ns;
   const double process_s = totals.process_s;
   csv.close();
+  if (sel_csv) sel_csv->close();
   const pipeline::CmaxMotionStats& st = pipe.stats();
 
   // ---- rotation: ground truth and gyro per window -----------------------------------------------
@@ -281,11 +334,45 @@ int run_flow(const FlowArgs& args, std::ostream& out) {
   const double us_per_event = st.events_used > 0 ? 1e3 * st.time_ms / static_cast<double>(st.events_used) : 0.0;
   const double us_per_event_all = events > 0 ? 1e6 * process_s / static_cast<double>(events) : 0.0;
   const char* objective = mapping::cmax_objective_name(pipe.objective());
+  // The model block: the one model, or the selection's winners and the candidates' mean numbers.
+  std::string model_json, model_text;
+  {
+    std::ostringstream j, t;
+    if (!selecting) {
+      t << mapping::warp_model_name(model) << " (fixed: --model or cmax.model)";
+      j << "{\"selection\": \"fixed\", \"chosen\": " << str(mapping::warp_model_name(model));
+    } else {
+      j << "{\"selection\": \"auto\", \"rule\": \"the simplest candidate unless a richer one's relative objective gain "
+           "exceeds gain_per_parameter per extra parameter (as evio segment per cluster)\", \"objective\": "
+        << str(objective) << ", \"gain_per_parameter\": " << num(cfg.model_gain_per_parameter)
+        << ", \"windows\": " << st.windows << ", \"dropped_uncalibrated\": [";
+      for (size_t i = 0; i < dropped.size(); ++i) j << (i ? ", " : "") << str(dropped[i]);
+      j << "], \"candidates\": [";
+      t << "auto over " << st.windows << " windows:";
+      for (size_t i = 0; i < candidates.size(); ++i) {
+        const double n = static_cast<double>(st.chosen[i]);
+        const double share = st.windows > 0 ? n / windows_d(st.windows) : 0.0;
+        j << (i ? ", " : "") << "{\"model\": " << str(mapping::warp_model_name(candidates[i])) << ", \"parameters\": "
+          << mapping::warp_dof(candidates[i]) << ", \"windows_chosen\": " << st.chosen[i] << ", \"share_chosen\": " << num(share)
+          << ", \"mean_gain\": " << num(st.windows > 0 ? gain_sum[i] / windows_d(st.windows) : 0.0)
+          << ", \"mean_score\": " << num(st.windows > 0 ? score_sum[i] / windows_d(st.windows) : 0.0) << "}";
+        t << (i ? "," : "") << " " << mapping::warp_model_name(candidates[i]) << " " << num(100.0 * share) << "%";
+      }
+      size_t top = 0;
+      for (size_t i = 1; i < candidates.size(); ++i)
+        if (st.chosen[i] > st.chosen[top]) top = i;
+      j << "], \"chosen\": " << str(st.windows > 0 ? mapping::warp_model_name(candidates[top]) : "none")
+        << ", \"per_window\": \"model_selection.csv\"";
+      t << " (" << (st.windows > 0 ? mapping::warp_model_name(candidates[top]) : "none") << " most often)";
+    }
+    model_text = t.str();
+    j << ", \"summary\": " << str(model_text) << "}";
+    model_json = j.str();
+  }
   {
     TextOut f((fs::path(args.out) / "stats.json").string());
     std::ostringstream j;
-    j << "{\n  \"dataset\": " << str(args.dataset) << ",\n  \"model\": " << str(mapping::warp_model_name(model))
-      << ",\n  \"parameters\": [";
+    j << "{\n  \"dataset\": " << str(args.dataset) << ",\n  \"model\": " << model_json << ",\n  \"parameters\": [";
     const auto names = mapping::warp_parameter_names(model);
     for (size_t i = 0; i < names.size(); ++i) j << (i ? ", " : "") << str(names[i]);
     j << "],\n  \"objective\": " << str(objective) << ",\n  \"sensor\": [" << sensor.width << ", " << sensor.height
@@ -313,7 +400,7 @@ int run_flow(const FlowArgs& args, std::ostream& out) {
 
   out << "events        " << events << " over " << num(duration_s) << " s, " << st.windows << " windows ("
       << st.windows_skipped << " skipped with fewer than " << cfg.window.min_window_events << " events)\n";
-  out << "model         " << mapping::warp_model_name(model) << ", objective " << objective << ", pyramid "
+  out << "model         " << model_text << ", objective " << objective << ", pyramid "
       << cfg.cmax.pyramid_levels << " levels (warm starts: " << (cfg.warm_pyramid_levels > 0 ? cfg.warm_pyramid_levels : cfg.cmax.pyramid_levels)
       << "), " << st.warm_starts << " warm starts, " << st.resets << " resets\n";
   out << "undistortion  " << pipeline::cmax_undistortion_name(pipe.undistortion()) << ": " << pipe.undistortion_reason() << "\n";
@@ -322,6 +409,7 @@ int run_flow(const FlowArgs& args, std::ostream& out) {
       << " iterations per window (one core; reading excluded)\n";
   out << eval_text.str();
   out << "wrote " << args.out << "/motion.csv" << (eval_json.empty() ? "" : ", motion_eval.csv")
+      << (selecting ? ", model_selection.csv" : "")
       << ", stats.json, flow_config.yaml";
   if (args.png) out << ", iwe/ (" << pngs << " PNG)";
   out << "\n";

@@ -14,6 +14,10 @@
 //   6dof        p0 p1 p2 = vx vy vz m/s (camera velocity, camera frame, at cmax.depth_m or the
 //               plane), p3 p4 p5 = wx wy wz rad/s
 // contrast_* are the objective (cmax.objective resolved) at zero motion and at the estimate.
+// With --model auto (model_selection): the model is chosen per window (mapping::choose_warp_model,
+// as `evio segment` per cluster); motion.csv has the richest candidate's columns (a window's own
+// parameters first, the rest empty) and model_selection.csv each candidate's objective, gain and
+// score per window; stats.json's "model" block counts the windows each candidate won.
 #pragma once
 
 #include <cstdint>
@@ -30,7 +34,13 @@ namespace evio::apps {
 // Everything `--config FILE` sets (YAML sections window, cmax and the key undistortion; README.md,
 // `evio flow --print-config`): the pipeline's options. cmax.width/height/fx/fy/cx/cy come from
 // the camera calibration and are not config keys.
-struct FlowConfig : pipeline::CmaxMotionPipelineOptions {};
+struct FlowConfig : pipeline::CmaxMotionPipelineOptions {
+  // Model selection per window (`--model auto`): the pipeline's `models` are these candidates,
+  // without the 3-D warps (rotation, 6dof) when the camera is not calibrated. Off: cmax.model.
+  bool model_selection = false;
+  std::vector<mapping::WarpModel> candidates = {mapping::WarpModel::kFlow, mapping::WarpModel::kSimilarity,
+                                                mapping::WarpModel::kRotation};
+};
 
 // Reads a flow config YAML (path empty: none) with `--set key.sub=value` overrides over the
 // defaults. Throws evio::InputError (file:line or the --set option, key, expected form).
@@ -46,7 +56,7 @@ struct FlowArgs {
   std::string calib;               // optional Kalibr camchain or ECD calib.txt
   std::string gt;                  // optional ground truth (TUM or csv); default: the dataset's own
   std::string out;                 // output folder (created)
-  std::string model;               // --model: overrides cmax.model when not empty
+  std::string model;               // --model: overrides cmax.model (model_selection off) when not empty; "auto": model_selection on
   std::string objective;           // --objective: overrides cmax.objective when not empty
   int64_t window_events = 0;       // --window-events (> 0 overrides window.events and clears window.ms)
   int64_t window_ns = 0;           // --window-ms (> 0 overrides window.ms)

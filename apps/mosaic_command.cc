@@ -283,8 +283,32 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
   const pipeline::MosaicBootstrapStats& bs = ms.bootstrap;
   const int64_t seen = ms.seen_pixels;
   {
+    // The model block: the tracker's motion and measurement models as they ran. measurement_model
+    // auto is relative_motion when the gyro drives the prediction or the particles carry their own
+    // velocities (particle_velocity without gyro), previous_mean otherwise (rotation_particle_filter.h).
+    const frontend::RotationParticleFilterOptions& to = cfg.tracker;
+    const bool gyro = st.gyro_predictions > 0;
+    const bool pv = to.motion_model == frontend::RotationMotionModel::kParticleVelocity && !gyro;
+    const frontend::RotationMotionModel motion_used = gyro ? frontend::RotationMotionModel::kRandomWalk : to.motion_model;
+    const bool relative = to.measurement_model == frontend::RotationMeasurementModel::kRelativeMotion ||
+                          (to.measurement_model == frontend::RotationMeasurementModel::kAuto && (gyro || pv));
+    const std::string measurement = relative ? "relative_motion" : "previous_mean";
+    const std::string why = to.measurement_model != frontend::RotationMeasurementModel::kAuto ? "set in the config"
+                            : gyro ? "auto: the gyro drives the prediction"
+                            : pv   ? "auto: the particles carry their own velocities (particle_velocity, no gyro)"
+                                   : "auto: no gyro and no particle velocities";
+    const std::string motion = gyro ? std::string("gyro") : frontend::rotation_motion_model_name(motion_used);
+    const double mean_particles = st.weighted_batches > 0 ? static_cast<double>(st.particle_batches) / static_cast<double>(st.weighted_batches) : 0.0;
     std::ofstream f((fs::path(args.out) / "stats.json").string());
-    f << "{\n  \"dataset\": " << json_string(args.dataset) << ",\n  \"events\": " << events
+    f << "{\n  \"dataset\": " << json_string(args.dataset) << ",\n  \"model\": {\"summary\": "
+      << json_string("rotation, " + measurement + " measurement (" + why + "), " + motion + " prediction, " + num(mean_particles) +
+                     " particles on average")
+      << ", \"measurement\": {\"option\": \"" << frontend::rotation_measurement_model_name(to.measurement_model)
+      << "\", \"resolved\": \"" << measurement << "\", \"reason\": " << json_string(why) << "}, \"motion\": {\"option\": \""
+      << frontend::rotation_motion_model_name(to.motion_model) << "\", \"resolved\": \"" << motion
+      << "\", \"gyro_predictions\": " << st.gyro_predictions << "}, \"particles\": {\"configured\": " << to.num_particles
+      << ", \"mean\": " << num(mean_particles) << "}}"
+      << ",\n  \"events\": " << events
       << ",\n  \"processing_time_s\": " << num(processing_s) << ",\n  \"sequence_duration_s\": " << num(duration_s)
       << ",\n  \"real_time_factor\": " << num(duration_s > 0 ? processing_s / duration_s : 0)
       << ",\n  \"events_per_s\": " << num(processing_s > 0 ? events / processing_s : 0)

@@ -368,7 +368,12 @@ int run_reconstruct(const ReconstructArgs& args, std::ostream& out) {
   {
     TextOut f((fs::path(args.out) / "stats.json").string());
     std::ostringstream j;
-    j << "{\n  \"method\": \"" << mapping::reconstruction_method_name(cfg.method) << "\",\n  \"use_frames\": "
+    const std::string method = mapping::reconstruction_method_name(cfg.method);
+    j << "{\n  \"model\": {\"summary\": \"" << method
+      << (cfg.use_frames ? ", frames fused: " + std::to_string(st.frames) : std::string(", events only (frames not used)"))
+      << "\", \"method\": \"" << method << "\", \"selection\": \"fixed\", \"use_frames\": " << (cfg.use_frames ? "true" : "false")
+      << ", \"frames_fused\": " << st.frames << "}";
+    j << ",\n  \"method\": \"" << method << "\",\n  \"use_frames\": "
       << (cfg.use_frames ? "true" : "false") << ",\n  \"events\": " << events << ",\n  \"events_outside_sensor\": "
       << st.events_outside << ",\n  \"frames_fused\": " << st.frames << ",\n  \"images\": " << images
       << ",\n  \"t_first_s\": " << num(t_first * 1e-9) << ",\n  \"t_last_s\": " << num(t_last * 1e-9)

@@ -222,8 +222,16 @@ int run_segment(const SegmentArgs& args, std::ostream& out) {
   int64_t windows = 0, pngs = 0;
   std::vector<double> window_ms;
   std::set<int> ids_used;
+  // The model block: windows per cluster count, clusters per warp model, and the gains that
+  // decided the count (accepted: the smallest gain of the clusters kept; removed: of those merged).
+  std::map<int, int64_t> count_windows;
+  std::map<std::string, int64_t> model_clusters;
+  std::vector<double> kept_gains, removed_gains;
   auto handle = [&](std::vector<pipeline::SegmentationWindow> ws) {
     for (const pipeline::SegmentationWindow& w : ws) {
+      ++count_windows[static_cast<int>(w.clusters.size())];
+      for (const mapping::SegmentCluster& k : w.clusters) ++model_clusters[mapping::warp_model_name(k.model)];
+      for (const mapping::CountStep& cs : w.count_steps) (cs.removed ? removed_gains : kept_gains).push_back(cs.smallest_gain);
       flush_until(w.input_begin, nullptr);  // skipped windows before this one: no label
       flush_until(w.input_end, &w);
       window_ms.push_back(w.time_ms);
@@ -292,7 +300,33 @@ int run_segment(const SegmentArgs& args, std::ostream& out) {
   {
     TextOut f((fs::path(args.out) / "stats.json").string());
     std::ostringstream j;
-    j << "{\n  \"events\": " << events << ",\n  \"events_segmented\": " << ws.events_used
+    const mapping::SegmentationOptions& so = pipe.segmentation_options();
+    int modal = 0;
+    int64_t modal_n = -1;
+    for (const auto& [c, n] : count_windows)
+      if (n > modal_n) modal = c, modal_n = n;
+    auto mean = [](const std::vector<double>& v) {
+      double m = 0;
+      for (double x : v) m += x;
+      return v.empty() ? NAN : m / static_cast<double>(v.size());
+    };
+    std::ostringstream summary;
+    summary << (so.clusters > 0 ? "fixed " : "auto ") << modal << " clusters in " << modal_n << " of " << st.windows << " windows;";
+    for (const auto& [m, n] : model_clusters) summary << " " << m << " " << n;
+    summary << " clusters";
+    j << "{\n  \"model\": {\"summary\": " << str(summary.str()) << ", \"count\": {\"selection\": "
+      << str(so.clusters > 0 ? "fixed" : "auto") << ", \"clusters\": " << so.clusters << ", \"max_clusters\": " << so.max_clusters
+      << ", \"min_cluster_gain\": " << num(so.min_cluster_gain) << ", \"modal\": " << modal << ", \"windows_per_count\": {";
+    bool first = true;
+    for (const auto& [c, n] : count_windows) j << (first ? "" : ", ") << "\"" << c << "\": " << n, first = false;
+    j << "}, \"accepted_smallest_gain_mean\": " << num(mean(kept_gains)) << ", \"removed\": " << removed_gains.size()
+      << ", \"removed_gain_mean\": " << num(mean(removed_gains)) << "}, \"warp\": {\"candidates\": [";
+    for (size_t i = 0; i < so.models.size(); ++i) j << (i ? ", " : "") << str(mapping::warp_model_name(so.models[i]));
+    j << "], \"gain_per_parameter\": " << num(so.model_gain_per_parameter) << ", \"clusters_per_model\": {";
+    first = true;
+    for (const auto& [m, n] : model_clusters) j << (first ? "" : ", ") << str(m) << ": " << n, first = false;
+    j << "}}, \"per_window\": \"segments.json\"}";
+    j << ",\n  \"events\": " << events << ",\n  \"events_segmented\": " << ws.events_used
       << ",\n  \"events_labelled\": " << st.events_labelled << ",\n  \"events_noise\": " << st.events_noise
       << ",\n  \"events_in_no_window\": " << unsegmented << ",\n  \"events_dropped\": " << ws.events_dropped
       << ",\n  \"windows\": " << st.windows << ",\n  \"windows_skipped\": " << ws.windows_skipped

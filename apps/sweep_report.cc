@@ -340,6 +340,23 @@ SweepReportResult write_sweep_report(const SweepReportOptions& opts) {
     sweep_write_file(rep / (g.file_stem() + ".csv"), gcsv);
     res.files.push_back((rep / (g.file_stem() + ".csv")).string());
   }
+  // Model selection: what each cell's algorithm chose, and on what numbers (its stats.json "model").
+  {
+    Table models{{"algorithm", "dataset", "variant", "params", "cell", "model chosen"}, {}};
+    for (const Group& g : groups) {
+      for (const SweepRecord* r : g.rows) {
+        std::string m = sweep_model_summary(*r);
+        for (char& c : m) c = c == '|' ? '/' : c;
+        models.rows.push_back({r->algorithm, r->dataset, r->variant, params_text(*r), r->cell,
+                               m.empty() ? (r->exit_code == 0 ? "(not reported)" : "(failed: " + exit_text(*r) + ")") : m});
+      }
+    }
+    const std::string note = "The model each cell's algorithm chose and the numbers behind it, from the \"model\" object of its "
+                             "stats.json (the whole object is in results.jsonl).";
+    md += "\n## Model selection\n\n" + note + "\n\n" + models.markdown();
+    body += "<h2 id=\"model-selection\">Model selection</h2>\n<p>" + html(note) + "</p>\n" + models.html_table();
+    tex += "\n" + models.latex_table("Model selection per cell");
+  }
   sweep_write_file(rep / "pareto.md", md);
   sweep_write_file(rep / "pareto.tex", tex);
   std::string page = "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>" + html(title) +
@@ -350,6 +367,7 @@ SweepReportResult write_sweep_report(const SweepReportOptions& opts) {
   if (!res.plot_note.empty()) page += "<p class=\"missing\">Plots are missing: " + html(res.plot_note) + ".</p>\n";
   page += "<ul>\n";
   for (const Group& g : groups) page += "<li><a href=\"#" + html(g.file_stem()) + "\">" + html(group_title(g)) + "</a></li>\n";
+  page += "<li><a href=\"#model-selection\">Model selection</a></li>\n";
   page += "</ul>\n" + body + "</body>\n</html>\n";
   sweep_write_file(rep / "index.html", page);
   for (const char* f : {"pareto.md", "pareto.tex", "index.html"}) res.files.push_back((rep / f).string());

@@ -175,7 +175,45 @@ double num(const YAML::Node& n, const char* key) {
   }
 }
 
+// A parsed JSON value back as compact JSON: quoted scalars (tag "!") stay strings, plain ones are
+// numbers, true, false or null when they read as such.
+std::string to_json(const YAML::Node& n) {
+  if (n.IsMap()) {
+    std::string s = "{";
+    bool first = true;
+    for (const auto& kv : n) {
+      s += (first ? "" : ", ") + quoted(kv.first.Scalar()) + ": " + to_json(kv.second);
+      first = false;
+    }
+    return s + "}";
+  }
+  if (n.IsSequence()) {
+    std::string s = "[";
+    for (size_t i = 0; i < n.size(); ++i) s += (i ? ", " : "") + to_json(n[i]);
+    return s + "]";
+  }
+  if (!n.IsScalar()) return "null";
+  const std::string& v = n.Scalar();
+  if (n.Tag() != "!") {
+    if (v == "true" || v == "false" || v == "null") return v;
+    char* end = nullptr;
+    const double d = std::strtod(v.c_str(), &end);
+    if (!v.empty() && *end == '\0' && std::isfinite(d)) return v;
+  }
+  return quoted(v);
+}
+
 }  // namespace
+
+std::string sweep_model_summary(const SweepRecord& r) {
+  if (r.model_json.empty()) return "";
+  try {
+    const YAML::Node n = YAML::Load(r.model_json);
+    return n.IsMap() ? text(n, "summary") : std::string();
+  } catch (const YAML::Exception&) {
+    return "";
+  }
+}
 
 double SweepRecord::metric(const std::string& name) const {
   for (const auto& [k, v] : metrics) {
@@ -203,6 +241,8 @@ void read_cell_metrics(const std::string& algorithm, const std::string& out_dir,
     r->duration_s = number_at(file("stats.json"), a.duration_path);
     if (a.duration_start_path) r->duration_s -= number_at(file("stats.json"), a.duration_start_path);
   }
+  const YAML::Node& stats = file("stats.json");
+  r->model_json = stats.IsMap() && stats["model"].IsMap() ? to_json(stats["model"]) : std::string();
 }
 
 std::string sweep_record_json(const SweepRecord& r) {
@@ -221,7 +261,7 @@ std::string sweep_record_json(const SweepRecord& r) {
   for (size_t i = 0; i < r.metrics.size(); ++i) j << (i ? ", " : "") << quoted(r.metrics[i].first) << ": " << json_number(r.metrics[i].second, 9);
   j << "}, \"error_metric\": " << (r.error_metric.empty() ? "null" : quoted(r.error_metric)) << ", \"note\": " << quoted(r.note)
     << ", \"engine\": " << quoted(r.engine) << ", \"host\": " << quoted(r.host) << ", \"started_utc\": " << quoted(r.started_utc)
-    << "}\n";
+    << ", \"model\": " << (r.model_json.empty() ? "null" : r.model_json) << "}\n";
   return j.str();
 }
 
@@ -289,6 +329,7 @@ std::vector<SweepRecord> read_sweep_records(const std::string& results_path) {
     r.engine = text(n, "engine");
     r.host = text(n, "host");
     r.started_utc = text(n, "started_utc");
+    if (n["model"].IsMap()) r.model_json = to_json(n["model"]);
     out.push_back(std::move(r));
   }
   return out;

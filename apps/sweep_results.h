@@ -23,6 +23,9 @@ struct SweepRecord {
   std::string error_metric;   // the headline error in metrics (empty: the command does not evaluate)
   std::string note;           // where the metrics come from / why there is no error metric
   std::string engine, host, started_utc;
+  // The model the algorithm chose, with the numbers behind it: the "model" object of the cell's
+  // stats.json as compact JSON ("" when the command wrote none); its "summary" is one line of text.
+  std::string model_json;
 
   double metric(const std::string& name) const;  // NaN when absent
 };
@@ -40,6 +43,9 @@ const SweepAlgorithmInfo& sweep_algorithm_info(const std::string& algorithm);
 // Reads the metrics of a finished cell from its output folder (stats.json, eval.json): fills
 // metrics, error_metric, duration_s and note. Missing files or keys give null metrics.
 void read_cell_metrics(const std::string& algorithm, const std::string& out_dir, SweepRecord* r);
+
+// The "summary" text of the record's model object ("" when none).
+std::string sweep_model_summary(const SweepRecord& r);
 
 // The record as one JSON line, '\n' included.
 std::string sweep_record_json(const SweepRecord& r);

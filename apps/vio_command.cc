@@ -357,8 +357,55 @@ int run_vio(const VioArgs& args, std::ostream& out) {
   std::sort(solve.begin(), solve.end());
   const double med = solve.empty() ? 0 : solve[solve.size() / 2];
   const bool use_frames = cfg.frontend == pipeline::VioFrontEnd::kFrames;
+  // The model block: the motion model per segment with the keyframes and GRIC numbers that decided
+  // it (margin: GRIC of the general model minus that of rotation-only; > rotation_only_gric_margin
+  // for rotation_only_min_keyframes keyframes switches rotation-only on), and the frames' sizes.
+  std::ostringstream mj, summary;
+  {
+    double rot_s = 0, all_s = 0;
+    mj << "{\"motion\": {\"selection\": " << (cfg.window.rotation_only_model ? "\"auto\"" : "\"fixed\"")
+       << ", \"rule\": \"GRIC per keyframe with hysteresis and the IMU and parallax conditions (backend/sliding_window_estimator.h)\""
+       << ", \"gric_margin\": " << num(cfg.window.rotation_only_gric_margin) << ", \"min_keyframes\": "
+       << cfg.window.rotation_only_min_keyframes << ", \"keyframes\": " << st.keyframes
+       << ", \"rotation_only_keyframes\": " << st.rotation_only_keyframes << ", \"segments\": [";
+    for (size_t i = 0; i < r.motion_models.size(); ++i) {
+      const pipeline::VioSegment& m = r.motion_models[i];
+      int keyframes = 0, tested = 0;
+      double margin = 0;
+      for (const auto& t : st.motion_model_tests) {
+        if (t.t_ns < m.t_begin_ns || t.t_ns > m.t_end_ns) continue;
+        ++keyframes;
+        if (t.best == backend::TwoViewModel::kNone) continue;
+        ++tested;
+        margin += t.gric_general - t.gric_rotation;
+      }
+      const double d = static_cast<double>(m.t_end_ns - m.t_begin_ns) * 1e-9;
+      all_s += d;
+      if (m.what == "rotation_only") rot_s += d;
+      mj << (i ? ", " : "") << "{\"model\": \"" << m.what << "\", \"t_start_s\": " << format_seconds(m.t_begin_ns)
+         << ", \"t_end_s\": " << format_seconds(m.t_end_ns) << ", \"keyframes\": " << keyframes
+         << ", \"gric_margin_mean\": " << num(tested ? margin / tested : NAN) << "}";
+    }
+    const double share = all_s > 0 ? rot_s / all_s : 0.0;
+    mj << "], \"rotation_only_s\": " << num(rot_s) << ", \"rotation_only_share\": " << num(share) << "}";
+    summary << "rotation_only " << num(100.0 * share) << "% of the time (" << st.rotation_only_keyframes << " of " << st.keyframes
+            << " keyframes)";
+    if (use_frames) {
+      const frontend::EventFrameOptions& fo = cfg.frames;
+      const int64_t frames = vs.event_frames.frames_emitted;
+      const bool adaptive = fo.min_window_ns > 0;
+      mj << ", \"frames\": {\"events_per_frame\": " << fo.events_per_frame << ", \"adaptive\": " << (adaptive ? "true" : "false")
+         << ", \"min_window_ms\": " << num(fo.min_window_ns * 1e-6) << ", \"max_window_ms\": " << num(fo.max_window_ns * 1e-6)
+         << ", \"frames\": " << frames << ", \"mean_events_per_frame\": "
+         << num(frames > 0 ? static_cast<double>(vs.events) / static_cast<double>(frames) : NAN)
+         << ", \"mean_frame_interval_ms\": " << num(frames > 0 ? 1e3 * duration_s / static_cast<double>(frames) : NAN) << "}";
+      summary << "; frames " << (adaptive ? "adaptive" : "fixed") << ", "
+              << num(frames > 0 ? static_cast<double>(vs.events) / static_cast<double>(frames) : NAN) << " events per frame";
+    }
+    mj << ", \"summary\": \"" << json_escape(summary.str()) << "\"}";
+  }
   std::ostringstream j;
-  j << "{\n  \"dataset\": \"" << json_escape(args.dataset) << "\",\n  \"inputs\": \"" << pipeline::to_string(cfg.inputs)
+  j << "{\n  \"dataset\": \"" << json_escape(args.dataset) << "\",\n  \"model\": " << mj.str() << ",\n  \"inputs\": \"" << pipeline::to_string(cfg.inputs)
     << "\",\n  \"frontend\": \"" << pipeline::to_string(cfg.frontend)
     << "\",\n  \"events\": " << vs.events << ",\n  \"corners\": " << vs.corner_events << ",\n  \"frames\": " << st.frames
     << ",\n  \"keyframes\": " << st.keyframes << ",\n  \"landmarks\": " << pts.size()

@@ -42,7 +42,6 @@ struct MotionSegmenter::State {
 
 namespace {
 
-int n_params(WarpModel m) { return warp_dof(m); }
 
 // The flow (px/s) a motion gives at point (x, y) at t_ref: the central difference of the warp over
 // +-1 ms (for the accelerated models the velocity at t_ref, without the acceleration's term).
@@ -188,9 +187,7 @@ MotionSegmenter::MotionSegmenter(const SegmentationOptions& options) : options_(
   std::string why;
   if (!options_.Validate(&why)) throw std::invalid_argument("segmentation options: " + why);
   if (options_.models.empty()) options_.models = {WarpModel::kFlow};
-  std::stable_sort(options_.models.begin(), options_.models.end(),
-                   [](WarpModel a, WarpModel b) { return n_params(a) < n_params(b); });
-  options_.models.erase(std::unique(options_.models.begin(), options_.models.end()), options_.models.end());
+  options_.models = sort_warp_models(options_.models);
   cm_options_ = options_.cmax;
   if (cm_options_.objective == CmaxObjective::kAuto) cm_options_.objective = CmaxObjective::kNormalizedGradientMagnitude;
 }
@@ -633,17 +630,8 @@ SegmentationResult MotionSegmenter::segment(const CmaxEvents& ev, const std::vec
         }
         trials.push_back(t);
       }
-      // Score against the simplest model.
-      const double f0 = trials.front().objective;
-      int best = 0;
-      double best_score = 0;
-      for (size_t i = 0; i < trials.size(); ++i) {
-        trials[i].gain = f0 > 0 ? trials[i].objective / f0 - 1.0 : 0.0;
-        const double score = trials[i].gain - options_.model_gain_per_parameter *
-                                                  (n_params(trials[i].model) - n_params(trials.front().model));
-        if (i == 0 || score > best_score) best = static_cast<int>(i), best_score = score;
-      }
-      trials[best].chosen = true;
+      // Score against the simplest model: the rule of warp_model_selection.h.
+      const size_t best = choose_warp_model(&trials, options_.model_gain_per_parameter);
       if (trials[best].model != c.model) changed = true;
       c.model = trials[best].model;
       c.params = trials[best].params;

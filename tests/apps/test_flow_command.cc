@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <map>
 #include <random>
 #include <sstream>
 
@@ -20,6 +21,7 @@
 #include "evio_test/real_data.h"
 #include "evio_test/temp_dir.h"
 #include "evio_test/text_file.h"
+#include "simulate_command.h"
 
 namespace evio::apps {
 namespace {
@@ -349,6 +351,74 @@ void real_window_reaches_grid_optimum(const std::string& model, double range, in
 TEST(FlowCommandReal, EcdWindowFlowReachesTheGridOptimum) { real_window_reaches_grid_optimum("flow", 1500, 61); }
 
 TEST(FlowCommandReal, EcdWindowRotationReachesTheGridOptimum) { real_window_reaches_grid_optimum("rotation", 10, 21); }
+
+// --model auto on simulated scenes whose right model is known (datasets/, 1 s each, calibrated:
+// candidates flow, rotation, similarity): windows won per model, from model_selection.csv, which
+// must agree with stats.json's model block.
+std::map<std::string, int> auto_model_wins(const std::string& scene, double duration_s, std::string* stats) {
+  evio_test::TempDir dir;
+  SimulateArgs sa;
+  sa.scene = std::string(EVIO_SOURCE_DIR) + "/datasets/" + scene;
+  sa.out = dir.file("seq");
+  sa.overrides.duration_s = duration_s;
+  sa.progress = false;
+  std::ostringstream so;
+  EXPECT_EQ(run_simulate(sa, so), 0);
+  FlowArgs a;
+  a.dataset = sa.out;
+  a.out = dir.file("out");
+  a.model = "auto";
+  a.progress = false;
+  std::ostringstream out;
+  EXPECT_EQ(run_flow(a, out), 0);
+  std::printf("%s: %s", scene.c_str(), out.str().c_str());
+  *stats = read_text(a.out + "/stats.json");
+  const std::string cfg = read_text(a.out + "/flow_config.yaml");  // reads back, selection on
+  EXPECT_NE(cfg.find("model_selection: true"), std::string::npos) << cfg;
+  EXPECT_EQ(flow_config_text(load_flow_config(a.out + "/flow_config.yaml")), cfg);
+  const std::string csv = read_text(a.out + "/model_selection.csv");
+  EXPECT_EQ(first_line(csv), "t_start_s,t_end_s,chosen,flow_objective,flow_gain,flow_score,rotation_objective,rotation_gain,"
+                             "rotation_score,similarity_objective,similarity_gain,similarity_score");
+  std::map<std::string, int> wins;
+  for (const auto& r : csv_rows(csv)) {
+    EXPECT_EQ(r.size(), 12u);
+    ++wins[r[2]];
+  }
+  for (const auto& [m, n] : wins)
+    EXPECT_NE(stats->find("{\"model\": \"" + m + "\", \"parameters\": " +
+                          std::to_string(mapping::warp_dof(*mapping::warp_model_from_name(m))) + ", \"windows_chosen\": " +
+                          std::to_string(n)),
+              std::string::npos) << *stats;
+  EXPECT_NE(stats->find("\"selection\": \"auto\""), std::string::npos);
+  EXPECT_NE(stats->find("\"objective\": \"normalized_gradient_magnitude\""), std::string::npos);
+  return wins;
+}
+
+int total(const std::map<std::string, int>& wins) {
+  int n = 0;
+  for (const auto& [m, k] : wins) n += k;
+  return n;
+}
+
+TEST(FlowCommandModel, AutoPicksFlowOnPlanarTranslation) {
+  std::string stats;
+  const auto wins = auto_model_wins("poster_translation.yaml", 1.0, &stats);
+  const int n = total(wins);
+  ASSERT_GT(n, 5);
+  const double flow = wins.count("flow") ? wins.at("flow") : 0;
+  EXPECT_GE(flow / n, 0.9) << stats;  // measured 40 of 40 windows (rotation and similarity gains below 0.001)
+  EXPECT_NE(stats.find("\"chosen\": \"flow\""), std::string::npos) << stats;
+}
+
+TEST(FlowCommandModel, AutoPicksRotationOnPureRotation) {
+  std::string stats;
+  const auto wins = auto_model_wins("poster_rotation.yaml", 1.0, &stats);
+  const int n = total(wins);
+  ASSERT_GT(n, 5);
+  const double rot = wins.count("rotation") ? wins.at("rotation") : 0;
+  EXPECT_GE(rot / n, 0.9) << stats;  // measured 40 of 40 windows (rotation gain 0.07-0.12 over flow, above similarity's)
+  EXPECT_NE(stats.find("\"chosen\": \"rotation\""), std::string::npos) << stats;
+}
 
 }  // namespace
 }  // namespace evio::apps

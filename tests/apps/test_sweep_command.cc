@@ -291,8 +291,9 @@ std::string fake_programs(const evio_test::TempDir& tmp) {
       "mkdir -p \"$out\"\necho \"fake run on $ds\"\n"
       "if [ -n \"$marker\" ] && [ ! -e \"$marker\" ]; then echo $$ > \"$marker\"; exec sleep 30; fi\n"
       "if [ \"$fail\" = 1 ]; then echo 'evio: error: failing on purpose' >&2; exit 1; fi\n"
-      "printf '{\"groundtruth\": {\"rms_error_degps\": %s}, \"duration_s\": 2, \"windows\": 3, \"corners\": %s}\\n' "
-      "\"$err\" \"$err\" > \"$out/stats.json\"\n";
+      "printf '{\"groundtruth\": {\"rms_error_degps\": %s}, \"duration_s\": 2, \"windows\": 3, \"corners\": %s, "
+      "\"model\": {\"summary\": \"chose m%s\", \"chosen\": \"m%s\", \"share\": 0.5, \"tried\": [\"a\", \"b\"]}}\\n' "
+      "\"$err\" \"$err\" \"$err\" \"$err\" > \"$out/stats.json\"\n";
   for (const char* alg : {"flow", "corners"}) {
     const std::string p = dir + "/evio-" + alg;
     std::ofstream(p) << script;
@@ -505,6 +506,44 @@ TEST(SweepReport, TablesAndPageListEveryCellAndSayWhenPlotsAreMissing) {
   r.python = a.python;
   ASSERT_EQ(run_quietly(r), 0);
   EXPECT_TRUE(fs::exists(a.out + "/report/index.html"));
+}
+
+// The "model" object of each cell's stats.json reaches its results.jsonl line (as JSON, numbers
+// numbers and strings strings) and the report's model-selection table (Markdown, HTML, LaTeX).
+TEST(SweepReport, ModelSelectionReachesResultsAndReport) {
+  evio_test::TempDir tmp;
+  SweepArgs a = fake_sweep(tmp, "datasets: [rec]\nalgorithms:\n  - {algorithm: flow, grid: {err: [3, 4]}}\n"
+                                "  - {algorithm: corners, grid: {err: [5], fail: [1]}}\n");
+  run_quietly(a);
+  const std::string lines = evio_test::read_text(a.out + "/results.jsonl");
+  EXPECT_NE(lines.find("\"model\": {\"summary\": \"chose m3\", \"chosen\": \"m3\", \"share\": 0.5, \"tried\": [\"a\", \"b\"]}"),
+            std::string::npos) << lines;
+  EXPECT_NE(lines.find("\"model\": null"), std::string::npos) << lines;  // the failed cell wrote no stats.json
+  const auto latest = latest_sweep_records(read_sweep_records(a.out + "/results.jsonl"));
+  ASSERT_EQ(latest.size(), 3u);
+  int with_model = 0;
+  for (const auto& [id, r] : latest) {
+    if (r.algorithm == "flow") {
+      ++with_model;
+      EXPECT_EQ(sweep_model_summary(r), "chose m" + r.params[0].second);
+      // Read back and written again, the line is the same.
+      EXPECT_NE(sweep_record_json(r).find("\"chosen\": \"m" + r.params[0].second + "\", \"share\": 0.5"), std::string::npos);
+    } else {
+      EXPECT_TRUE(r.model_json.empty());
+    }
+  }
+  EXPECT_EQ(with_model, 2);
+  const std::string md = evio_test::read_text(a.out + "/report/pareto.md");
+  const std::string page = evio_test::read_text(a.out + "/report/index.html");
+  const std::string tex = evio_test::read_text(a.out + "/report/pareto.tex");
+  EXPECT_NE(md.find("## Model selection"), std::string::npos);
+  for (const char* s : {"chose m3", "chose m4", "(failed: 1)"}) {
+    EXPECT_NE(md.find(s), std::string::npos) << s;
+    EXPECT_NE(page.find(s), std::string::npos) << s;
+  }
+  EXPECT_NE(page.find("<h2 id=\"model-selection\">"), std::string::npos);
+  EXPECT_NE(page.find("href=\"#model-selection\""), std::string::npos);
+  EXPECT_NE(tex.find("Model selection per cell"), std::string::npos);
 }
 
 TEST(SweepReport, SaysSoWhenNoCellHasAFiniteError) {

@@ -26,7 +26,8 @@
 // - Warp model per cluster, simplest first (flow 2 < rotation 3 < similarity 4 = flow_accel 4 <
 //   similarity_accel 6 = 6dof 6 parameters; ties in the order given): a richer model replaces the
 //   current one when it raises the cluster's objective by more than model_gain_per_parameter per
-//   extra parameter.
+//   extra parameter (choose_warp_model in warp_model_selection.h, the rule `evio flow --model
+//   auto` applies per window).
 // Both decisions are returned with the numbers that made them.
 #pragma once
 
@@ -37,6 +38,7 @@
 #include <Eigen/Core>
 
 #include "evio/mapping/cmax.h"
+#include "evio/mapping/warp_model_selection.h"
 
 namespace evio::mapping {
 
@@ -88,15 +90,6 @@ struct SegmentationOptions {
   int footprint_radius_px = 4;  // dilation of a cluster's footprint for the next window, px (>= 0)
   uint64_t seed = 1;          // k-means++ seeding
   bool Validate(std::string* why) const;
-};
-
-// One model tried for a cluster, for the report.
-struct ModelTrial {
-  WarpModel model = WarpModel::kFlow;
-  Eigen::VectorXd params;
-  double objective = 0;  // the cluster's weighted objective under this model
-  double gain = 0;       // relative to the cluster's previous model
-  bool chosen = false;
 };
 
 struct SegmentCluster {

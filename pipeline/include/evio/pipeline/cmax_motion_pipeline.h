@@ -17,6 +17,7 @@
 #include "evio/calib/camera.h"
 #include "evio/mapping/cmax.h"
 #include "evio/mapping/image.h"
+#include "evio/mapping/warp_model_selection.h"
 #include "evio/pipeline/cmax_windows.h"
 #include "evio/sensors/measurements.h"
 
@@ -38,6 +39,13 @@ struct CmaxMotionPipelineOptions {
   // already near the optimum, so the coarse levels that give a cold start its reach can go (boxes,
   // 10 s, 120k events: 1 level 2.7 deg/s, 3 levels 4.3 deg/s and 1.7x the time).
   int warm_pyramid_levels = 1;
+  // Model selection per window (empty: cmax.model only): every candidate is fitted (each
+  // warm-started from its own previous window) with one objective (cmax.objective auto: the
+  // normalised gradient magnitude, comparable across models), and the simplest that explains the
+  // window wins by mapping::choose_warp_model, the rule `evio segment` applies per cluster.
+  // rotation needs the camera. cmax.model is ignored then.
+  std::vector<mapping::WarpModel> models;
+  double model_gain_per_parameter = 0.01;  // relative objective gain per extra parameter (>= 0)
   bool keep_iwe = false;           // each window carries its IWE before and after warping (unblurred)
   bool keep_events = false;        // each window carries its prepared events (diagnostics)
 
@@ -51,8 +59,9 @@ struct CmaxMotionWindow {
   int64_t t_end_ns = 0;           // last event (event windows) or window end (time windows), ns
   int64_t t_ref_ns = 0;           // warp reference: the middle of [t_start, t_end], ns
   int64_t events = 0;             // events estimated with
-  mapping::WarpModel model = mapping::WarpModel::kFlow;
+  mapping::WarpModel model = mapping::WarpModel::kFlow;  // the one model, or the chosen candidate
   Eigen::VectorXd params;         // mapping::warp_parameter_names(model): px/s, rad/s, 1/s, m/s
+  std::vector<mapping::ModelTrial> trials;  // model selection: every candidate, simplest first (else empty)
   double objective_zero = 0;      // objective at zero motion (level 0)
   double objective = 0;           // objective at params (level 0)
   int iterations = 0;             // BFGS iterations, all levels (and both runs after a reset)
@@ -75,6 +84,7 @@ struct CmaxMotionStats {
   int64_t resets = 0;               // warm starts rejected (objective below zero motion's)
   int64_t iterations = 0, evaluations = 0;
   double time_ms = 0;               // sum of the windows' time_ms
+  std::vector<int64_t> chosen;      // model selection: windows won by each candidate (models() order)
 };
 
 class CmaxMotionPipeline {
@@ -99,8 +109,12 @@ class CmaxMotionPipeline {
   CmaxUndistortion undistortion() const { return windower_->undistortion(); }
   const std::string& undistortion_reason() const { return windower_->undistortion_reason(); }
   // The maximiser's options as used (camera size and pinhole filled in, objective as given).
-  const mapping::CmaxOptions& cmax_options() const { return cold_->options(); }
+  // With model selection, cmax.model is the first candidate's.
+  const mapping::CmaxOptions& cmax_options() const { return fitters_.front().cold->options(); }
   mapping::CmaxObjective objective() const { return mapping::resolve_objective(o_.cmax.objective, o_.cmax.model); }
+  // The candidate models, simplest first (one: cmax.model, without model selection).
+  const std::vector<mapping::WarpModel>& models() const { return models_; }
+  bool selects_model() const { return !o_.models.empty(); }
   const CmaxMotionStats& stats() const;
   const CmaxMotionPipelineOptions& options() const { return o_; }
 
@@ -109,9 +123,14 @@ class CmaxMotionPipeline {
 
   CmaxMotionPipelineOptions o_;
   std::unique_ptr<CmaxWindower> windower_;
-  std::unique_ptr<mapping::ContrastMaximizer> cold_, warm_;
-  std::optional<Eigen::VectorXd> previous_;  // last estimated window's parameters
-  int64_t previous_t_ref_ns_ = 0;            // ... and its reference time
+  // One fitter per candidate model.
+  struct Fitter {
+    std::unique_ptr<mapping::ContrastMaximizer> cold, warm;
+    std::optional<Eigen::VectorXd> previous;  // its last window's parameters
+    int64_t previous_t_ref_ns = 0;            // ... and their reference time
+  };
+  std::vector<mapping::WarpModel> models_;
+  std::vector<Fitter> fitters_;
   std::vector<CmaxMotionWindow> done_;
   mutable CmaxMotionStats stats_;  // the window counts are the windower's, copied in stats()
 };
