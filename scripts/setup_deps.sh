@@ -13,6 +13,7 @@ packages=(
   liblz4-dev libzstd-dev libbz2-dev hdf5-filter-plugin-blosc-serial
   clang libclang-rt-14-dev
   python3-numpy python3-matplotlib
+  parallel rsync openssh-client openssh-server   # evio sweep --engine parallel [--hosts]: cli.sweep_parallel_ssh
 )
 if [ $# -gt 0 ]; then
   packages=("$@")
