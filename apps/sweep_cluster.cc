@@ -88,10 +88,11 @@ void write_atomically(const std::string& path, const std::string& text) {
   if (std::rename(tmp.c_str(), path.c_str()) != 0) throw std::runtime_error(path + ": rename failed: " + std::strerror(errno));
 }
 
-// The outcome of a job that left no outcome file: what the scheduler says, and a line in its stderr log.
+// The outcome of a job that left no outcome file: the exit code the scheduler gives (125 when that is
+// 0: the cell was not measured, so it is not a success), and a line in its stderr log.
 SweepOutcome outcome_without_file(const SweepJob& job, int exit_code, double wall_s, const std::string& host, const std::string& why) {
   SweepOutcome o;
-  o.exit_code = exit_code;
+  o.exit_code = exit_code != 0 ? exit_code : 125;  // never a success: nothing was measured
   o.wall_s = wall_s;
   o.cpu_s = NAN;
   o.peak_rss_mb = NAN;

@@ -3,7 +3,9 @@
 # slurm.conf (this host as the only node, ports that are free, state and logs in a temp folder),
 # starts munged, slurmctld and slurmd in the background (torn down at exit), runs the same sweep
 # with --engine local and --engine slurm and checks that results.jsonl has the same rows (cell,
-# exit code, params, metrics; times aside). Exit 77 (skipped) when slurm-wlm or munge is missing.
+# exit code, params, metrics; times and per-event timings aside), then cancels a task mid-run and
+# checks that it is recorded (from scontrol) and rerun by --resume. Exit 77 (skipped) when slurm-wlm
+# or munge is missing, or when not run as root (slurmd needs it).
 # Usage: scripts/test_slurm.sh EVIO [SPEC] [PYTHON]   (as root or the user the daemons may run as)
 set -u
 evio=${1:?usage: test_slurm.sh EVIO [SPEC] [PYTHON]}
@@ -14,6 +16,7 @@ for need in slurmctld slurmd sbatch squeue scontrol scancel; do
   command -v $need > /dev/null || [ -x /usr/sbin/$need ] || { echo "SKIP: $need is not installed (Debian package slurm-wlm)"; exit 77; }
 done
 command -v munged > /dev/null || [ -x /usr/sbin/munged ] || { echo "SKIP: munged is not installed (Debian package munge)"; exit 77; }
+[ "$(id -u)" = 0 ] || { echo "SKIP: slurmd runs jobs as their user and needs root"; exit 77; }
 export PATH=$PATH:/usr/sbin
 
 t=$(mktemp -d /tmp/evio_sweep_slurm.XXXXXX)
@@ -96,10 +99,38 @@ local, slurm = rows(sys.argv[1]), rows(sys.argv[2])
 assert local.keys() == slurm.keys(), (sorted(local), sorted(slurm))
 for cell, r in sorted(local.items()):
     s = slurm[cell]
-    for k in ("algorithm", "dataset", "params", "exit_code", "metrics", "duration_s"):
+    for k in ("algorithm", "dataset", "params", "exit_code", "duration_s"):
         assert r[k] == s[k], (cell, k, r[k], s[k])
+    untimed = lambda m: {k: v for k, v in m.items() if "per_event" not in k}  # ns_per_event, time_per_event_us: times
+    assert untimed(r["metrics"]) == untimed(s["metrics"]), (cell, r["metrics"], s["metrics"])
     assert s["engine"] == "slurm" and s["peak_rss_mb"] > 0, (cell, s)
     assert any(v is not None for v in s["metrics"].values()), (cell, s["metrics"])
 print(f"{len(local)} cells: same exit codes and metrics through sbatch --array")
 EOF
 grep -q '^#SBATCH --array=0-5%2$' "$t/slurm/slurm/run1.sh" || fail "unexpected array script: $(cat "$t/slurm/slurm/run1.sh")"
+
+# A task cancelled mid-run (scancel: its runner dies with it and leaves no outcome file) is recorded
+# with what `scontrol show job` says (a negative exit code: the signal) and rerun by --resume.
+cat > "$t/slow.yaml" << EOF
+name: slow
+datasets:
+  - {name: wall, scene: $here/../datasets/poster_6dof.yaml, duration: 2}
+algorithms:
+  - {algorithm: reconstruct, datasets: [wall], grid: {method: [cf]}}
+EOF
+"$evio" sweep "$t/slow.yaml" --out "$t/cancel" -q --no-report --engine slurm &
+sweep=$!
+for i in $(seq 1200); do
+  pgrep -f "evio-reconstruct $t/cancel/" > /dev/null && break
+  sleep 0.05
+done
+pgrep -f "evio-reconstruct $t/cancel/" > /dev/null || fail "the slow cell never ran"
+scancel "$(cat "$t/cancel/slurm/run1.jobid")"
+wait $sweep
+rc=$?
+[ $rc = 1 ] || fail "the sweep with a cancelled task exited $rc, not 1"
+grep -q '"exit_code": -[0-9]' "$t/cancel/results.jsonl" || fail "the cancelled cell is not recorded with a signal: $(cat "$t/cancel/results.jsonl")"
+grep -q "left no .*outcome.json: Slurm task" "$t"/cancel/cells/*/stderr.log || fail "the cell's stderr.log does not say why"
+"$evio" sweep "$t/slow.yaml" --out "$t/cancel" -q --no-report --engine slurm --resume || fail "--resume failed"
+[ "$(grep -c '"exit_code": 0' "$t/cancel/results.jsonl")" = 1 ] || fail "--resume did not rerun the cancelled cell"
+echo "a task cancelled mid-run was recorded with $(grep -o '"exit_code": -[0-9]*' "$t/cancel/results.jsonl") and rerun by --resume"

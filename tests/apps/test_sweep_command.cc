@@ -548,10 +548,12 @@ TEST(SweepSlurm, ArrayScriptAndExitCodes) {
 
 bool have_parallel() { return std::system("parallel --version > /dev/null 2>&1") == 0; }
 
-// The metrics of each cell, by cell id.
-std::map<std::string, std::vector<std::pair<std::string, double>>> metrics_by_cell(const std::string& results) {
-  std::map<std::string, std::vector<std::pair<std::string, double>>> m;
-  for (const auto& [id, r] : latest_sweep_records(read_sweep_records(results))) m[id] = r.metrics;
+// The metrics of each cell, by cell id, as text ("name=value ..."; NaN compares equal to NaN).
+std::map<std::string, std::string> metrics_by_cell(const std::string& results) {
+  std::map<std::string, std::string> m;
+  for (const auto& [id, r] : latest_sweep_records(read_sweep_records(results))) {
+    for (const auto& [k, v] : r.metrics) m[id] += k + "=" + std::to_string(v) + " ";
+  }
   return m;
 }
 
