@@ -178,6 +178,18 @@ void check_fields(const SweepJob& job, const std::string& line) {
   }
 }
 
+// The job with its program and the arguments that name existing files by a relative path (a spec
+// given by a relative path gives such dataset paths) made absolute: parallel and slurm run the
+// runner in DIR, not in this process's folder.
+SweepJob with_absolute_paths(SweepJob j) {
+  std::error_code ec;
+  if (!j.program.empty() && j.program[0] != '/') j.program = fs::absolute(j.program).lexically_normal().string();
+  for (std::string& a : j.args) {
+    if (!a.empty() && a[0] != '/' && a[0] != '-' && fs::exists(a, ec)) a = fs::absolute(a).lexically_normal().string();
+  }
+  return j;
+}
+
 // The folder (relative to DIR) that holds every path a job writes, returned in one transfer:
 // DIR/cells/<cell>/ for a cell (its logs, outcome.json and out/).
 std::string returned_folder(const std::vector<std::string>& paths) {
@@ -229,7 +241,7 @@ class ParallelEngine : public SweepEngine {
     }
     std::ostringstream lines;
     for (const SweepJob& job : jobs) {
-      SweepJob j = job;
+      SweepJob j = with_absolute_paths(job);
       for (std::string* p : {&j.stdout_path, &j.stderr_path, &j.out_dir}) *p = inside(*p, o_.dir);
       for (std::string& a : j.args) {
         std::error_code ec;
@@ -392,7 +404,7 @@ class SlurmEngine : public SweepEngine {
     for (const SweepJob& job : jobs) {
       std::error_code ec;
       fs::remove(sweep_outcome_path(job), ec);
-      lines << command_of(o_.runner, run_cell_arguments(job)) << "\n";
+      lines << command_of(o_.runner, run_cell_arguments(with_absolute_paths(job))) << "\n";
       max_timeout = job.timeout_s > 0 && max_timeout >= 0 ? std::max(max_timeout, job.timeout_s) : -1;  // -1: a job without a limit
     }
     sweep_write_file(stem + ".jobs", lines.str());

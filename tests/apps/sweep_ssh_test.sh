@@ -75,7 +75,7 @@ printf '1/evio-a\n1/evio-b\n' > "$t/hosts"
 start=$(date +%s.%N)
 "$evio" sweep "$spec" --out "$t/local" -q --no-report -j 2 || fail "the local sweep failed"
 mid=$(date +%s.%N)
-"$evio" sweep "$spec" --out "$t/ssh" -q --no-report --engine parallel --hosts "$t/hosts" || fail "the parallel --hosts sweep failed: $(cat "$t"/ssh/parallel/*.log)"
+"$evio" sweep "$spec" --out "$t/ssh" -q --no-report --engine parallel --hosts "$t/hosts" || fail "the parallel --hosts sweep failed: $(tail -n 3 "$t"/ssh/parallel/*.log "$t"/ssh/cells/*/stderr.log)"
 end=$(date +%s.%N)
 echo "local: $($python -c "print(round($mid - $start, 1))") s, parallel over 2 ssh logins: $($python -c "print(round($end - $mid, 1))") s"
 
