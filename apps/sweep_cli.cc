@@ -3,9 +3,20 @@
 #include <iostream>
 
 #include "cli_common.h"
+#include "evio/calib/error.h"
+#include "sweep_cluster.h"
 #include "sweep_command.h"
 
 int main(int argc, char** argv) try {
+  // The per-cell runner of the parallel and slurm engines (sweep_cluster.h), not for users.
+  if (argc > 1 && std::string(argv[1]) == "--run-cell") {
+    try {
+      return evio::apps::run_cell(std::vector<std::string>(argv + 1, argv + argc));
+    } catch (const evio::InputError& e) {
+      std::fprintf(stderr, "evio: error: %s\n", e.what());
+      return 125;
+    }
+  }
   evio::apps::CommandLine cli("sweep");
   evio::apps::SweepArgs sweep;
   cli->footer(
@@ -20,8 +31,21 @@ int main(int argc, char** argv) try {
   CLI::Option* out_opt = cli->add_option("-o,--out", sweep.out, "Sweep folder (created; results.jsonl, cells/, data/, report/)");
   CLI::Option* report_opt = cli->add_option("--report", sweep.out, "Only write DIR/report/ from DIR/results.jsonl (no SPEC)");
   report_opt->excludes(spec_opt)->excludes(out_opt);
-  cli->add_option("-j,--jobs", sweep.jobs, "Cells run at once (default: the number of cores)")->check(CLI::PositiveNumber);
-  cli->add_option("--engine", sweep.engine, "How cells run: local (a bounded process pool on this machine)");
+  cli->add_option("-j,--jobs", sweep.jobs, "Cells run at once (default: the number of cores); parallel: per host; slurm: array tasks at once (default: no limit)")->check(CLI::PositiveNumber);
+  cli->add_option("--engine", sweep.engine,
+                  "How cells run: local (a bounded process pool on this machine), parallel (GNU parallel, here or with "
+                  "--hosts over ssh; files in DIR/parallel/), slurm (one sbatch job-array task per cell; DIR must be on a "
+                  "file system the compute nodes share; files in DIR/slurm/)")
+      ->capture_default_str();
+  cli->add_option("--hosts", sweep.hosts,
+                  "--engine parallel: GNU parallel --sshloginfile (one ssh login a line, [N/]user@host or a Host of "
+                  "~/.ssh/config, ':' for this machine); the programs and the data the cells read are sent once per host, "
+                  "each cell's folder is returned (README, section `evio sweep`)")
+      ->check(CLI::ExistingFile);
+  cli->add_option("--slurm-partition", sweep.slurm_partition, "--engine slurm: sbatch --partition (default: the cluster's)");
+  cli->add_option("--slurm-args", sweep.slurm_args,
+                  "--engine slurm: more sbatch options, separated by spaces, each put in the script as an #SBATCH line "
+                  "(e.g. \"--mem=4G --qos=short\"); the time limit per task is the cell timeout + 1 min (minutes, rounded up)");
   cli->add_flag("--resume", sweep.resume,
                 "Continue the sweep in DIR: cells recorded with exit code 0 are skipped, failed, killed and unrecorded "
                 "cells run (again)");

@@ -2,6 +2,7 @@
 
 #include <signal.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -12,6 +13,7 @@
 
 #include "evio/calib/error.h"
 #include "evio/calib/plugin.h"
+#include "sweep_cluster.h"
 #include "sweep_engine.h"
 #include "sweep_report.h"
 #include "sweep_results.h"
@@ -22,16 +24,9 @@ namespace fs = std::filesystem;
 
 namespace {
 
-std::string shell_quote(const std::string& s) {
-  if (!s.empty() && s.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-+=./,:@") == std::string::npos) return s;
-  std::string o = "'";
-  for (char c : s) o += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return o + "'";
-}
-
 std::string command_line(const std::vector<std::string>& args) {
   std::string s = "evio";
-  for (const std::string& a : args) s += " " + shell_quote(a);
+  for (const std::string& a : args) s += " " + sweep_shell_quote(a);
   return s;
 }
 
@@ -62,6 +57,8 @@ SweepJob job_for(const std::string& programs_dir, const std::vector<std::string>
   j.stdout_path = (log_dir / (log_stem + "stdout.log")).string();
   j.stderr_path = (log_dir / (log_stem + "stderr.log")).string();
   j.timeout_s = timeout_s;
+  const auto out = std::find(args.begin(), args.end(), "--out");
+  if (out != args.end() && out + 1 != args.end()) j.out_dir = *(out + 1);
   return j;
 }
 
@@ -144,7 +141,7 @@ int run_sweep(const SweepArgs& args, std::ostream& out) {
   if (args.out.empty()) throw InputError("evio sweep", 0, "no output folder", "--out DIR");
   if (args.report_only) return write_report(args, "", out);
   const SweepSpec spec = load_sweep_spec(args.spec);
-  const fs::path dir(args.out);
+  const fs::path dir = fs::absolute(args.out).lexically_normal();  // absolute: parallel and slurm run cells from DIR
   const std::vector<SweepCell> cells = expand_sweep_cells(spec, (dir / "data").string());
   const std::string programs = args.programs_dir.empty() ? executable_dir() : args.programs_dir;
   if (args.list) {
@@ -153,9 +150,17 @@ int run_sweep(const SweepArgs& args, std::ostream& out) {
   }
   std::unique_ptr<SweepEngine> engine;
   try {
-    engine = make_sweep_engine(args.engine, args.jobs);
+    SweepEngineOptions eo;
+    eo.jobs = args.jobs;
+    eo.dir = args.out;
+    eo.hosts = args.hosts;
+    eo.runner = args.runner;
+    eo.slurm_partition = args.slurm_partition;
+    eo.slurm_args = args.slurm_args;
+    if (!args.hosts.empty() && args.engine != "parallel") throw std::invalid_argument("--hosts needs --engine parallel");
+    engine = make_sweep_engine(args.engine, eo);
   } catch (const std::invalid_argument& e) {
-    throw InputError("evio sweep", 0, e.what(), "--engine local");
+    throw InputError("evio sweep", 0, e.what(), "--engine local, parallel (with --hosts FILE) or slurm");
   }
   const fs::path results = dir / "results.jsonl";
   std::error_code ec;
@@ -178,7 +183,10 @@ int run_sweep(const SweepArgs& args, std::ostream& out) {
     std::fprintf(stderr, "evio sweep: %zu cells, %zu to run (engine %s)\n", cells.size(), pending.size(), engine->name().c_str());
   }
   StopOnSignals stop_on_signals;
-  generate_datasets(spec, pending, dir / "data", programs, engine.get(), args.progress);
+  // Simulated scenes are generated here (their scene files are local), then read by the cells wherever they run.
+  SweepEngineOptions local;
+  local.jobs = args.jobs;
+  generate_datasets(spec, pending, dir / "data", programs, make_sweep_engine("local", local).get(), args.progress);
 
   std::vector<SweepJob> jobs;
   for (const SweepCell* c : pending) {

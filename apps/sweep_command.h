@@ -15,13 +15,17 @@ struct SweepArgs {
   std::string spec;                     // SPEC.yaml (not needed with report_only)
   std::string out;                      // the sweep folder DIR
   std::string engine = "local";         // how cells run (sweep_engine.h)
-  int jobs = 0;                         // cells at once; <= 0: the number of cores
+  int jobs = 0;                         // cells at once (per host with hosts); <= 0: the number of cores
+  std::string hosts;                    // parallel: GNU parallel --sshloginfile; empty: this machine
+  std::string slurm_partition;          // slurm: sbatch --partition; empty: the default partition
+  std::string slurm_args;               // slurm: more sbatch options, split at spaces
   bool resume = false;                  // continue DIR: skip cells recorded with exit code 0
   double timeout_s = -1;                // per cell, s, overrides the spec's (0: none); < 0: the spec's
   bool list = false;                    // print the cells and their commands, run nothing
   bool report_only = false;             // write DIR/report/ from DIR/results.jsonl, run nothing
   bool no_report = false;               // skip the report at the end
   std::string python = "/usr/bin/python3";  // for scripts/plot_sweep.py
+  std::string runner;                   // evio-sweep, run as `--run-cell` by parallel and slurm; default: this program
   std::string programs_dir;             // where evio-<algorithm> programs are; default: this program's folder
   bool progress = true;                 // a line on stderr per finished cell
 };

@@ -1,5 +1,7 @@
 #include "sweep_engine.h"
 
+#include "sweep_cluster.h"
+
 #include <fcntl.h>
 #include <signal.h>
 #include <sys/prctl.h>
@@ -179,9 +181,11 @@ class LocalEngine : public SweepEngine {
 
 }  // namespace
 
-std::unique_ptr<SweepEngine> make_sweep_engine(const std::string& name, int jobs) {
-  if (name == "local") return std::make_unique<LocalEngine>(jobs);
-  throw std::invalid_argument("--engine " + name + ": unknown or not implemented (implemented: local; parallel and slurm are planned)");
+std::unique_ptr<SweepEngine> make_sweep_engine(const std::string& name, const SweepEngineOptions& options) {
+  if (name == "local") return std::make_unique<LocalEngine>(options.jobs);
+  if (name == "parallel") return make_parallel_engine(options);
+  if (name == "slurm") return make_slurm_engine(options);
+  throw std::invalid_argument("--engine " + name + ": unknown (engines: local, parallel, slurm)");
 }
 
 SweepOutcome run_job(const SweepJob& job) {

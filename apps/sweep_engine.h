@@ -1,8 +1,10 @@
 // evio sweep: engines run the cells' processes. An engine takes a list of jobs (one command line
 // each, with its log files and timeout) and reports each job's outcome as it ends: exit code
 // (negative: the signal that ended it), wall and CPU time and peak RSS of the child. `local` is a
-// bounded pool of child processes on this machine (fork/exec, wait4); engines that hand the jobs
-// to GNU parallel or Slurm are meant to implement the same interface.
+// bounded pool of child processes on this machine (fork/exec, wait4); `parallel` (GNU parallel, on
+// this machine or over ssh with --hosts) and `slurm` (a job array) are in sweep_cluster.h: they run
+// each job through `evio-sweep --run-cell` (run_job below on the machine that runs it), which writes
+// the outcome as JSON next to the job's logs, so every engine measures the same way.
 #pragma once
 
 #include <functional>
@@ -18,6 +20,8 @@ struct SweepJob {
   std::string stdout_path;        // created/truncated; the child's stdout
   std::string stderr_path;        // created/truncated; the child's stderr
   double timeout_s = 0;           // wall time after which the child's process group is killed; 0: none
+  std::string out_dir;            // the folder the program writes (its --out); engines that run the job
+                                  // on another machine return it with the logs; empty: none
 };
 
 struct SweepOutcome {
@@ -40,9 +44,19 @@ class SweepEngine {
   virtual void run(const std::vector<SweepJob>& jobs, const std::function<void(size_t, const SweepOutcome&)>& done) = 0;
 };
 
-// The engine called `name` ("local"); jobs: at most that many cells at once (<= 0: the number of
-// cores). Throws std::invalid_argument naming the engines that exist for any other name.
-std::unique_ptr<SweepEngine> make_sweep_engine(const std::string& name, int jobs);
+// How an engine runs; only `jobs` matters to `local`.
+struct SweepEngineOptions {
+  int jobs = 0;                    // at most that many jobs at once (<= 0: the number of cores; slurm: no limit)
+  std::string dir;                 // the sweep folder (parallel, slurm: their files go to DIR/parallel/, DIR/slurm/)
+  std::string runner;              // evio-sweep itself (runs `--run-cell`); default: /proc/self/exe
+  std::string hosts;               // parallel: a GNU parallel --sshloginfile; empty: this machine only
+  std::string slurm_partition;     // slurm: sbatch --partition; empty: the cluster's default
+  std::string slurm_args;          // slurm: more #SBATCH options, split at spaces (e.g. "--mem=4G --qos=short")
+};
+
+// The engine called `name` (local, parallel, slurm). Throws std::invalid_argument naming the
+// engines that exist for any other name, or saying what an engine needs that is missing.
+std::unique_ptr<SweepEngine> make_sweep_engine(const std::string& name, const SweepEngineOptions& options);
 
 // Runs one job to its end on this machine (what the local engine does per cell).
 SweepOutcome run_job(const SweepJob& job);

@@ -280,7 +280,7 @@ SweepReportResult write_sweep_report(const SweepReportOptions& opts) {
     res.plot_note = "scripts/plot_sweep.py was not found";
   } else {
     SweepJob job{opts.python, {script, (rep / "cells.csv").string(), (rep / "plots").string()},
-                 (rep / "plot.log").string(), (rep / "plot_errors.log").string(), 300};
+                 (rep / "plot.log").string(), (rep / "plot_errors.log").string(), 300, ""};
     const SweepOutcome o = run_job(job);
     if (o.exit_code == 0) {
       res.plots = true;

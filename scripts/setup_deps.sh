@@ -14,6 +14,8 @@ packages=(
   clang libclang-rt-14-dev
   python3-numpy python3-matplotlib
   chromium
+  parallel rsync openssh-client openssh-server   # evio sweep --engine parallel [--hosts]: cli.sweep_parallel_ssh
+  slurm-wlm munge                                # evio sweep --engine slurm: cli.sweep_slurm (scripts/test_slurm.sh)
 )
 if [ $# -gt 0 ]; then
   packages=("$@")
