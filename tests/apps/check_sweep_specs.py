@@ -30,7 +30,7 @@ for spec in specs:
     for line in lines:
         cell, command = line.split("\t", 1)
         words = shlex.split(command)
-        algorithm, rest = words[1], words[3:]  # evio ALG DATASET ...
+        algorithm, dataset, rest = words[1], words[2], words[3:]  # evio ALG DATASET ...
         args, i = [], 0
         while i < len(rest):
             if rest[i] in ("--out", "--gt"):
@@ -38,7 +38,7 @@ for spec in specs:
                 continue
             args.append(rest[i])
             i += 1
-        key = (algorithm, tuple(args))
+        key = (algorithm, tuple(a.replace(dataset, "DATASET") for a in args))  # one check per entry and grid point
         if key in checked:
             continue
         checked.add(key)
