@@ -280,8 +280,9 @@ int run_vio(const VioArgs& args, std::ostream& out) {
                                                                   : vs.t_last_event_ns - vs.t_first_event_ns) * 1e-9;
   if (!r.initialized) {
     log_debug("vio: " + r.init_failure);
-    throw InputError(args.dataset, 0, "could not initialise (no still start and the visual-inertial alignment failed)",
-                     "a recording that starts still or moves with enough features in the first seconds");
+    throw InputError(args.dataset, 0, "could not initialise: " + r.init_failure,
+                     "a recording that starts still or moves with enough features in the first seconds, with at least "
+                     "frames.min_events events per frame");
   }
   const std::string init_method = init_description(r.init_method);
 
