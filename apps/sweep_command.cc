@@ -219,8 +219,9 @@ int run_sweep(const SweepArgs& args, std::ostream& out) {
       if (args.progress) {
         const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
         const double eta = s / static_cast<double>(done) * static_cast<double>(jobs.size() - done);
-        std::fprintf(stderr, "evio sweep: %zu/%zu cells done (%zu failed), %.0f s elapsed, ETA %.0f s: %s %s (exit %d) in %.1f s\n",
-                     done, jobs.size(), failed, s, eta, c.id.c_str(), r.outcome.c_str(), o.exit_code, o.wall_s);
+        std::fprintf(stderr, "evio sweep: %zu/%zu cells done (%zu failed), %.0f s elapsed, ETA %.0f s: %s exit %d%s in %.1f s: %s\n",
+                     done, jobs.size(), failed, s, eta, c.id.c_str(), o.exit_code, o.timed_out ? " (timeout)" : "", o.wall_s,
+                     r.outcome.c_str());
       }
     });
   }
