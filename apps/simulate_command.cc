@@ -124,7 +124,13 @@ class FolderSink final : public simulator::SimulationSink {
 
   void on_events(const std::vector<Event>& events, const std::vector<uint16_t>* labels) override {
     if (events.empty()) return;
-    const EventSpan span(events.data(), events.size());
+    const std::vector<Event>* out = &events;
+    if (c_.clock_offset_ns != 0) {  // output.clock_offset_ns: the written stamps only
+      shifted_ = events;
+      for (Event& e : shifted_) e.t_ns += c_.clock_offset_ns;
+      out = &shifted_;
+    }
+    const EventSpan span(out->data(), out->size());
     events_.write(span);
     if (h5_) h5_->write(span);
     if (labels_) {
@@ -148,7 +154,7 @@ class FolderSink final : public simulator::SimulationSink {
     std::snprintf(name, sizeof(name), "images/frame_%08zu.png", frame_count_++);
     const std::string path = (dir_ / name).string();
     if (!write_image(path, frame.image)) throw InputError(path, 0, "cannot write image", kWritable);
-    images_->print("%s %s\n", format_seconds(frame.t_ns).c_str(), name);
+    images_->print("%s %s\n", format_seconds(frame.t_ns + c_.clock_offset_ns).c_str(), name);
   }
 
   void on_ground_truth(const simulator::RenderedView& view, const simulator::CameraState& camera) override {
@@ -166,8 +172,9 @@ class FolderSink final : public simulator::SimulationSink {
       if (!write_image(path, view.label)) throw InputError(path, 0, "cannot write label image", kWritable);
     }
     const calib::SE3& T = camera.T_w_c;
-    maps_->print("%s %s %s %.17g %.17g %.17g %.17g %.17g %.17g %.17g\n", name, format_seconds(view.t_ns).c_str(),
-                 format_seconds(view.t_ns - c_.simulator.time_shift_ns).c_str(), T.translation.x(),
+    const int64_t t = view.t_ns + c_.clock_offset_ns;
+    maps_->print("%s %s %s %.17g %.17g %.17g %.17g %.17g %.17g %.17g\n", name, format_seconds(t).c_str(),
+                 format_seconds(t - c_.simulator.time_shift_ns).c_str(), T.translation.x(),
                  T.translation.y(), T.translation.z(), T.rotation.x(), T.rotation.y(), T.rotation.z(),
                  T.rotation.w());
   }
@@ -194,6 +201,7 @@ class FolderSink final : public simulator::SimulationSink {
   std::unique_ptr<OutFile> labels_, images_, maps_;
   int64_t bin_ns_;
   std::vector<uint64_t> bins_;
+  std::vector<Event> shifted_;  // a step's events with output.clock_offset_ns added
   uint64_t on_ = 0, off_ = 0;
   size_t frame_count_ = 0, map_count_ = 0;
 };
@@ -207,8 +215,8 @@ size_t write_poses(const simulator::SimulationConfig& c, const fs::path& dir) {
   vel.print("# t[s] v_w[m/s](x y z) omega_b[rad/s](x y z) a_w[m/s^2](x y z, no gravity) alpha_b[rad/s^2](x y z)\n");
   for (int64_t t = t0; t <= t1; t += period) {
     const simulator::TrajectoryState s = c.trajectory->evaluate(t);
-    poses.push_back({t, s.T_w_b});
-    vel.print("%s %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g\n", format_seconds(t).c_str(),
+    poses.push_back({t + c.clock_offset_ns, s.T_w_b});
+    vel.print("%s %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g\n", format_seconds(t + c.clock_offset_ns).c_str(),
               s.v_w.x(), s.v_w.y(), s.v_w.z(), s.omega_b.x(), s.omega_b.y(), s.omega_b.z(), s.a_w.x(), s.a_w.y(),
               s.a_w.z(), s.alpha_b.x(), s.alpha_b.y(), s.alpha_b.z());
   }
@@ -219,13 +227,13 @@ size_t write_poses(const simulator::SimulationConfig& c, const fs::path& dir) {
 
 size_t write_imu(const simulator::SimulationConfig& c, const fs::path& dir) {
   std::vector<simulator::ImuBiasSample> biases;
-  const std::vector<ImuSample> imu =
-      simulator::simulate_imu(*c.trajectory, c.simulator.t_begin_ns, c.simulator.t_end_ns, c.imu, &biases);
+  std::vector<ImuSample> imu = simulator::simulate_imu(*c.trajectory, c.simulator.t_begin_ns, c.simulator.t_end_ns, c.imu, &biases);
+  for (ImuSample& s : imu) s.t_ns += c.clock_offset_ns;
   write_ecd_imu((dir / "imu.txt").string(), imu);
   OutFile b((dir / "imu_biases.txt").string());
   b.print("# t[s] bias_gyro[rad/s](x y z) bias_accel[m/s^2](x y z)\n");
   for (const simulator::ImuBiasSample& s : biases) {
-    b.print("%s %.17g %.17g %.17g %.17g %.17g %.17g\n", format_seconds(s.t_ns).c_str(), s.gyro.x(), s.gyro.y(),
+    b.print("%s %.17g %.17g %.17g %.17g %.17g %.17g\n", format_seconds(s.t_ns + c.clock_offset_ns).c_str(), s.gyro.x(), s.gyro.y(),
             s.gyro.z(), s.accel.x(), s.accel.y(), s.accel.z());
   }
   b.close();

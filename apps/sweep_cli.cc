@@ -24,8 +24,11 @@ int main(int argc, char** argv) try {
       "DIR/data/), algorithms (vio, mosaic, corners, flow, segment, reconstruct) with fixed args and parameter grids\n"
       "of config keys (passed as --set key=value). Each cell runs as `evio <algorithm>` in DIR/cells/<cell>/ (logs,\n"
       "command.txt, out/). DIR/results.jsonl: one JSON line per finished cell (cell, algorithm, dataset, params,\n"
-      "exit_code (negative: the signal), wall_s, cpu_s, peak_rss_mb, metrics). DIR/report/: pareto.md, pareto.tex,\n"
-      "cells.csv, per-group CSVs, plots/ and index.html (self-contained). Exit code 1 when a cell failed (recorded;\n"
+      "exit_code (negative: the signal), wall_s, cpu_s, peak_rss_mb, metrics, outcome: ok | error (exit 1, its stderr\n"
+      "line in outcome_detail) | crash (a signal or another exit code) | hang (timeout) | nonfinite (NaN/Inf in an\n"
+      "output)). DIR/report/: pareto.md, pareto.tex, cells.csv, per-group CSVs, plots/ and index.html (self-contained);\n"
+      "the outcome table (outcomes.csv) when a cell is not ok or the spec has `report: [extremes]`. Exit code 1 when a\n"
+      "cell failed (outcome not ok; with the spec's `accept_errors: true` only crash, hang and nonfinite fail; recorded,\n"
       "--resume reruns it), 130 when interrupted (--resume runs the rest).");
   CLI::Option* spec_opt = cli->add_option("SPEC", sweep.spec, "Sweep spec YAML")->check(CLI::ExistingFile);
   CLI::Option* out_opt = cli->add_option("-o,--out", sweep.out, "Sweep folder (created; results.jsonl, cells/, data/, report/)");
@@ -47,8 +50,8 @@ int main(int argc, char** argv) try {
                   "--engine slurm: more sbatch options, separated by spaces, each put in the script as an #SBATCH line "
                   "(e.g. \"--mem=4G --qos=short\"); the time limit per task is the cell timeout + 1 min (minutes, rounded up)");
   cli->add_flag("--resume", sweep.resume,
-                "Continue the sweep in DIR: cells recorded with exit code 0 are skipped, failed, killed and unrecorded "
-                "cells run (again)");
+                "Continue the sweep in DIR: cells recorded with exit code 0 (outcome not nonfinite) are skipped, failed, "
+                "killed, non-finite and unrecorded cells run (again)");
   cli->add_option("--timeout", sweep.timeout_s, "Per-cell wall-time limit, s (0: none), instead of the spec's timeout_s; a "
                                                 "cell past it is killed (SIGKILL) and recorded with exit code -9")
       ->check(CLI::NonNegativeNumber);

@@ -123,10 +123,11 @@ class StopOnSignals {
   struct sigaction old_int_ {}, old_term_ {};
 };
 
-int write_report(const SweepArgs& args, const std::string& title, std::ostream& out) {
+int write_report(const SweepArgs& args, const std::string& title, bool extremes, std::ostream& out) {
   SweepReportOptions ro;
   ro.dir = args.out;
   ro.title = title;
+  ro.extremes = extremes;
   ro.python = args.python;
   const SweepReportResult r = write_sweep_report(ro);
   out << "report of " << r.cells << " cells: " << (fs::path(args.out) / "report" / "index.html").string() << ", pareto.md, pareto.tex, cells.csv"
@@ -139,7 +140,7 @@ int write_report(const SweepArgs& args, const std::string& title, std::ostream& 
 
 int run_sweep(const SweepArgs& args, std::ostream& out) {
   if (args.out.empty()) throw InputError("evio sweep", 0, "no output folder", "--out DIR");
-  if (args.report_only) return write_report(args, "", out);
+  if (args.report_only) return write_report(args, "", false, out);
   const SweepSpec spec = load_sweep_spec(args.spec);
   const fs::path dir = fs::absolute(args.out).lexically_normal();  // absolute: parallel and slurm run cells from DIR
   const std::vector<SweepCell> cells = expand_sweep_cells(spec, (dir / "data").string());
@@ -177,7 +178,7 @@ int run_sweep(const SweepArgs& args, std::ostream& out) {
   std::vector<const SweepCell*> pending;
   for (const SweepCell& c : cells) {
     const auto it = latest.find(c.id);
-    if (it == latest.end() || it->second.exit_code != 0) pending.push_back(&c);
+    if (it == latest.end() || it->second.exit_code != 0 || it->second.outcome == "nonfinite") pending.push_back(&c);
   }
   if (args.progress) {
     std::fprintf(stderr, "evio sweep: %zu cells, %zu to run (engine %s)\n", cells.size(), pending.size(), engine->name().c_str());
@@ -219,14 +220,16 @@ int run_sweep(const SweepArgs& args, std::ostream& out) {
       r.host = o.host;
       r.started_utc = o.started_utc;
       read_cell_metrics(c.algorithm, (dir / "cells" / c.id / "out").string(), &r);
+      classify_cell_outcome(c.algorithm, (dir / "cells" / c.id / "out").string(), jobs[i].stderr_path, &r);
       append_sweep_record(results.string(), r);
       ++done;
-      failed += o.exit_code != 0;
+      failed += spec.accept_errors ? sweep_outcome_is_defect(r.outcome) : r.outcome != "ok";
       if (args.progress) {
         const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
         const double eta = s / static_cast<double>(done) * static_cast<double>(jobs.size() - done);
-        std::fprintf(stderr, "evio sweep: %zu/%zu cells done (%zu failed), %.0f s elapsed, ETA %.0f s: %s exit %d%s in %.1f s\n",
-                     done, jobs.size(), failed, s, eta, c.id.c_str(), o.exit_code, o.timed_out ? " (timeout)" : "", o.wall_s);
+        std::fprintf(stderr, "evio sweep: %zu/%zu cells done (%zu failed), %.0f s elapsed, ETA %.0f s: %s exit %d%s in %.1f s: %s\n",
+                     done, jobs.size(), failed, s, eta, c.id.c_str(), o.exit_code, o.timed_out ? " (timeout)" : "", o.wall_s,
+                     r.outcome.c_str());
       }
     });
   }
@@ -236,9 +239,10 @@ int run_sweep(const SweepArgs& args, std::ostream& out) {
     return 130;
   }
   out << "ran " << done << " cells (" << failed << " failed); results: " << results.string() << "\n";
-  if (!args.no_report) write_report(args, spec.name, out);
+  if (!args.no_report) write_report(args, spec.name, spec.report_extremes, out);
   if (failed > 0) {
-    throw InputError(results.string(), 0, std::to_string(failed) + " of " + std::to_string(done) + " cells failed (their stderr.log in " +
+    throw InputError(results.string(), 0, std::to_string(failed) + " of " + std::to_string(done) + " cells failed" +
+                                              (spec.accept_errors ? " with a crash, hang or non-finite output" : "") + " (their stderr.log in " +
                                               (dir / "cells").string() + "/<cell>/)", "`--resume` reruns the failed cells");
   }
   return 0;

@@ -181,6 +181,107 @@ struct Table {
   }
 };
 
+// The outcome of a record; records written before outcomes existed get it from the exit code.
+std::string outcome_of(const SweepRecord& r) {
+  if (!r.outcome.empty()) return r.outcome;
+  if (r.timed_out) return "hang";
+  return r.exit_code == 0 ? "ok" : r.exit_code == 1 ? "error" : "crash";
+}
+
+// The outcome table: rows = datasets, columns = algorithms (variants apart), each cell the distinct
+// outcomes of its cells; a note per cell that is not ok (its error line, exit code or bad value).
+struct OutcomeTable {
+  Table table;                                                     // text cells: "ok", "error [1]"
+  std::vector<std::vector<std::vector<std::string>>> outcomes;     // per row and column: its distinct outcomes
+  std::vector<std::vector<std::vector<std::pair<int, std::string>>>> notes;  // per row and column: (note number, detail)
+  std::vector<std::string> footnotes;                              // "[n] cell: detail"
+  std::map<std::string, int> counts;                               // outcome -> cells
+};
+
+OutcomeTable outcome_table(const std::map<std::string, SweepRecord>& latest) {
+  std::vector<std::string> datasets, columns;
+  const auto& algs = sweep_algorithms();
+  auto column_of = [](const SweepRecord& r) { return r.algorithm + (r.variant.empty() ? "" : " (" + r.variant + ")"); };
+  std::vector<std::pair<size_t, std::string>> col_keys;
+  for (const auto& [id, r] : latest) {
+    if (std::find(datasets.begin(), datasets.end(), r.dataset) == datasets.end()) datasets.push_back(r.dataset);
+    const std::pair<size_t, std::string> key{static_cast<size_t>(std::find(algs.begin(), algs.end(), r.algorithm) - algs.begin()), column_of(r)};
+    if (std::find(col_keys.begin(), col_keys.end(), key) == col_keys.end()) col_keys.push_back(key);
+  }
+  std::sort(datasets.begin(), datasets.end());
+  std::sort(col_keys.begin(), col_keys.end());
+  for (const auto& k : col_keys) columns.push_back(k.second);
+  OutcomeTable t;
+  t.table.header = {"dataset"};
+  t.table.header.insert(t.table.header.end(), columns.begin(), columns.end());
+  t.outcomes.assign(datasets.size(), std::vector<std::vector<std::string>>(columns.size()));
+  t.notes.assign(datasets.size(), std::vector<std::vector<std::pair<int, std::string>>>(columns.size()));
+  std::vector<std::vector<std::vector<std::string>>> words(datasets.size(), std::vector<std::vector<std::string>>(columns.size()));
+  for (const auto& [id, r] : latest) {
+    const size_t d = static_cast<size_t>(std::find(datasets.begin(), datasets.end(), r.dataset) - datasets.begin());
+    const size_t c = static_cast<size_t>(std::find(columns.begin(), columns.end(), column_of(r)) - columns.begin());
+    const std::string o = outcome_of(r);
+    ++t.counts[o];
+    std::string word = o;
+    if (o != "ok") {
+      std::string detail = r.outcome_detail.empty() ? "exit code " + std::to_string(r.exit_code) : r.outcome_detail;
+      t.footnotes.push_back("[" + std::to_string(t.footnotes.size() + 1) + "] " + r.cell + ": " + detail);
+      t.notes[d][c].emplace_back(static_cast<int>(t.footnotes.size()), detail);
+      word += " [" + std::to_string(t.footnotes.size()) + "]";
+    }
+    if (std::find(t.outcomes[d][c].begin(), t.outcomes[d][c].end(), o) == t.outcomes[d][c].end()) t.outcomes[d][c].push_back(o);
+    if (o != "ok" || std::find(words[d][c].begin(), words[d][c].end(), word) == words[d][c].end()) words[d][c].push_back(word);
+  }
+  for (size_t d = 0; d < datasets.size(); ++d) {
+    std::vector<std::string> row = {datasets[d]};
+    for (size_t c = 0; c < columns.size(); ++c) {
+      std::string cell;
+      for (const std::string& w : words[d][c]) cell += (cell.empty() ? "" : ", ") + w;
+      row.push_back(cell.empty() ? "-" : cell);
+    }
+    t.table.rows.push_back(std::move(row));
+  }
+  return t;
+}
+
+std::string outcome_summary(const OutcomeTable& t) {
+  std::string s;
+  for (const char* o : {"ok", "error", "crash", "hang", "nonfinite"}) {
+    const auto it = t.counts.find(o);
+    s += (s.empty() ? "" : ", ") + std::to_string(it == t.counts.end() ? 0 : it->second) + " " + o;
+  }
+  return "Outcomes: " + s + " (ok: exit code 0 and every output number finite; error: exit code 1 with a one-line "
+         "message; crash: a signal or another exit code; hang: killed after the timeout; nonfinite: exit code 0 with NaN "
+         "or Inf in an output).";
+}
+
+// The HTML of the outcome table: each cell coloured by its worst outcome, details on hover.
+std::string outcome_html(const OutcomeTable& t) {
+  std::string s = "<table class=\"outcomes\">\n<tr>";
+  for (const auto& h : t.table.header) s += "<th>" + html(h) + "</th>";
+  s += "</tr>\n";
+  for (size_t d = 0; d < t.table.rows.size(); ++d) {
+    s += "<tr><td>" + html(t.table.rows[d][0]) + "</td>";
+    for (size_t c = 0; c + 1 < t.table.rows[d].size(); ++c) {
+      std::string cls = "ok";
+      for (const char* o : {"error", "nonfinite", "hang", "crash"}) {
+        if (std::find(t.outcomes[d][c].begin(), t.outcomes[d][c].end(), o) != t.outcomes[d][c].end()) cls = o;
+      }
+      std::string title;
+      for (const auto& [n, detail] : t.notes[d][c]) title += (title.empty() ? "" : "\n") + ("[" + std::to_string(n) + "] ") + detail;
+      s += "<td class=\"" + cls + "\"" + (title.empty() ? "" : " title=\"" + html(title) + "\"") + ">" + html(t.table.rows[d][c + 1]) + "</td>";
+    }
+    s += "</tr>\n";
+  }
+  s += "</table>\n";
+  if (!t.footnotes.empty()) {
+    s += "<ol class=\"notes\">\n";
+    for (const std::string& f : t.footnotes) s += "<li>" + html(f.substr(f.find("] ") + 2)) + "</li>\n";
+    s += "</ol>\n";
+  }
+  return s;
+}
+
 Table front_table(const Group& g) {
   Table t{{"variant", "params", g.error_label, "CPU s", "wall s", "peak RSS MiB", "cell"}, {}};
   for (size_t i = 0; i < g.rows.size(); ++i) {
@@ -295,6 +396,22 @@ SweepReportResult write_sweep_report(const SweepReportOptions& opts) {
   }
 
   std::string md = "# " + title + "\n\n" + summary + "\n";
+  const OutcomeTable outcomes = outcome_table(latest);
+  const bool show_outcomes = opts.extremes || outcomes.counts.size() > 1 || !outcomes.counts.count("ok");
+  std::string outcome_body;
+  if (show_outcomes) {
+    md += "\n## Outcomes\n\n" + outcome_summary(outcomes) + "\n\n" + outcomes.table.markdown();
+    if (!outcomes.footnotes.empty()) md += "\n";
+    for (const std::string& f : outcomes.footnotes) md += "- " + f + "\n";
+    outcome_body = "<h2 id=\"outcomes\">Outcomes</h2>\n<p>" + html(outcome_summary(outcomes)) + "</p>\n" + outcome_html(outcomes);
+    std::string ocsv = "dataset,algorithm,variant,cell,outcome,exit_code,detail\n";
+    for (const auto& [id, r] : latest) {
+      ocsv += csv_field(r.dataset) + "," + r.algorithm + "," + csv_field(r.variant) + "," + csv_field(r.cell) + "," + outcome_of(r) + "," +
+              std::to_string(r.exit_code) + "," + csv_field(r.outcome_detail) + "\n";
+    }
+    sweep_write_file(rep / "outcomes.csv", ocsv);
+    res.files.push_back((rep / "outcomes.csv").string());
+  }
   if (!res.plot_note.empty()) md += "\nPlots are missing: " + res.plot_note + ".\n";
   std::string tex = "% " + title + " (evio sweep --report)\n% " + summary + "\n";
   std::string body;
@@ -362,10 +479,11 @@ SweepReportResult write_sweep_report(const SweepReportOptions& opts) {
   std::string page = "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>" + html(title) +
                      "</title>\n<style>body{font-family:sans-serif;margin:2em;max-width:80em}table{border-collapse:collapse;"
                      "margin:0.5em 0 1.5em}td,th{border:1px solid #bbb;padding:2px 6px;font-size:90%;text-align:left}"
-                     "th{background:#eee}img{max-width:100%}.missing{color:#a00}</style>\n</head>\n<body>\n<h1>" +
+                     "th{background:#eee}img{max-width:100%}.missing{color:#a00}td.ok{background:#dfd}td.error{background:#ffd}"
+                     "td.crash,td.hang,td.nonfinite{background:#fcc}</style>\n</head>\n<body>\n<h1>" +
                      html(title) + "</h1>\n<p>" + html(summary) + "</p>\n";
   if (!res.plot_note.empty()) page += "<p class=\"missing\">Plots are missing: " + html(res.plot_note) + ".</p>\n";
-  page += "<ul>\n";
+  page += outcome_body + "<ul>\n";
   for (const Group& g : groups) page += "<li><a href=\"#" + html(g.file_stem()) + "\">" + html(group_title(g)) + "</a></li>\n";
   page += "<li><a href=\"#model-selection\">Model selection</a></li>\n";
   page += "</ul>\n" + body + "</body>\n</html>\n";

@@ -20,6 +20,7 @@ struct SweepReportOptions {
   std::string title;                    // report title (default: the folder name)
   std::string python = "/usr/bin/python3";  // runs scripts/plot_sweep.py (needs matplotlib)
   std::string plot_script;              // default: scripts/plot_sweep.py of the sources or the install
+  bool extremes = false;                // show the outcome table even when every cell is ok (spec `report: [extremes]`)
 };
 
 struct SweepReportResult {
@@ -30,7 +31,9 @@ struct SweepReportResult {
 };
 
 // Reads DIR/results.jsonl and writes DIR/report/{pareto.md, cells.csv, pareto.tex, index.html,
-// plots/*.png}. Throws InputError when there is no record to report.
+// plots/*.png}; pareto.md and index.html open with the outcome table (rows = datasets, columns =
+// algorithms, cell = ok / error / crash / hang / nonfinite, details as numbered notes) when a cell is
+// not ok or opts.extremes is set. Throws InputError when there is no record to report.
 SweepReportResult write_sweep_report(const SweepReportOptions& opts);
 
 }  // namespace evio::apps

@@ -5,8 +5,12 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
@@ -35,6 +39,9 @@ struct AlgorithmMetrics {
   std::vector<MetricSource> metrics;
   const char* duration_path;        // in stats.json; nullptr: unknown
   const char* duration_start_path;  // subtracted when set (reconstruct: t_last_s - t_first_s)
+  // Numeric output files checked for NaN/Inf ('*' matches within a name); a TIFF may name its coverage
+  // mask after ':' (NaN is the TIFF's documented "not seen" value where the mask is 0).
+  std::vector<const char*> outputs;
 };
 
 const std::vector<AlgorithmMetrics>& algorithm_metrics() {
@@ -51,7 +58,8 @@ const std::vector<AlgorithmMetrics>& algorithm_metrics() {
         {"final_yaw_error_deg", "eval.json", "estimates.0.final_yaw_error_deg"},
         {"keyframes", "stats.json", "keyframes"},
         {"rotation_only_keyframes", "stats.json", "rotation_only_keyframes"}},
-       "sequence_duration_s", nullptr},
+       "sequence_duration_s", nullptr,
+       {"trajectory.tum", "trajectory_causal.tum", "keyframes.txt", "observations.txt", "stats.json", "eval.json"}},
       {{"mosaic", true, "rot_rms_deg", "rotation RMS deg",
         "eval.json of `evio mosaic --gt`: rotation error after the initial orientation, panorama PSNR/SSIM against the "
         "simulator's panorama when it exists"},
@@ -62,7 +70,8 @@ const std::vector<AlgorithmMetrics>& algorithm_metrics() {
         {"events", "stats.json", "events"},
         {"mean_particles", "stats.json", "tracker.mean_particles"},
         {"events_per_cpu_s", "stats.json", "events_per_cpu_s"}},
-       "sequence_duration_s", nullptr},
+       "sequence_duration_s", nullptr,
+       {"rotation.tum", "stats.json", "eval.json", "panorama_log.tiff:panorama_seen.png"}},
       {{"flow", false, "angular_velocity_rms_degps", "angular velocity RMS deg/s",
         "stats.json of `evio flow`: angular-velocity error against the dataset's ground truth (rotation model only; "
         "other models have no ground-truth error), events vs gyro"},
@@ -72,7 +81,8 @@ const std::vector<AlgorithmMetrics>& algorithm_metrics() {
         {"windows", "stats.json", "windows"},
         {"events", "stats.json", "events"},
         {"time_per_event_us", "stats.json", "time_per_event_us"}},
-       "duration_s", nullptr},
+       "duration_s", nullptr,
+       {"motion.csv", "motion_eval.csv", "stats.json"}},
       {{"corners", false, "", "",
         "stats.json of `evio corners`: the command does not evaluate corners against ground truth (no precision/recall); "
         "counts and speed only"},
@@ -81,7 +91,8 @@ const std::vector<AlgorithmMetrics>& algorithm_metrics() {
         {"tracks", "stats.json", "tracks.count"},
         {"events", "stats.json", "events"},
         {"ns_per_event", "stats.json", "ns_per_event"}},
-       "duration_s", nullptr},
+       "duration_s", nullptr,
+       {"corners.txt", "tracks.txt", "stats.json"}},
       {{"segment", false, "", "",
         "stats.json of `evio segment`: the command does not score labels against ground truth; cluster counts and "
         "speed only"},
@@ -90,14 +101,16 @@ const std::vector<AlgorithmMetrics>& algorithm_metrics() {
         {"events_labelled", "stats.json", "events_labelled"},
         {"events_noise", "stats.json", "events_noise"},
         {"time_per_event_us", "stats.json", "time_per_event_us"}},
-       nullptr, nullptr},
+       nullptr, nullptr,
+       {"labels.txt", "segments.json", "stats.json"}},
       {{"reconstruct", false, "", "",
         "stats.json of `evio reconstruct`: the command does not compare images with ground truth (no PSNR/SSIM); "
         "counts and speed only"},
        {{"images", "stats.json", "images"},
         {"events", "stats.json", "events"},
         {"time_per_event_ns", "stats.json", "time_per_event_ns"}},
-       "t_last_s", "t_first_s"},
+       "t_last_s", "t_first_s",
+       {"images.txt", "images/*.tiff", "corners.txt", "stats.json"}},
   };
   return k;
 }
@@ -245,6 +258,120 @@ void read_cell_metrics(const std::string& algorithm, const std::string& out_dir,
   r->model_json = stats.IsMap() && stats["model"].IsMap() ? to_json(stats["model"]) : std::string();
 }
 
+namespace {
+
+// A file name matches a pattern whose '*' matches any run of characters within the name.
+bool name_matches(const std::string& pattern, const std::string& name) {
+  const size_t star = pattern.find('*');
+  if (star == std::string::npos) return pattern == name;
+  const std::string head = pattern.substr(0, star), tail = pattern.substr(star + 1);
+  return name.size() >= head.size() + tail.size() && name.compare(0, head.size(), head) == 0 &&
+         name.compare(name.size() - tail.size(), tail.size(), tail) == 0;
+}
+
+// A word of a text output that spells a non-finite number (how printf, iostreams and JSON writers
+// print NaN and Inf).
+bool nonfinite_word(std::string w) {
+  std::transform(w.begin(), w.end(), w.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  if (!w.empty() && (w[0] == '-' || w[0] == '+')) w.erase(0, 1);
+  return w == "nan" || w == "inf" || w == "infinity" || w.rfind("nan(", 0) == 0;
+}
+
+std::string nonfinite_in_text(const fs::path& file, const std::string& rel) {
+  std::ifstream f(file);
+  std::string line;
+  for (int no = 1; std::getline(f, line); ++no) {
+    std::string word;
+    for (size_t i = 0; i <= line.size(); ++i) {
+      const char c = i < line.size() ? line[i] : ' ';
+      if (std::isspace(static_cast<unsigned char>(c)) || c == ',' || c == ':' || c == '[' || c == ']' || c == '{' ||
+          c == '}' || c == '"' || c == ';') {
+        if (nonfinite_word(word)) return rel + ":" + std::to_string(no) + ": " + word;
+        word.clear();
+      } else {
+        word += c;
+      }
+    }
+  }
+  return "";
+}
+
+// A float TIFF: no Inf anywhere; no NaN where the mask (an 8-bit PNG, same size) is non-zero, or
+// anywhere when there is no mask file.
+std::string nonfinite_in_tiff(const fs::path& file, const std::string& rel, const fs::path& mask_file) {
+  cv::Mat m = cv::imread(file.string(), cv::IMREAD_UNCHANGED);
+  if (m.empty() || (m.depth() != CV_32F && m.depth() != CV_64F) || m.channels() != 1) return "";
+  m.convertTo(m, CV_64F);
+  const cv::Mat mask = mask_file.empty() ? cv::Mat() : cv::imread(mask_file.string(), cv::IMREAD_GRAYSCALE);
+  const bool masked = !mask.empty() && mask.size() == m.size();
+  for (int y = 0; y < m.rows; ++y) {
+    for (int x = 0; x < m.cols; ++x) {
+      const double v = m.at<double>(y, x);
+      if (std::isinf(v) || (std::isnan(v) && (!masked || mask.at<uint8_t>(y, x) != 0))) {
+        return rel + ": pixel (" + std::to_string(x) + ", " + std::to_string(y) + ") is " + (std::isnan(v) ? "NaN" : "Inf") +
+               (masked ? " where " + mask_file.filename().string() + " marks it seen" : "");
+      }
+    }
+  }
+  return "";
+}
+
+}  // namespace
+
+std::string find_nonfinite_output(const std::string& algorithm, const std::string& out_dir) {
+  for (const char* entry : metrics_of(algorithm).outputs) {
+    const std::string e(entry);
+    const size_t colon = e.find(':');
+    const fs::path rel(e.substr(0, colon));
+    const std::string mask = colon == std::string::npos ? "" : e.substr(colon + 1);
+    const fs::path folder = fs::path(out_dir) / rel.parent_path();
+    std::vector<std::string> names;
+    std::error_code ec;
+    for (fs::directory_iterator it(folder, ec), end; !ec && it != end; it.increment(ec)) {
+      if (it->is_regular_file(ec) && name_matches(rel.filename().string(), it->path().filename().string())) {
+        names.push_back(it->path().filename().string());
+      }
+    }
+    std::sort(names.begin(), names.end());
+    for (const std::string& n : names) {
+      const std::string r = (rel.parent_path() / n).string();
+      const std::string found = fs::path(n).extension() == ".tiff"
+                                    ? nonfinite_in_tiff(folder / n, r, mask.empty() ? fs::path() : fs::path(out_dir) / mask)
+                                    : nonfinite_in_text(folder / n, r);
+      if (!found.empty()) return found;
+    }
+  }
+  return "";
+}
+
+void classify_cell_outcome(const std::string& algorithm, const std::string& out_dir, const std::string& stderr_path,
+                           SweepRecord* r) {
+  r->outcome_detail.clear();
+  if (r->timed_out) {
+    r->outcome = "hang";
+    r->outcome_detail = "killed after the timeout";
+  } else if (r->exit_code == 1) {
+    r->outcome = "error";
+    std::ifstream f(stderr_path);
+    std::string line;
+    while (std::getline(f, line)) {
+      while (!line.empty() && std::isspace(static_cast<unsigned char>(line.back()))) line.pop_back();
+      if (!line.empty()) r->outcome_detail = line;
+    }
+    if (r->outcome_detail.size() > 400) r->outcome_detail = r->outcome_detail.substr(0, 400) + "...";
+  } else if (r->exit_code != 0) {
+    r->outcome = "crash";
+    r->outcome_detail = r->exit_code < 0 ? "killed by signal " + std::to_string(-r->exit_code) : "exit code " + std::to_string(r->exit_code);
+  } else {
+    r->outcome_detail = find_nonfinite_output(algorithm, out_dir);
+    r->outcome = r->outcome_detail.empty() ? "ok" : "nonfinite";
+  }
+}
+
+bool sweep_outcome_is_defect(const std::string& outcome) {
+  return outcome == "crash" || outcome == "hang" || outcome == "nonfinite";
+}
+
 std::string sweep_record_json(const SweepRecord& r) {
   std::ostringstream j;
   j << "{\"cell\": " << quoted(r.cell) << ", \"algorithm\": " << quoted(r.algorithm) << ", \"variant\": " << quoted(r.variant)
@@ -260,6 +387,7 @@ std::string sweep_record_json(const SweepRecord& r) {
     << ", \"metrics\": {";
   for (size_t i = 0; i < r.metrics.size(); ++i) j << (i ? ", " : "") << quoted(r.metrics[i].first) << ": " << json_number(r.metrics[i].second, 9);
   j << "}, \"error_metric\": " << (r.error_metric.empty() ? "null" : quoted(r.error_metric)) << ", \"note\": " << quoted(r.note)
+    << ", \"outcome\": " << quoted(r.outcome) << ", \"outcome_detail\": " << quoted(r.outcome_detail)
     << ", \"engine\": " << quoted(r.engine) << ", \"host\": " << quoted(r.host) << ", \"started_utc\": " << quoted(r.started_utc)
     << ", \"model\": " << (r.model_json.empty() ? "null" : r.model_json) << "}\n";
   return j.str();
@@ -326,6 +454,8 @@ std::vector<SweepRecord> read_sweep_records(const std::string& results_path) {
     r.error_metric = text(n, "error_metric");
     if (r.error_metric == "null" || r.error_metric == "~") r.error_metric.clear();
     r.note = text(n, "note");
+    r.outcome = text(n, "outcome");
+    r.outcome_detail = text(n, "outcome_detail");
     r.engine = text(n, "engine");
     r.host = text(n, "host");
     r.started_utc = text(n, "started_utc");

@@ -26,6 +26,10 @@ struct SweepRecord {
   // The model the algorithm chose, with the numbers behind it: the "model" object of the cell's
   // stats.json as compact JSON ("" when the command wrote none); its "summary" is one line of text.
   std::string model_json;
+  // How the cell ended (classify_cell_outcome): "ok", "error", "crash", "hang" or "nonfinite"; empty in
+  // records written before outcomes existed. outcome_detail: the error line of stderr ("error"), the
+  // exit code or signal ("crash"), the timeout ("hang"), the file and value ("nonfinite").
+  std::string outcome, outcome_detail;
 
   double metric(const std::string& name) const;  // NaN when absent
 };
@@ -46,6 +50,22 @@ void read_cell_metrics(const std::string& algorithm, const std::string& out_dir,
 
 // The "summary" text of the record's model object ("" when none).
 std::string sweep_model_summary(const SweepRecord& r);
+// The first non-finite number (NaN, Inf) in the algorithm's output files in out_dir (its trajectories,
+// motion.csv, corners, labels, stats.json, eval.json, 32-bit TIFF images), as "FILE:LINE: VALUE"
+// (FILE relative to out_dir; TIFF: "FILE: pixel (x, y) is NaN|Inf ..."); empty when every number is
+// finite or absent. NaN in mosaic's panorama_log.tiff is its "not seen" value: only NaN where
+// panorama_seen.png marks the pixel seen counts. Binary PLY maps are not read.
+std::string find_nonfinite_output(const std::string& algorithm, const std::string& out_dir);
+
+// Sets r->outcome and r->outcome_detail from r->exit_code and r->timed_out, the cell's stderr file and
+// its outputs: "hang" (killed after the timeout), "crash" (a signal, or an exit code other than 0 and
+// 1), "error" (exit code 1; the detail is the last non-empty line of stderr, the command's one-line
+// error), "nonfinite" (exit code 0 with a non-finite number in an output), "ok" (exit code 0, every
+// output number finite).
+void classify_cell_outcome(const std::string& algorithm, const std::string& out_dir, const std::string& stderr_path,
+                           SweepRecord* r);
+// The outcomes that are failures of the program (not of the input): crash, hang, nonfinite.
+bool sweep_outcome_is_defect(const std::string& outcome);
 
 // The record as one JSON line, '\n' included.
 std::string sweep_record_json(const SweepRecord& r);

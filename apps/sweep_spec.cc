@@ -22,7 +22,7 @@ namespace {
 
 const char* kSpecForm =
     "a mapping with `datasets:` (a list of {name, path} or {name, scene, duration, seed, set}) and `algorithms:` (a list "
-    "of {algorithm, variant, datasets, args, grid, timeout_s}), optional `name:` and `timeout_s:`";
+    "of {algorithm, variant, datasets, args, grid, timeout_s}), optional `name:`, `timeout_s:`, `report: [extremes]` and `accept_errors: true|false`";
 
 class SpecReader {
  public:
@@ -227,12 +227,23 @@ SweepSpec parse_sweep_spec(const std::string& text, const std::string& file, con
   }
   SpecReader r(file, dir);
   if (!root.IsMap()) throw InputError(file, root.IsDefined() && !root.IsNull() ? root.Mark().line + 1 : 0, "the spec is not a mapping", kSpecForm);
-  r.keys(root, {"name", "timeout_s", "datasets", "algorithms"}, "the spec", kSpecForm);
+  r.keys(root, {"name", "timeout_s", "report", "accept_errors", "datasets", "algorithms"}, "the spec", kSpecForm);
   SweepSpec spec;
   spec.file = file;
   spec.dir = dir;
   if (root["name"]) spec.name = r.scalar(root["name"], "name");
   if (root["timeout_s"]) spec.timeout_s = r.seconds(root["timeout_s"], "timeout_s");
+  if (root["report"]) {
+    for (const std::string& s : r.strings(root["report"], "report")) {
+      if (s != "extremes") r.fail(root["report"], "unknown report section '" + s + "'", "`report: [extremes]`");
+      spec.report_extremes = true;
+    }
+  }
+  if (root["accept_errors"]) {
+    const std::string v = r.scalar(root["accept_errors"], "accept_errors");
+    if (v != "true" && v != "false") r.fail(root["accept_errors"], "accept_errors '" + v + "' is not true or false", "`accept_errors: true`");
+    spec.accept_errors = v == "true";
+  }
   const YAML::Node ds = root["datasets"], as = root["algorithms"];
   if (!ds || !ds.IsSequence() || ds.size() == 0) r.fail(ds ? ds : root, "`datasets:` is missing or not a non-empty list", kSpecForm);
   if (!as || !as.IsSequence() || as.size() == 0) r.fail(as ? as : root, "`algorithms:` is missing or not a non-empty list", kSpecForm);

@@ -37,6 +37,9 @@ struct SweepSpec {
   std::string dir;        // its folder (relative paths in the spec are resolved against it)
   std::string name;       // optional title of the report
   double timeout_s = 0;   // per cell, s; 0: no limit
+  bool report_extremes = false;  // `report: [extremes]`: the report shows the outcome table (dataset x algorithm)
+  bool accept_errors = false;    // `accept_errors: true`: a cell that exits 1 with its one-line error passes;
+                                 // the sweep fails only on crash, hang or non-finite output
   std::vector<SweepDataset> datasets;
   std::vector<SweepAlgorithm> algorithms;
 };

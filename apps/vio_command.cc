@@ -342,8 +342,9 @@ int run_vio(const VioArgs& args, std::ostream& out) {
     log_debug("vio: " + r.init_failure);
     std::error_code ec;  // no state came: no trajectory files
     for (const char* f : {"trajectory.tum", "trajectory_causal.tum", "keyframes.txt"}) fs::remove(fs::path(args.out) / f, ec);
-    throw InputError(args.dataset, 0, "could not initialise (no still start and the visual-inertial alignment failed)",
-                     "a recording that starts still or moves with enough features in the first seconds");
+    throw InputError(args.dataset, 0, "could not initialise: " + r.init_failure,
+                     "a recording that starts still or moves with enough features in the first seconds, with at least "
+                     "frames.min_events events per frame");
   }
   const std::string init_method = init_description(r.init_method);
 

@@ -30,6 +30,9 @@ bool ImuSimOptions::Validate(std::string* why) const {
   if (!gravity_w.allFinite()) return validation_failed(why, "gravity_w must be finite");
   if (!initial_bias_gyro_radps.allFinite() || !initial_bias_accel_mps2.allFinite())
     return validation_failed(why, "initial biases must be finite");
+  for (const auto& [b, e] : gaps_ns) {
+    if (e <= b) return validation_failed(why, "each IMU gap must end after it begins");
+  }
   return true;
 }
 
@@ -81,7 +84,9 @@ std::vector<ImuSample> simulate_imu(const ContinuousTrajectory& trajectory, int6
       bg += sigma_bg * rng.next3();
       ba += sigma_ba * rng.next3();
     }
-    out.push_back(s);
+    bool in_gap = false;
+    for (const auto& [b, e] : options.gaps_ns) in_gap |= t >= b && t < e;
+    if (!in_gap) out.push_back(s);
   }
   return out;
 }

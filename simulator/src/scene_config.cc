@@ -95,7 +95,7 @@ class ConfigBuilder {
 
   void build() {
     root_.allow({"description", "seed", "duration", "camera", "scene", "trajectory", "imu", "events", "stepping",
-                 "frames", "ground_truth", "output"});
+                 "frames", "ground_truth", "illumination", "output"});
     if (root_.has("description")) c_->description = root_.string("description", "", {});
     c_->seed = root_.has("seed") ? root_.seed("seed", 0) : 1;  // a missing top-level seed means 1
     root_.set("seed", YAML::Node(c_->seed));
@@ -108,10 +108,25 @@ class ConfigBuilder {
     read_stepping(root_.child("stepping", false, "stepping: {max_flow_px, max_log_change, min_step_s, max_step_s}"));
     read_frames(root_.child("frames", false, "frames: {rate_hz, exposure_s, ...}"));
     read_ground_truth(root_.child("ground_truth", false, "ground_truth: {pose_rate_hz, period_s, times_s, ...}"));
-    Section output = root_.child("output", false, "output: {events_h5, panorama}");
-    output.allow({"events_h5", "panorama"});
+    read_illumination();
+    Section output = root_.child("output", false, "output: {events_h5, panorama, clock_offset_ns}");
+    output.allow({"events_h5", "panorama", "clock_offset_ns"});
     c_->write_h5 = output.boolean("events_h5", true);
     c_->write_panorama = output.boolean("panorama", true);
+    if (output.has("clock_offset_ns")) {
+      const YAML::Node n = output.get("clock_offset_ns");
+      const std::string expected = "an integer number of ns in [0, 4e18], e.g. 1700000000000000000";
+      long long v = -1;
+      size_t used = 0;
+      try {
+        v = std::stoll(n.IsScalar() ? n.Scalar() : std::string(), &used);
+      } catch (const std::exception&) {
+      }
+      if (!n.IsScalar() || used != n.Scalar().size() || v < 0 || v > 4'000'000'000'000'000'000LL) {
+        p_->fail(n, output.key_path("clock_offset_ns"), "is not an integer in range", expected);
+      }
+      c_->clock_offset_ns = v;
+    }
 
     SimulatorOptions& o = c_->simulator;
     o.camera = c_->camera.camera;
@@ -505,11 +520,35 @@ class ConfigBuilder {
     return std::make_shared<SpriteScene>(background, std::move(sprites), c_->simulator.t_begin_ns);
   }
 
+  // [[t_s, v], ...] pairs, t_s seconds since the start (sorted, increasing); v checked by range r.
+  std::vector<std::pair<int64_t, double>> timed_pairs(const Section& s, const std::string& key, Range r, const std::string& expected) {
+    std::vector<std::pair<int64_t, double>> out;
+    const YAML::Node n = s.get(key);
+    if (!n.IsSequence()) p_->fail(n, s.key_path(key), "is not a list", expected);
+    for (size_t i = 0; i < n.size(); ++i) {
+      const std::string kp = s.key_path(key) + "." + std::to_string(i);
+      if (!n[i].IsSequence() || n[i].size() != 2) p_->fail(n[i], kp, "is not a pair", expected);
+      out.emplace_back(c_->simulator.t_begin_ns + s.time_ns_of(n[i][0], kp + ".0", Range::kNonNegative), s.number_of(n[i][1], kp + ".1", r, ""));
+    }
+    return out;
+  }
+
+  void read_illumination() {
+    if (!root_.has("illumination")) return;
+    const std::string expected = "illumination: [[t_s, gain], ...] with t_s seconds since the start, increasing, gain > 0";
+    c_->simulator.illumination = timed_pairs(root_, "illumination", Range::kPositive, expected);
+    for (size_t i = 1; i < c_->simulator.illumination.size(); ++i) {
+      if (c_->simulator.illumination[i].first <= c_->simulator.illumination[i - 1].first) {
+        p_->fail(root_.get("illumination")[i], "illumination." + std::to_string(i), "is not after the previous knot", expected);
+      }
+    }
+  }
+
   // ---- sensors ----
   void read_imu(Section s) {
     s.allow({"enable", "rate_hz", "accelerometer_noise_density", "accelerometer_random_walk",
              "gyroscope_noise_density", "gyroscope_random_walk", "enable_noise", "gravity_mps2",
-             "initial_bias_gyro_radps", "initial_bias_accel_mps2", "seed"});
+             "initial_bias_gyro_radps", "initial_bias_accel_mps2", "gaps_s", "seed"});
     ImuSimOptions& o = c_->imu;
     c_->imu_enabled = s.boolean("enable", true);
     o.rate_hz = s.number("rate_hz", 1000.0, Range::kPositive, "Hz");
@@ -526,6 +565,14 @@ class ConfigBuilder {
     o.initial_bias_gyro_radps = s.vec3("initial_bias_gyro_radps", o.initial_bias_gyro_radps, Range::kAny, "rad/s");
     o.initial_bias_accel_mps2 = s.vec3("initial_bias_accel_mps2", o.initial_bias_accel_mps2, Range::kAny, "m/s^2");
     o.seed = seed_for(s);
+    if (s.has("gaps_s")) {
+      const std::string expected = "gaps_s: [[start_s, end_s], ...] seconds since the start, end after start";
+      for (const auto& [b, e] : timed_pairs(s, "gaps_s", Range::kNonNegative, expected)) {
+        const int64_t end = c_->simulator.t_begin_ns + std::llround(e * 1e9);
+        if (end <= b) s.fail_at("gaps_s", "has a gap that does not end after it starts", expected);
+        o.gaps_ns.emplace_back(b, end);
+      }
+    }
     std::string why;
     if (!o.Validate(&why)) s.fail("invalid IMU options: " + why, "see datasets/README.md, imu");
   }

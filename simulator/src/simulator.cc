@@ -69,6 +69,12 @@ bool SimulatorOptions::Validate(std::string* why) const {
   if (!stepping.Validate(why) || !events.Validate(why) || !frames.Validate(why)) return false;
   if (!std::is_sorted(ground_truth_times_ns.begin(), ground_truth_times_ns.end()))
     return validation_failed(why, "ground_truth_times_ns must be sorted");
+  for (size_t i = 0; i < illumination.size(); ++i) {
+    if (!(std::isfinite(illumination[i].second) && illumination[i].second > 0))
+      return validation_failed(why, "illumination gains must be finite and > 0");
+    if (i > 0 && illumination[i].first <= illumination[i - 1].first)
+      return validation_failed(why, "illumination knots must have increasing times");
+  }
   return true;
 }
 
@@ -107,6 +113,17 @@ CameraState Simulator::camera_state(int64_t t_ns) const {
   return c;
 }
 
+double Simulator::illumination_gain(int64_t t_ns) const {
+  const auto& k = o_.illumination;
+  if (k.empty()) return 1.0;
+  if (t_ns <= k.front().first) return k.front().second;
+  if (t_ns >= k.back().first) return k.back().second;
+  size_t i = 1;
+  while (k[i].first < t_ns) ++i;
+  const double a = static_cast<double>(t_ns - k[i - 1].first) / static_cast<double>(k[i].first - k[i - 1].first);
+  return std::exp((1.0 - a) * std::log(k[i - 1].second) + a * std::log(k[i].second));
+}
+
 RenderedView Simulator::render(int64_t t_ns, bool with_flow) const {
   RenderedView view;
   RenderRequest request;
@@ -141,6 +158,8 @@ RenderedView Simulator::render(int64_t t_ns, bool with_flow) const {
     for (const std::exception_ptr& e : errors)
       if (e) std::rethrow_exception(e);
   }
+  const double gain = illumination_gain(t_ns);
+  if (gain != 1.0) view.intensity *= gain;
   view.t_ns = t_ns;
   return view;
 }

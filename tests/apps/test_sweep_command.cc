@@ -17,11 +17,14 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <limits>
 #include <map>
 #include <set>
 #include <sstream>
 
 #include <gtest/gtest.h>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
 
 #include "evio/calib/error.h"
 #include "evio_test/temp_dir.h"
@@ -750,6 +753,132 @@ TEST(SweepReport, PlotsAreEmbeddedWhenMatplotlibIsThere) {
   const std::string page = evio_test::read_text(a.out + "/report/index.html");
   EXPECT_NE(page.find("<img alt=\"flow on rec\" src=\"data:image/png;base64,iVBORw0KGgo"), std::string::npos);
   EXPECT_EQ(page.find("Plots are missing"), std::string::npos);
+}
+
+// ---- the numerical-extremes suite: each cell's outcome, the outcome table, accept_errors ----
+
+// Stand-ins for evio-flow and evio-corners that end as --set end=ok|error|crash|nan|hang says.
+std::string outcome_programs(const evio_test::TempDir& tmp) {
+  const std::string dir = tmp.file("outcome_bin");
+  fs::create_directories(dir);
+  const std::string script =
+      "#!/bin/sh\nds=$1; shift; out=; end=ok\n"
+      "while [ $# -gt 0 ]; do case \"$1\" in\n"
+      "  --out) out=$2; shift 2;;\n  --set) case \"$2\" in end=*) end=${2#end=};; esac; shift 2;;\n"
+      "  *) shift;; esac; done\nmkdir -p \"$out\"\n"
+      "printf 't_s,omega_x\\n0.1,0.5\\n' > \"$out/motion.csv\"\n"
+      "echo '{\"windows\": 1, \"time_per_event_ns\": 3, \"note\": \"inference on nanoseconds\"}' > \"$out/stats.json\"\n"
+      "case $end in\n"
+      "  error) echo 'progress line' >&2; echo \"evio: error: $ds/events.txt: no events (expected: at least 1 event)\" >&2; exit 1;;\n"
+      "  crash) kill -SEGV $$;;\n  hang) exec sleep 30;;\n"
+      "  nan) printf 't_s,omega_x\\n0.1,0.5\\n0.2,-nan\\n' > \"$out/motion.csv\";;\n"
+      "  exit2) exit 2;;\nesac\n";
+  for (const char* alg : {"flow", "corners"}) {
+    const std::string p = dir + "/evio-" + alg;
+    std::ofstream(p) << script;
+    fs::permissions(p, fs::perms::owner_all);
+  }
+  return dir;
+}
+
+TEST(SweepExtremes, EveryCellGetsItsOutcomeAndTheReportTablesThem) {
+  evio_test::TempDir tmp;
+  SweepArgs a = fake_sweep(tmp, "timeout_s: 2\nreport: [extremes]\naccept_errors: true\ndatasets: [rec]\nalgorithms:\n"
+                                "  - {algorithm: flow, grid: {end: [ok, error, crash, nan, hang, exit2]}}\n"
+                                "  - {algorithm: corners, grid: {end: [ok]}}\n");
+  a.programs_dir = outcome_programs(tmp);
+  std::string error;
+  EXPECT_EQ(run_quietly(a, &error), 1);
+  EXPECT_NE(error.find("4 of 7 cells failed with a crash, hang or non-finite output"), std::string::npos) << error;
+  const std::vector<SweepRecord> recs = read_sweep_records(a.out + "/results.jsonl");
+  ASSERT_EQ(recs.size(), 7u);
+  std::map<std::string, const SweepRecord*> by_end;
+  for (const SweepRecord& r : recs) by_end[r.algorithm == "corners" ? "corners" : r.params.at(0).second] = &r;
+  ASSERT_EQ(by_end.size(), 7u);
+  EXPECT_EQ(by_end["ok"]->outcome, "ok");
+  EXPECT_EQ(by_end["ok"]->outcome_detail, "");
+  EXPECT_EQ(by_end["corners"]->outcome, "ok");
+  EXPECT_EQ(by_end["error"]->outcome, "error");
+  EXPECT_EQ(by_end["error"]->outcome_detail, "evio: error: " + tmp.file("rec") + "/events.txt: no events (expected: at least 1 event)");
+  EXPECT_EQ(by_end["crash"]->outcome, "crash");
+  EXPECT_EQ(by_end["crash"]->outcome_detail, "killed by signal 11");
+  EXPECT_EQ(by_end["exit2"]->outcome, "crash");
+  EXPECT_EQ(by_end["exit2"]->outcome_detail, "exit code 2");
+  EXPECT_EQ(by_end["nan"]->outcome, "nonfinite");
+  EXPECT_EQ(by_end["nan"]->outcome_detail, "motion.csv:3: -nan");
+  EXPECT_EQ(by_end["hang"]->outcome, "hang");
+
+  const std::string md = evio_test::read_text(a.out + "/report/pareto.md");
+  EXPECT_NE(md.find("## Outcomes"), std::string::npos);
+  EXPECT_NE(md.find("Outcomes: 2 ok, 1 error, 2 crash, 1 hang, 1 nonfinite"), std::string::npos) << md;
+  EXPECT_NE(md.find("| dataset | corners | flow |"), std::string::npos) << md;
+  EXPECT_NE(md.find(by_end["error"]->cell + ": evio: error: "), std::string::npos) << md;
+  EXPECT_NE(md.find(by_end["nan"]->cell + ": motion.csv:3: -nan"), std::string::npos) << md;
+  for (const char* o : {"error [", "crash [", "hang [", "nonfinite ["}) EXPECT_NE(md.find(o), std::string::npos) << o;
+  const std::string page = evio_test::read_text(a.out + "/report/index.html");
+  EXPECT_NE(page.find("<td class=\"crash\" title=\""), std::string::npos);
+  EXPECT_NE(page.find("<td class=\"ok\">ok</td>"), std::string::npos);
+  const std::string ocsv = evio_test::read_text(a.out + "/report/outcomes.csv");
+  EXPECT_NE(ocsv.find(by_end["crash"]->cell + ",crash,-11,killed by signal 11"), std::string::npos) << ocsv;
+
+  // Only ok and error cells: the suite passes with accept_errors, fails without it.
+  SweepArgs pass = fake_sweep(tmp, "report: [extremes]\naccept_errors: true\ndatasets: [rec]\nalgorithms:\n"
+                                   "  - {algorithm: flow, grid: {end: [ok, error]}}\n");
+  pass.programs_dir = a.programs_dir;
+  pass.out = tmp.file("pass");
+  EXPECT_EQ(run_quietly(pass, &error), 0) << error;
+  SweepArgs strict = pass;
+  strict.spec = tmp.write("strict.yaml", "datasets: [rec]\nalgorithms:\n  - {algorithm: flow, grid: {end: [ok, error]}}\n");
+  strict.out = tmp.file("strict");
+  EXPECT_EQ(run_quietly(strict, &error), 1);
+  EXPECT_NE(error.find("1 of 2 cells failed ("), std::string::npos) << error;
+  EXPECT_NE(evio_test::read_text(pass.out + "/report/pareto.md").find("## Outcomes"), std::string::npos);
+}
+
+TEST(SweepExtremes, AllOkSweepHasNoOutcomeTableUnlessAsked) {
+  evio_test::TempDir tmp;
+  SweepArgs a = fake_sweep(tmp, "datasets: [rec]\nalgorithms:\n  - {algorithm: flow, grid: {end: [ok]}}\n");
+  a.programs_dir = outcome_programs(tmp);
+  ASSERT_EQ(run_quietly(a), 0);
+  EXPECT_EQ(evio_test::read_text(a.out + "/report/pareto.md").find("## Outcomes"), std::string::npos);
+  a.spec = tmp.write("asked.yaml", "report: [extremes]\ndatasets: [rec]\nalgorithms:\n  - {algorithm: flow, grid: {end: [ok]}}\n");
+  a.out = tmp.file("asked");
+  ASSERT_EQ(run_quietly(a), 0);
+  const std::string md = evio_test::read_text(a.out + "/report/pareto.md");
+  EXPECT_NE(md.find("## Outcomes"), std::string::npos);
+  EXPECT_NE(md.find("| rec | ok |"), std::string::npos) << md;
+  EXPECT_NE(spec_error("report: [pareto]\ndatasets: [rec]\nalgorithms: [{algorithm: flow}]\n", tmp.file("")).find("unknown report section 'pareto'"), std::string::npos);
+  EXPECT_NE(spec_error("accept_errors: maybe\ndatasets: [rec]\nalgorithms: [{algorithm: flow}]\n", tmp.file("")).find("accept_errors 'maybe' is not true or false"), std::string::npos);
+}
+
+TEST(SweepExtremes, NonfiniteNumbersAreFoundInTextOutputsAndFloatTiffs) {
+  evio_test::TempDir tmp;
+  const std::string out = tmp.file("out");
+  fs::create_directories(out + "/images");
+  std::ofstream(out + "/images.txt") << "0.1 images/frame_00000000.png\n";
+  std::ofstream(out + "/stats.json") << "{\"images\": 2, \"info\": \"nanoflann infinity-free\", \"t\": 1e-9}\n";
+  cv::Mat img(4, 5, CV_32F, cv::Scalar(0.5));
+  ASSERT_TRUE(cv::imwrite(out + "/images/frame_00000000.tiff", img));
+  EXPECT_EQ(find_nonfinite_output("reconstruct", out), "");
+  img.at<float>(2, 3) = std::numeric_limits<float>::infinity();
+  ASSERT_TRUE(cv::imwrite(out + "/images/frame_00000001.tiff", img));
+  EXPECT_EQ(find_nonfinite_output("reconstruct", out), "images/frame_00000001.tiff: pixel (3, 2) is Inf");
+  // mosaic: NaN marks the panorama's unseen pixels; it counts only where panorama_seen.png says seen.
+  cv::Mat pano(4, 5, CV_32F, cv::Scalar(std::numeric_limits<float>::quiet_NaN()));
+  pano.at<float>(1, 1) = -2.0f;
+  cv::Mat seen(4, 5, CV_8U, cv::Scalar(0));
+  seen.at<uint8_t>(1, 1) = 255;
+  ASSERT_TRUE(cv::imwrite(out + "/panorama_log.tiff", pano));
+  ASSERT_TRUE(cv::imwrite(out + "/panorama_seen.png", seen));
+  EXPECT_EQ(find_nonfinite_output("mosaic", out), "");
+  seen.at<uint8_t>(3, 4) = 255;
+  ASSERT_TRUE(cv::imwrite(out + "/panorama_seen.png", seen));
+  EXPECT_EQ(find_nonfinite_output("mosaic", out), "panorama_log.tiff: pixel (4, 3) is NaN where panorama_seen.png marks it seen");
+  std::ofstream(out + "/stats.json") << "{\"images\": 2, \"mean\": NaN}\n";
+  std::ofstream(out + "/trajectory.tum") << "1.0 0 0 0 0 0 0 1\n2.0 inf 0 0 0 0 0 1\n";
+  EXPECT_EQ(find_nonfinite_output("vio", out), "trajectory.tum:2: inf");
+  EXPECT_EQ(find_nonfinite_output("flow", out), "stats.json:1: NaN");
+  EXPECT_EQ(find_nonfinite_output("corners", tmp.file("absent")), "");
 }
 
 }  // namespace

@@ -107,6 +107,29 @@ TEST(SimulateConfig, MinimalPanoramaSceneBuildsEveryObject) {
   EXPECT_NEAR(s.omega_b.y(), 100.0 * M_PI / 180.0, 1e-9);
 }
 
+TEST(SimulateConfig, IlluminationImuGapsAndClockOffset) {
+  const SimulationConfig plain = parse(kPanorama);
+  EXPECT_TRUE(plain.simulator.illumination.empty());
+  EXPECT_TRUE(plain.imu.gaps_ns.empty());
+  EXPECT_EQ(plain.clock_offset_ns, 0);
+  const std::string text = std::string(kPanorama) +
+                           "illumination: [[0.1, 1], [0.15, 4]]\nimu: {gaps_s: [[0.2, 0.25]]}\n"
+                           "output: {clock_offset_ns: 1700000000000000000}\n";
+  const SimulationConfig c = parse(text);
+  const int64_t t0 = c.simulator.t_begin_ns;
+  ASSERT_EQ(c.simulator.illumination.size(), 2u);
+  EXPECT_EQ(c.simulator.illumination[0], std::make_pair(t0 + 100000000, 1.0));
+  EXPECT_EQ(c.simulator.illumination[1], std::make_pair(t0 + 150000000, 4.0));
+  ASSERT_EQ(c.imu.gaps_ns.size(), 1u);
+  EXPECT_EQ(c.imu.gaps_ns[0], std::make_pair(t0 + 200000000, t0 + 250000000));
+  EXPECT_EQ(c.clock_offset_ns, 1700000000000000000LL);
+  expect_error(std::string(kPanorama) + "illumination: [[0.1, 1], [0.1, 2]]\n", {"illumination.1", "not after the previous knot"});
+  expect_error(std::string(kPanorama) + "illumination: [[0.1, 0]]\n", {"illumination.0.1", "out of range"});
+  expect_error(std::string(kPanorama) + "imu: {gaps_s: [[0.3, 0.2]]}\n", {"imu.gaps_s", "does not end after it starts"});
+  expect_error(std::string(kPanorama) + "output: {clock_offset_ns: -5}\n", {"output.clock_offset_ns", "[0, 4e18]"});
+  expect_error(std::string(kPanorama) + "output: {clock_offset_ns: 1.5e9}\n", {"output.clock_offset_ns"});
+}
+
 TEST(SimulateConfig, SeedsDeriveFromTheTopLevelSeedUnlessPinned) {
   const SimulationConfig c = parse(kPanorama);
   EXPECT_EQ(c.simulator.events.seed, yaml_config::derive_seed(5, "events.seed"));

@@ -182,6 +182,30 @@ TEST(SimulateImu, SampleTimesAndConstantBiasesWithoutNoise) {
   EXPECT_THROW(simulate_imu(traj, kLargeT0, t1, o), std::invalid_argument);
 }
 
+TEST(SimulateImu, GapsLeaveSamplesOutAndTheOthersUnchanged) {
+  const SinusoidTrajectory traj(lively_sinusoid(kLargeT0));
+  ImuSimOptions o;
+  o.rate_hz = 1000.0;
+  const int64_t t1 = kLargeT0 + 1000000000;
+  const std::vector<ImuSample> all = simulate_imu(traj, kLargeT0, t1, o);
+  ASSERT_EQ(all.size(), 1001u);
+  o.gaps_ns = {{kLargeT0 + 300000000, kLargeT0 + 500000000}, {kLargeT0 + 100000000, kLargeT0 + 100000001}};
+  const std::vector<ImuSample> gappy = simulate_imu(traj, kLargeT0, t1, o);
+  ASSERT_EQ(gappy.size(), 1001u - 200u - 1u);  // [0.3, 0.5) s: 200 samples; the one at 0.1 s
+  size_t j = 0;
+  for (const ImuSample& s : all) {
+    const int64_t t = s.t_ns - kLargeT0;
+    if ((t >= 300000000 && t < 500000000) || t == 100000000) continue;
+    ASSERT_LT(j, gappy.size());
+    EXPECT_EQ(gappy[j].t_ns, s.t_ns);
+    EXPECT_EQ(gappy[j].gyro, s.gyro);  // the noise ran on through the gaps
+    EXPECT_EQ(gappy[j].accel, s.accel);
+    ++j;
+  }
+  o.gaps_ns = {{kLargeT0 + 5, kLargeT0 + 5}};
+  EXPECT_THROW(simulate_imu(traj, kLargeT0, t1, o), std::invalid_argument);
+}
+
 TEST(SimulateImu, WhiteNoiseMatchesTheKalibrDiscreteModel) {
   const SinusoidTrajectory traj(still(0, 50.0));
   ImuSimOptions o;

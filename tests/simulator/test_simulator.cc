@@ -116,6 +116,32 @@ TEST(Simulator, ZeroMotionAndNoNoiseGivesNoEvents) {
   EXPECT_GT(s.steps, 100u);  // still steps (at max_step_ns) through the span
 }
 
+TEST(Simulator, IlluminationRampOfAStillSceneGivesItsBurstOfEvents) {
+  SinusoidTrajectoryOptions still;
+  still.duration_s = 1.0;
+  SimulatorOptions o = base_options();
+  o.illumination = {{400000000, 1.0}, {450000000, 4.0}};  // x4 over 50 ms, then held
+  Simulator sim(boxes_scene(), std::make_shared<SinusoidTrajectory>(still), o);
+  EXPECT_EQ(sim.illumination_gain(0), 1.0);
+  EXPECT_NEAR(sim.illumination_gain(425000000), 2.0, 1e-12);  // linear in log gain
+  EXPECT_EQ(sim.illumination_gain(900000000), 4.0);
+  const RenderedView before = sim.render(100000000, false), after = sim.render(900000000, false);
+  EXPECT_NEAR(cv::norm(after.intensity, 4.0 * before.intensity, cv::NORM_INF), 0.0, 1e-5);
+  Collect sink;
+  const SimulationStats s = sim.run(&sink);
+  // Every pixel's log intensity rises by ln 4 = 1.386: 6 ON events at C = 0.2 (mismatch 0 here).
+  const double pixels = static_cast<double>(o.camera.width()) * o.camera.height();
+  EXPECT_GT(static_cast<double>(s.events), 6.0 * pixels * 0.95);
+  EXPECT_LT(static_cast<double>(s.events), 7.0 * pixels * 1.05);
+  EXPECT_EQ(s.events_off, 0u);
+  for (const Event& e : sink.events) {
+    EXPECT_GE(e.t_ns, 400000000);
+    EXPECT_LE(e.t_ns, 450000000);
+  }
+  o.illumination = {{0, 1.0}, {0, 2.0}};
+  EXPECT_THROW(Simulator(boxes_scene(), std::make_shared<SinusoidTrajectory>(still), o), std::invalid_argument);
+}
+
 TEST(Simulator, EventCountsConvergeWhenTheStepBoundIsHalved) {
   std::vector<uint64_t> counts;
   for (double bound : {0.5, 0.25}) {

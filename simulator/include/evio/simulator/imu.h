@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -24,6 +25,9 @@ struct ImuSimOptions {
   Eigen::Vector3d initial_bias_gyro_radps = Eigen::Vector3d::Zero();   // rad/s
   Eigen::Vector3d initial_bias_accel_mps2 = Eigen::Vector3d::Zero();   // m/s^2
   uint64_t seed = 1;
+  // Body-clock spans [begin, end) without samples (a stalled IMU driver), ns, sorted or not; the
+  // noise and bias processes run on through a gap, so the samples outside it do not change.
+  std::vector<std::pair<int64_t, int64_t>> gaps_ns;
 
   bool Validate(std::string* why) const;
 };

@@ -65,6 +65,8 @@ struct SimulationConfig {
   GroundTruthConfig ground_truth;
   bool write_h5 = true;                           // events.h5
   bool write_panorama = true;                     // panorama.npy/.png for panorama backgrounds
+  int64_t clock_offset_ns = 0;  // output.clock_offset_ns: added to every written time stamp (events, frames,
+                                // IMU, poses, maps), ns >= 0; 1.7e18 puts them at Unix time ~2023
 
   std::string resolved_yaml;  // the tree after overrides, with seeds, duration and paths resolved
 };

@@ -66,6 +66,11 @@ struct SimulatorOptions {
   // label: sprites are drawn in label order over the background, 0).
   bool event_labels = false;
   std::vector<int64_t> ground_truth_times_ns;  // body clock; views handed to the sink (sorted)
+  // Scene illumination over time: (body-clock time ns, gain > 0) knots, sorted by time; the rendered
+  // intensity is multiplied by the gain, interpolated linearly in log gain between knots and held
+  // outside them (empty: 1). A fast ramp makes every textured pixel fire |ln(ratio)| / C events at
+  // once: an event burst (a light switched on, a flicker).
+  std::vector<std::pair<int64_t, double>> illumination;
   bool ground_truth_flow = true;         // include flow in the ground-truth views
   bool Validate(std::string* why) const;
 };
@@ -105,7 +110,9 @@ class Simulator {
 
   // Camera pose and velocity at body-clock time t_ns.
   CameraState camera_state(int64_t t_ns) const;
-  // Renders the clean view at body-clock time t_ns.
+  // The illumination gain at body-clock time t_ns (options().illumination; 1 when empty).
+  double illumination_gain(int64_t t_ns) const;
+  // Renders the clean view at body-clock time t_ns (intensity times the illumination gain).
   RenderedView render(int64_t t_ns, bool with_flow) const;
   // Runs the whole span. `progress` (if set) is called now and then with the fraction done and
   // the events so far.
