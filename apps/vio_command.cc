@@ -156,19 +156,15 @@ class StateFile {
                     p.y(), p.z(), q.x(), q.y(), q.z(), q.w());
     }
     f_ << line;
-    ++count_;
   }
   void close() {
     f_.close();
     if (!f_) throw InputError(path_, 0, "write failed (disk full?)", "a writable output folder");
   }
-  int64_t count() const { return count_; }
-
  private:
   std::string path_;
   bool full_;
   std::ofstream f_;
-  int64_t count_ = 0;
 };
 
 std::string init_description(pipeline::VioInitMethod m) {
