@@ -25,6 +25,13 @@ int main(int argc, char** argv) try {
          "Write a PNG overlay (events, corners, tracks) every N ms of sensor time to DIR/frames/; 0: none "
          "(default: the config's frames.every_ms, else none), ms")
       ->check(CLI::NonNegativeNumber);
+  CLI::Option* gt_opt = cli->add_option(
+      "--gt", corners.gt,
+      "Scene YAML the dataset was simulated from (evio simulate's scene_resolved.yaml; default: DATASET/"
+      "scene_resolved.yaml when it exists). When its planes carry checkerboard textures, eval.json scores the corner "
+      "events against the grid nodes projected through the true pose: precision (within 2 px), (corner, 50 ms bin) "
+      "recall, F = harmonic mean of the two, f_error = 1 - F");
+  cli->add_flag("--no-gt", corners.no_gt, "Do not score against DATASET/scene_resolved.yaml")->excludes(gt_opt);
   cli->add_option("--set", corners.set,
                   "Change one config value: key.sub=value (dotted key of the --config YAML, value in YAML "
                   "syntax), applied after --config, e.g. --set efast.filter_sae=true; repeatable. The "

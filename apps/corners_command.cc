@@ -17,8 +17,11 @@
 
 #include "evio/calib/calibration_io.h"
 #include "evio/calib/error.h"
+#include "evio/evaluation/corner_evaluation.h"
 #include "evio/sensors/image_io.h"
 #include "evio/sensors/time.h"
+#include "evio/simulator/scene_config.h"
+#include "evio/simulator/simulator.h"
 #include "json_util.h"
 #include "progress.h"
 #include "evio/sensors/config_table.h"
@@ -224,6 +227,51 @@ int run_corners(const CornersArgs& args, std::ostream& out) {
     overlay = std::make_unique<OverlayWriter>((fs::path(args.out) / "frames").string(), sensor.width, sensor.height, cfg);
   }
 
+  // True corners of a simulated dataset (--gt SCENE.yaml, or DATASET/scene_resolved.yaml that
+  // `evio simulate` writes): the checkerboard grid nodes projected through the true camera pose.
+  std::string gt_scene = args.gt;
+  {
+    std::error_code ec;
+    const fs::path auto_scene = fs::path(args.dataset) / "scene_resolved.yaml";
+    if (gt_scene.empty() && !args.no_gt && fs::is_directory(args.dataset, ec) && fs::is_regular_file(auto_scene, ec))
+      gt_scene = auto_scene.string();
+  }
+  std::unique_ptr<simulator::Simulator> truth_sim;
+  std::unique_ptr<evaluation::CornerEventScorer> scorer;
+  std::vector<simulator::SceneCorner> true_corners;
+  if (!gt_scene.empty()) {
+    const simulator::SimulationConfig sc = simulator::load_simulation_config(gt_scene);
+    if (sc.simulator.camera.width() != sensor.width || sc.simulator.camera.height() != sensor.height)
+      throw InputError(gt_scene, 0,
+                       "the scene's camera is " + std::to_string(sc.simulator.camera.width()) + " x " +
+                           std::to_string(sc.simulator.camera.height()) + " px",
+                       "the scene the dataset was simulated from (" + std::to_string(sensor.width) + " x " +
+                           std::to_string(sensor.height) + " px)");
+    true_corners = sc.corners;
+    if (true_corners.empty()) {
+      out << "evio corners: " << gt_scene << " has no true corners (checkerboard planes): no eval.json\n";
+    } else {
+      truth_sim = std::make_unique<simulator::Simulator>(sc.scene, sc.trajectory, sc.simulator);
+      const simulator::Simulator* sim = truth_sim.get();
+      const int64_t shift = sc.simulator.time_shift_ns;
+      std::vector<bool> inner;
+      for (const simulator::SceneCorner& c : true_corners) inner.push_back(c.inner);
+      scorer = std::make_unique<evaluation::CornerEventScorer>(
+          sensor.width, sensor.height, static_cast<int>(true_corners.size()), inner,
+          [sim, shift, &true_corners](int64_t t_ns, std::vector<Eigen::Vector2d>* px) {
+            px->assign(true_corners.size(), Eigen::Vector2d::Constant(NAN));
+            const calib::SE3 T_c_w = sim->camera_state(t_ns + shift).T_w_c.inverse();
+            for (size_t c = 0; c < true_corners.size(); ++c) {
+              Eigen::Vector2d p;
+              if (sim->options().camera.project(T_c_w * true_corners[c].p_w, &p)) (*px)[c] = p;
+            }
+          },
+          sim->t_begin_ns() - shift, sim->t_end_ns() - shift);
+    }
+  }
+  double scoring_s = 0;
+  std::vector<uint8_t> flags;  // the chunk's corner decisions, scored after the processing timer
+
   TextOut corners_file((fs::path(args.out) / "corners.txt").string());
   bool zero_one = true;  // polarity convention of the input, known after the first chunk
   std::fputs("# t[s] x y p   (eFAST corner events, polarity as in the input)\n", corners_file.get());
@@ -275,8 +323,11 @@ int run_corners(const CornersArgs& args, std::ostream& out) {
     }
     t_last = chunk.back().t_ns;
     const auto t0 = std::chrono::steady_clock::now();
+    if (scorer) flags.assign(chunk.size(), 0);
+    size_t k = 0;
     for (const Event& e : chunk.span()) {
       ++events;
+      ++k;
       if (overlay && e.x < sensor.width && e.y < sensor.height) {
         while (e.t_ns >= overlay->next_frame_ns) {
           const auto w0 = std::chrono::steady_clock::now();
@@ -287,6 +338,7 @@ int run_corners(const CornersArgs& args, std::ostream& out) {
         overlay->add_event(e);
       }
       if (!front.process(e)) continue;
+      if (scorer) flags[k - 1] = 1;
       char* end = format_seconds(e.t_ns, line);
       *end = '\0';
       std::fprintf(corners_file.get(), "%s %d %d %d\n", line, e.x, e.y, e.polarity > 0 ? 1 : (zero_one ? 0 : -1));
@@ -294,6 +346,12 @@ int run_corners(const CornersArgs& args, std::ostream& out) {
     }
     std::vector<frontend::CornerTrack> ended = front.take_finished_tracks();
     processing_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (scorer) {
+      const auto s0 = std::chrono::steady_clock::now();
+      size_t i = 0;
+      for (const Event& e : chunk.span()) scorer->add(e, flags[i++] != 0);
+      scoring_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - s0).count();
+    }
     if (tracker) write_tracks(std::move(ended));  // not processing time (as the overlays)
     progress.update(reader->progress(), events, std::to_string(front.stats().corners) + " corners");
   }
@@ -338,6 +396,35 @@ int run_corners(const CornersArgs& args, std::ostream& out) {
       << (overlay ? overlay->written : 0) << "\n}\n";
     std::fputs(j.str().c_str(), f.get());
     f.close();
+  }
+
+  if (scorer) {
+    const evaluation::CornerMetrics m = scorer->finish();
+    const evaluation::CornerScoringOptions so;
+    auto num9 = [](double v) { return json_number(v, 9); };
+    TextOut f((fs::path(args.out) / "eval.json").string());
+    std::ostringstream j;
+    j << "{\n  \"scene\": \"" << json_escape(gt_scene) << "\",\n  \"true_corners\": " << true_corners.size()
+      << ",\n  \"protocol\": \"a corner event is right when a true corner (checkerboard grid node projected through the "
+         "true pose) lies within match_radius_px of its pixel at its time; pair recall over (corner, bin) pairs with the "
+         "corner visible >= border_px inside the image and moving >= min_speed_pxps\""
+      << ",\n  \"match_radius_px\": " << num9(so.match_radius_px) << ",\n  \"bin_s\": " << num9(so.bin_ns * 1e-9)
+      << ",\n  \"min_speed_pxps\": " << num9(so.min_speed_pxps) << ",\n  \"border_px\": " << num9(so.border_px)
+      << ",\n  \"events\": " << m.events << ",\n  \"corner_events\": " << m.corner_events
+      << ",\n  \"true_positives\": " << m.true_positives << ",\n  \"precision\": " << num9(m.precision())
+      << ",\n  \"chance\": " << num9(m.chance()) << ",\n  \"event_recall\": " << num9(m.event_recall())
+      << ",\n  \"pair_recall\": " << num9(m.pair_recall()) << ",\n  \"pairs\": " << m.pairs
+      << ",\n  \"inner_pair_recall\": " << num9(m.inner_pair_recall()) << ",\n  \"inner_pairs\": " << m.inner_pairs
+      << ",\n  \"f_score\": " << num9(m.f_score()) << ",\n  \"f_error\": " << num9(1.0 - m.f_score())
+      << ",\n  \"scoring_time_s\": " << num9(scoring_s) << "\n}\n";
+    std::fputs(j.str().c_str(), f.get());
+    f.close();
+    char b[320];
+    std::snprintf(b, sizeof(b),
+                  "ground truth  precision %.3f (chance %.3f), (corner, %.0f ms bin) recall %.3f, F %.3f against %zu true "
+                  "corners; wrote eval.json\n",
+                  m.precision(), m.chance(), so.bin_ns * 1e-6, m.pair_recall(), m.f_score(), true_corners.size());
+    out << b;
   }
 
   char buf[512];

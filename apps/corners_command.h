@@ -2,6 +2,9 @@
 // recording: undistortion lookup, optional refractory and background-activity filters, eFAST
 // corner events (optionally on the filtered SAE), corner tracks; writes corners.txt, tracks.txt, stats.json, optional PNG
 // overlays, and prints a summary (reduction rate, corners per second, tracks and their lengths).
+// On a simulated dataset whose scene has checkerboard planes (--gt SCENE.yaml, or
+// DATASET/scene_resolved.yaml), also eval.json: corner events against the true corners
+// (evaluation/corner_evaluation.h: precision, chance, event and (corner, bin) recall, F).
 #pragma once
 
 #include <iosfwd>
@@ -39,6 +42,8 @@ struct CornersArgs {
   std::string out;            // output folder (created)
   bool filter_sae = false;    // --filter-sae
   int64_t frames_every_ns = -1;  // --frames-every-ms (>= 0 overrides the config)
+  std::string gt;             // --gt SCENE.yaml (empty: DATASET/scene_resolved.yaml when present)
+  bool no_gt = false;         // --no-gt
   bool progress = true;
 };
 

@@ -13,7 +13,8 @@ int main(int argc, char** argv) try {
       "images/frame_NNNNNNNN.png (8-bit, 1st..99th percentile of the log intensity) and .tiff (float32 log intensity)\n"
       "at each requested time, listed in images.txt (`t[s] path`, as in the Event Camera Dataset, so the folder opens\n"
       "as a dataset); stats.json (events, frames fused, images, ns per event and events/s of the filter);\n"
-      "reconstruct_config.yaml; video.mp4 with --video when OpenCV has an MP4 encoder; corners.txt with --corners.");
+      "reconstruct_config.yaml; video.mp4 with --video when OpenCV has an MP4 encoder; corners.txt with --corners;\n"
+      "eval.json for a simulated dataset (--gt): psnr_db, ssim (means over the images), ssim_error, minima, per image.");
   CLI::Option* dataset_opt = cli->add_option("DATASET", rec.dataset, "Dataset (any format evio reads)");
   CLI::Option* out_opt = cli->add_option("-o,--out", rec.out, "Output folder (created)");
   cli->add_option("--method", rec.method,
@@ -56,6 +57,12 @@ int main(int argc, char** argv) try {
   cli->add_flag("--corners", rec.corners,
                 "Also write corners.txt: event Harris corner events (RAL 2019; config section harris), `t[s] x y p` as "
                 "`evio corners` writes them");
+  CLI::Option* gt_opt = cli->add_option(
+      "--gt", rec.gt,
+      "Scene YAML the dataset was simulated from (evio simulate's scene_resolved.yaml; default: DATASET/"
+      "scene_resolved.yaml when it exists): eval.json scores every image against the clean view rendered at its time "
+      "(log(I + log_eps), PSNR in dB and SSIM after a global affine fit; ssim_error = 1 - mean SSIM)");
+  cli->add_flag("--no-gt", rec.no_gt, "Do not score against DATASET/scene_resolved.yaml")->excludes(gt_opt);
   cli->add_flag("--video", rec.video, "Also write video.mp4 (OpenCV VideoWriter, mp4v; reported when unavailable)");
   cli->add_option("--config", rec.config, "Reconstruct config YAML: method, cf, akf, frames, display (--print-config lists every key)");
   cli->add_option("--calib", rec.calib, "Calibration (Kalibr camchain .yaml or ECD calib.txt) for the sensor size; default: the dataset's");

@@ -11,6 +11,9 @@
 //   reconstruct_config.yaml     the resolved config
 //   corners.txt                 with --corners: event Harris corner events (mapping/event_harris.h),
 //                               `t[s] x y p` as `evio corners` writes them
+//   eval.json                   for a simulated dataset (--gt SCENE.yaml, or DATASET/scene_resolved.yaml):
+//                               PSNR and SSIM of every image against the clean view rendered at its time
+//                               (Simulator::true_log_view, mapping::compare_images), their means and minima
 #pragma once
 
 #include <cstdint>
@@ -61,6 +64,8 @@ struct ReconstructArgs {
   std::optional<double> contrast_off; // --contrast-off
   bool video = false;                 // --video
   bool corners = false;               // --corners
+  std::string gt;                     // --gt SCENE.yaml (empty: DATASET/scene_resolved.yaml when present)
+  bool no_gt = false;                 // --no-gt
   bool progress = true;
 };
 

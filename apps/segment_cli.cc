@@ -13,7 +13,8 @@ int main(int argc, char** argv) try {
       "labels.txt: `t x y p label`, one line per input event in input order (t in s, p 1 = ON / 0 = OFF, label the\n"
       "cluster id or -1: noise, or an event in no segmented window). segments.json: per window the clusters (id,\n"
       "model, parameters with units, events, objective, gain over the best other motion, models tried) and the\n"
-      "cluster-count decisions. images/: per window the clusters' IWEs in their colours, and each cluster's IWE.");
+      "cluster-count decisions. images/: per window the clusters' IWEs in their colours, and each cluster's IWE.\n"
+      "eval.json (with true labels): events_scored, accuracy, label_error = 1 - accuracy, accuracy_in_windows, per_label.");
   CLI::Option* dataset_opt = cli->add_option("DATASET", seg.dataset, "Dataset (any format evio reads; sub-pixel ECD text too)");
   CLI::Option* out_opt = cli->add_option("-o,--out", seg.out, "Output folder (created)");
   cli->add_option_function<std::string>(
@@ -39,6 +40,12 @@ int main(int argc, char** argv) try {
   cli->add_option("--calib", seg.calib,
                   "Calibration: Kalibr camchain .yaml or ECD calib.txt; default: the dataset's (the IWE size, the pinhole, "
                   "the undistortion)");
+  CLI::Option* gt_opt = cli->add_option(
+      "--gt", seg.gt,
+      "True per-event labels, one integer per line in the dataset's event order (0 background, 1..N objects, 65535 "
+      "noise), e.g. event_labels.txt of `evio simulate`; default: DATASET/event_labels.txt when it exists. Writes "
+      "eval.json: accuracy (share of true-labelled events whose cluster maps, per window by majority, to their label)");
+  cli->add_flag("--no-gt", seg.no_gt, "Do not score against DATASET/event_labels.txt")->excludes(gt_opt);
   cli->add_flag("--png,!--no-png", seg.png, "Coloured IWE PNGs per window to DIR/images/ (default on)");
   cli->add_option("--png-every", seg.png_every, "PNGs of every this many windows")->check(CLI::PositiveNumber);
   cli->add_option("--set", seg.set,

@@ -5,7 +5,9 @@
 #include <cstdio>
 #include <deque>
 #include <filesystem>
+#include <fstream>
 #include <map>
+#include <memory>
 #include <ostream>
 #include <set>
 #include <sstream>
@@ -13,6 +15,7 @@
 #include <opencv2/core.hpp>
 
 #include "evio/calib/error.h"
+#include "evio/evaluation/label_evaluation.h"
 #include "evio/sensors/config_table.h"
 #include "evio/sensors/image_io.h"
 #include "evio/sensors/time.h"
@@ -78,6 +81,38 @@ const Table<C>& segment_config_table() {
 
 std::string num(double v) { return json_number(v, 9); }
 std::string str(const std::string& s) { return "\"" + json_escape(s) + "\""; }
+
+// The true per-event labels (the simulator's event_labels.txt: one integer per line, in the
+// order of the dataset's events), read in step with the events.
+class TrueLabels {
+ public:
+  explicit TrueLabels(const std::string& path) : path_(path), f_(path) {
+    if (!f_) throw InputError(path, 0, "cannot open the true labels", kExpected);
+  }
+  uint16_t next() {
+    std::string l;
+    if (!std::getline(f_, l)) throw InputError(path_, line_, "fewer labels than events", kExpected);
+    ++line_;
+    char* end = nullptr;
+    const unsigned long v = std::strtoul(l.c_str(), &end, 10);
+    if (end == l.c_str() || v > 65535) throw InputError(path_, line_, "'" + l + "' is not a label", kExpected);
+    return static_cast<uint16_t>(v);
+  }
+  bool more() {
+    std::string l;
+    while (std::getline(f_, l))
+      if (l.find_first_not_of(" \t\r") != std::string::npos) return true;
+    return false;
+  }
+  const std::string& path() const { return path_; }
+
+ private:
+  static constexpr const char* kExpected =
+      "one label per event of the dataset, in event order (0 background, 1..N objects, 65535 noise)";
+  std::string path_;
+  std::ifstream f_;
+  int64_t line_ = 0;
+};
 
 // A colour per label (BGR), well apart for the first few; -1 (noise) grey.
 cv::Vec3b label_colour(int id) {
@@ -183,6 +218,27 @@ int run_segment(const SegmentArgs& args, std::ostream& out) {
   const std::string img_dir = (fs::path(args.out) / "images").string();
   if (args.png) fs::create_directories(img_dir);
 
+  // --gt (or DATASET/event_labels.txt): the true labels, scored per window (label_evaluation.h).
+  std::string gt_path = args.gt;
+  std::string gt_note;
+  if (gt_path.empty() && !args.no_gt) {
+    std::error_code ec;
+    const fs::path auto_path = fs::path(args.dataset) / "event_labels.txt";
+    if (fs::is_directory(args.dataset, ec) && fs::is_regular_file(auto_path, ec)) {
+      if (args.t_start_ns) gt_note = "not scored: --t-start skips events, so the labels cannot be matched";
+      else gt_path = auto_path.string();
+    }
+  }
+  if (!gt_path.empty() && args.t_start_ns)
+    throw InputError("--gt", 0, "cannot be combined with --t-start (labels are matched by event order)",
+                     "--gt without --t-start");
+  std::unique_ptr<TrueLabels> truth;
+  if (!gt_path.empty()) truth = std::make_unique<TrueLabels>(gt_path);
+  evaluation::LabelAgreement in_windows;
+  int64_t unsegmented_scored = 0;  // true-labelled events in no segmented window (wrong)
+  std::vector<int> group_pred;
+  std::vector<uint16_t> group_truth;
+
   // labels.txt in input order: the events wait in `pending` until their window is segmented.
   TextOut labels_file((fs::path(args.out) / "labels.txt").string());
   std::deque<SubpixelEvent> pending;
@@ -210,10 +266,25 @@ int run_segment(const SegmentArgs& args, std::ostream& out) {
         while (wi < w->input_index.size() && w->input_index[wi] < pending_first) ++wi;
         if (wi < w->input_index.size() && w->input_index[wi] == pending_first) label = w->labels[wi];
       }
-      if (!w || pending_first < w->input_begin) ++unsegmented;
+      const bool outside = !w || pending_first < w->input_begin;
+      if (outside) ++unsegmented;
+      if (truth) {
+        const uint16_t t = truth->next();
+        if (outside) {
+          unsegmented_scored += t != evaluation::kNoiseLabel;
+        } else {
+          group_pred.push_back(label);
+          group_truth.push_back(t);
+        }
+      }
       write_line(pending.front(), label);
       pending.pop_front();
       ++pending_first;
+    }
+    if (!group_pred.empty()) {  // one window: one majority mapping of its clusters
+      in_windows.add(evaluation::score_labels(group_pred, group_truth));
+      group_pred.clear();
+      group_truth.clear();
     }
   };
 
@@ -292,6 +363,39 @@ int run_segment(const SegmentArgs& args, std::ostream& out) {
   labels_file.close();
   std::fputs("\n  ]\n}\n", seg_json.get());
   seg_json.close();
+
+  if (truth) {
+    if (!args.t_end_ns && truth->more())
+      throw InputError(truth->path(), 0, "more labels than the " + std::to_string(events) + " events",
+                       "one label per event of the dataset, in event order");
+    const int64_t scored = in_windows.scored + unsegmented_scored;
+    const double accuracy = scored > 0 ? static_cast<double>(in_windows.correct) / static_cast<double>(scored) : NAN;
+    TextOut f((fs::path(args.out) / "eval.json").string());
+    std::ostringstream j;
+    j << "{\n  \"labels\": " << str(truth->path())
+      << ",\n  \"protocol\": \"per window, each cluster mapped to the true label most of its events carry; accuracy over "
+         "events with a true object label (not noise); events labelled -1 or in no segmented window count as wrong\""
+      << ",\n  \"events_scored\": " << scored << ",\n  \"events_correct\": " << in_windows.correct
+      << ",\n  \"accuracy\": " << num(accuracy) << ",\n  \"label_error\": " << num(1.0 - accuracy)
+      << ",\n  \"events_in_windows_scored\": " << in_windows.scored
+      << ",\n  \"accuracy_in_windows\": " << num(in_windows.scored ? in_windows.accuracy() : NAN)
+      << ",\n  \"per_label\": {";
+    bool first = true;
+    for (const auto& [l, c] : in_windows.scored_per_label) {
+      const auto it = in_windows.correct_per_label.find(l);
+      const int64_t ok = it == in_windows.correct_per_label.end() ? 0 : it->second;
+      j << (first ? "" : ", ") << "\"" << l << "\": {\"events_in_windows\": " << c
+        << ", \"accuracy_in_windows\": " << num(static_cast<double>(ok) / static_cast<double>(c)) << "}";
+      first = false;
+    }
+    j << "}\n}\n";
+    std::fputs(j.str().c_str(), f.get());
+    f.close();
+    out << "evio segment: labels against " << truth->path() << ": accuracy " << num(accuracy) << " over " << scored
+        << " events (" << num(in_windows.scored ? in_windows.accuracy() : NAN) << " inside segmented windows); wrote eval.json\n";
+  } else if (!gt_note.empty()) {
+    out << "evio segment: event_labels.txt " << gt_note << "\n";
+  }
 
   const pipeline::SegmentationStats& st = pipe.stats();
   const pipeline::CmaxWindowStats& ws = pipe.windows().stats();

@@ -13,6 +13,8 @@
 //   stats.json     events, windows, time per window and per event, alternations, evaluations,
 //                  labels used, the undistortion choice
 //   segment_config.yaml  the resolved config
+//   eval.json      with true labels (--gt FILE, or DATASET/event_labels.txt of `evio simulate`):
+//                  per-event label accuracy (evaluation/label_evaluation.h), per window
 #pragma once
 
 #include <cstdint>
@@ -45,6 +47,8 @@ struct SegmentArgs {
   std::string clusters;          // --clusters auto|N (empty: the config's)
   std::string models;            // --models flow,similarity,... (empty: the config's)
   std::optional<int64_t> t_start_ns, t_end_ns;
+  std::string gt;                // --gt FILE: true per-event labels (empty: DATASET/event_labels.txt when present)
+  bool no_gt = false;            // --no-gt: no scoring even when DATASET/event_labels.txt exists
   bool png = true;               // --png / --no-png
   int png_every = 1;             // PNGs of every this many windows
   bool progress = true;

@@ -339,6 +339,7 @@ class ConfigBuilder {
     const std::string expected =
         "texture: {procedural: checkerboard | shapes | noise | constant, size: [w, h], seed, ...} or {file: path}";
     Section s = parent.child(key, true, expected);
+    last_procedural_.reset();
     const bool is_file = s.has("file");
     if (is_file == s.has("procedural")) s.fail("give exactly one of 'procedural' and 'file'", expected);
     TextureWrap wu = default_wrap_u, wv = TextureWrap::kClamp;
@@ -398,6 +399,7 @@ class ConfigBuilder {
     o.seed = seed_for(s);
     std::string why;
     if (!o.Validate(&why)) s.fail("invalid procedural texture: " + why, expected);
+    last_procedural_ = o;
     try {
       return std::make_shared<Texture>(make_procedural_texture(o, wu, wv));
     } catch (const std::invalid_argument& e) {
@@ -446,6 +448,7 @@ class ConfigBuilder {
       pl.height_m = size.y();
       pl.texture = read_texture(ps, "texture", TextureWrap::kClamp);
       pl.gain = ps.number("gain", 1.0, Range::kPositive, "intensity factor");
+      if (last_procedural_ && last_procedural_->kind == ProceduralKind::kCheckerboard) add_board_corners(pl, *last_procedural_);
       planes.push_back(pl);
     }
     const std::string box_expected = "boxes: a list of {center_m, size_m: [sx, sy, sz], yaw_deg, texture, gain}";
@@ -655,9 +658,30 @@ class ConfigBuilder {
     if (g.depth || g.flow || g.intensity || g.labels) c_->simulator.ground_truth_times_ns = times;
   }
 
+  // The grid nodes of a checkerboard texture on a plane (SimulationConfig::corners): texel
+  // coordinates u = i cell_px (and the texture's edge) map to a = u / W width_m - width_m / 2 along
+  // axis_u, b = height_m / 2 - v / H height_m along axis_v (scene.h).
+  void add_board_corners(const TexturedPlane& pl, const ProceduralTextureOptions& o) {
+    auto nodes = [&o](int size) {
+      std::vector<double> n;
+      for (int k = 0; k * o.cell_px < size; ++k) n.push_back(k * o.cell_px);
+      n.push_back(size);
+      return n;
+    };
+    for (double v : nodes(o.height))
+      for (double u : nodes(o.width)) {
+        SceneCorner c;
+        const double a = u / o.width * pl.width_m - 0.5 * pl.width_m, b = 0.5 * pl.height_m - v / o.height * pl.height_m;
+        c.p_w = pl.center_w + a * pl.axis_u_w + b * pl.axis_v_w;
+        c.inner = u > 0 && u < o.width && v > 0 && v < o.height;
+        c_->corners.push_back(c);
+      }
+  }
+
   const Parser* p_;
   Section root_;
   SimulationConfig* c_;
+  std::optional<ProceduralTextureOptions> last_procedural_;  // of the last texture read_texture read
 };
 
 }  // namespace

@@ -124,6 +124,21 @@ double Simulator::illumination_gain(int64_t t_ns) const {
   return std::exp((1.0 - a) * std::log(k[i - 1].second) + a * std::log(k[i].second));
 }
 
+Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> log_intensity_view(const cv::Mat& intensity,
+                                                                                         double log_eps) {
+  if (intensity.type() != CV_32FC1) throw std::invalid_argument("log_intensity_view: expects a CV_32F image");
+  Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> l(intensity.rows, intensity.cols);
+  for (int y = 0; y < intensity.rows; ++y) {
+    const float* in = intensity.ptr<float>(y);
+    for (int x = 0; x < intensity.cols; ++x) l(y, x) = static_cast<float>(std::log(std::max(0.0f, in[x]) + log_eps));
+  }
+  return l;
+}
+
+Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> Simulator::true_log_view(int64_t t_cam_ns) const {
+  return log_intensity_view(render(t_cam_ns + o_.time_shift_ns, false).intensity, o_.events.log_eps);
+}
+
 RenderedView Simulator::render(int64_t t_ns, bool with_flow) const {
   RenderedView view;
   RenderRequest request;

@@ -193,64 +193,34 @@ CornerScorer::CornerScorer(const CornerGroundTruthSequence& seq) : seq_(seq), ne
 
 CornerMetrics CornerScorer::evaluate(const std::function<bool(const Event&)>& is_corner) const {
   const CornerGroundTruthSequence& seq = seq_;
-  const std::vector<uint8_t>& near = near_;
   const CornerSceneOptions& so = seq.options();
   const int num_corners = static_cast<int>(seq.corners_w().size());
-  const int64_t t0 = seq.t_begin_ns();
-  const int num_bins = static_cast<int>((seq.t_end_ns() - t0) / kCornerBinNs);  // whole bins only
-  std::vector<uint8_t> hit(static_cast<size_t>(num_bins) * num_corners, 0);
-
-  CornerMetrics m;
-  std::vector<Eigen::Vector2d> px;
-  std::vector<int> ids;
+  std::vector<bool> inner(num_corners);
+  for (int c = 0; c < num_corners; ++c) {
+    const int gi = c % (so.squares_x + 1), gj = c / (so.squares_x + 1);
+    inner[c] = gi > 0 && gi < so.squares_x && gj > 0 && gj < so.squares_y;
+  }
+  evaluation::CornerScoringOptions o;
+  o.match_radius_px = kCornerMatchRadiusPx;
+  o.bin_ns = kCornerBinNs;
+  o.min_speed_pxps = kMinCornerSpeedPxps;
+  o.border_px = kCornerDetectorBorderPx;
+  evaluation::CornerEventScorer scorer(
+      seq.width(), seq.height(), num_corners, inner,
+      [&seq, num_corners](int64_t t_ns, std::vector<Eigen::Vector2d>* px) {
+        px->assign(num_corners, Eigen::Vector2d::Constant(NAN));
+        const calib::SE3 T_c_w = seq.T_w_c(t_ns).inverse();
+        for (int c = 0; c < num_corners; ++c) {
+          Eigen::Vector2d p;
+          if (seq.camera().project(T_c_w * seq.corners_w()[c], &p)) (*px)[c] = p;
+        }
+      },
+      seq.t_begin_ns(), seq.t_end_ns(), o);
   for (size_t i = 0; i < seq.events().size(); ++i) {
     const Event& e = seq.events()[i];
-    const bool corner = is_corner(e);
-    ++m.events;
-    if (near[i]) {
-      ++m.near_events;
-      if (corner) ++m.near_events_flagged;
-    }
-    if (!corner) continue;
-    ++m.corner_events;
-    seq.true_corners_at(e.t_ns, kCornerMatchRadiusPx, &px, &ids);
-    const Eigen::Vector2d p(e.x, e.y);
-    const int bin = static_cast<int>((e.t_ns - t0) / kCornerBinNs);
-    bool tp = false;
-    for (size_t k = 0; k < px.size(); ++k) {
-      if ((px[k] - p).squaredNorm() > kCornerMatchRadiusPx * kCornerMatchRadiusPx) continue;
-      tp = true;
-      if (bin < num_bins) hit[static_cast<size_t>(bin) * num_corners + ids[k]] = 1;
-    }
-    if (tp) ++m.true_positives;
+    scorer.add(e, is_corner(e), near_[i] != 0);
   }
-
-  // (corner, bin) pairs: the corner is inside the detectable area (>= 4 px from the border) at the
-  // bin's start, middle and end, and moves at >= 20 px/s on average over the bin.
-  const double lo = kCornerDetectorBorderPx, x_hi = seq.width() - 1 - kCornerDetectorBorderPx,
-               y_hi = seq.height() - 1 - kCornerDetectorBorderPx;
-  auto inside = [&](const Eigen::Vector2d& q) { return q.x() >= lo && q.y() >= lo && q.x() <= x_hi && q.y() <= y_hi; };
-  for (int b = 0; b < num_bins; ++b) {
-    const int64_t ta = t0 + b * kCornerBinNs, tb = ta + kCornerBinNs;
-    for (int c = 0; c < num_corners; ++c) {
-      Eigen::Vector2d pa, pm, pb;
-      if (!seq.project_corner(c, ta, &pa) || !seq.project_corner(c, ta + kCornerBinNs / 2, &pm) ||
-          !seq.project_corner(c, tb, &pb))
-        continue;
-      if (!inside(pa) || !inside(pm) || !inside(pb)) continue;
-      if ((pb - pa).norm() / (kCornerBinNs * 1e-9) < kMinCornerSpeedPxps) continue;
-      const int gi = c % (so.squares_x + 1), gj = c / (so.squares_x + 1);
-      const bool inner = gi > 0 && gi < so.squares_x && gj > 0 && gj < so.squares_y;
-      const bool h = hit[static_cast<size_t>(b) * num_corners + c] != 0;
-      ++m.pairs;
-      m.pairs_hit += h;
-      if (inner) {
-        ++m.inner_pairs;
-        m.inner_pairs_hit += h;
-      }
-    }
-  }
-  return m;
+  return scorer.finish();
 }
 
 CornerMetrics CornerScorer::evaluate_efast(const frontend::EfastOptions& options) const {

@@ -16,6 +16,7 @@
 
 #include "evio/calib/camera.h"
 #include "evio/calib/geometry.h"
+#include "evio/evaluation/corner_evaluation.h"
 #include "evio/frontend/efast.h"
 #include "evio/sensors/measurements.h"
 #include "evio/simulator/simulator.h"
@@ -115,21 +116,9 @@ constexpr int64_t kCornerBinNs = 50'000'000;       // recall bins, ns
 constexpr double kMinCornerSpeedPxps = 20;         // a corner "moves" in a bin at this mean image speed, px/s
 constexpr int kCornerDetectorBorderPx = 4;         // eFAST never fires within 4 px of the border
 
-struct CornerMetrics {
-  int64_t events = 0;
-  int64_t corner_events = 0;
-  int64_t true_positives = 0;
-  int64_t near_events = 0;          // events within the radius of a true corner
-  int64_t near_events_flagged = 0;  // of those, flagged as corners
-  int64_t pairs = 0, pairs_hit = 0;                  // (corner, bin) pairs: visible and moving; with a hit
-  int64_t inner_pairs = 0, inner_pairs_hit = 0;      // the same for inner (X-junction) corners only
-  double precision() const { return corner_events ? double(true_positives) / corner_events : 0.0; }
-  double chance() const { return events ? double(near_events) / events : 0.0; }
-  double event_recall() const { return near_events ? double(near_events_flagged) / near_events : 0.0; }
-  double pair_recall() const { return pairs ? double(pairs_hit) / pairs : 0.0; }
-  double inner_pair_recall() const { return inner_pairs ? double(inner_pairs_hit) / inner_pairs : 0.0; }
-  double reduction() const { return corner_events ? double(events) / corner_events : 0.0; }
-};
+// The scoring itself lives in the library (evaluation/corner_evaluation.h), with these constants
+// as its defaults.
+using CornerMetrics = evaluation::CornerMetrics;
 
 class CornerScorer {
  public:

@@ -20,6 +20,7 @@
 #include <gtest/gtest.h>
 
 #include "evio/calib/log.h"
+#include "evio/evaluation/label_evaluation.h"
 #include "evio/simulator/scene_config.h"
 #include "evio/simulator/simulator.h"
 #include "evio_test/moving_patches.h"
@@ -117,27 +118,17 @@ Synthetic two_objects(int n, uint64_t seed, int64_t t0 = 1'000'000'000, double s
   return s;
 }
 
-// Majority mapping cluster -> true label; accuracy over events with a true label (not noise).
-// per_object (optional): accuracy per true label.
+// Majority mapping cluster -> true label; accuracy over events with a true label (not noise)
+// (evaluation::score_labels). per_object (optional): accuracy per true label.
 double label_accuracy(const std::vector<int>& pred, const uint16_t* truth, size_t n,
                       std::map<int, double>* per_object = nullptr) {
-  std::map<int, std::map<int, int>> votes;
-  for (size_t k = 0; k < n; ++k)
-    if (truth[k] != 65535 && pred[k] >= 0) ++votes[pred[k]][truth[k]];
-  std::map<int, int> map;
-  for (const auto& [c, v] : votes)
-    map[c] = std::max_element(v.begin(), v.end(), [](auto& a, auto& b) { return a.second < b.second; })->first;
-  size_t good = 0, total = 0;
-  std::map<int, size_t> g, t;
-  for (size_t k = 0; k < n; ++k) {
-    if (truth[k] == 65535) continue;
-    ++total;
-    ++t[truth[k]];
-    if (pred[k] >= 0 && map[pred[k]] == truth[k]) ++good, ++g[truth[k]];
-  }
+  const evio::evaluation::LabelAgreement a = evio::evaluation::score_labels(pred.data(), truth, n);
   if (per_object)
-    for (const auto& [l, c] : t) (*per_object)[l] = static_cast<double>(g[l]) / static_cast<double>(c);
-  return total ? static_cast<double>(good) / static_cast<double>(total) : 0.0;
+    for (const auto& [l, c] : a.scored_per_label) {
+      const auto it = a.correct_per_label.find(l);
+      (*per_object)[l] = static_cast<double>(it == a.correct_per_label.end() ? 0 : it->second) / static_cast<double>(c);
+    }
+  return a.accuracy();
 }
 
 TEST(CmaxSegmentation, DynamicThreeObjects) {

@@ -258,6 +258,40 @@ trajectory: {type: sinusoid, rpy_deg: [-90, 0, -90], amplitude_m: [0, 0.1, 0], f
   expect_error(skew, {"scene.yaml:8:", "scene.planes.0", "orthogonal"});
 }
 
+TEST(SimulateConfig, CheckerboardPlanesGiveTheirGridNodesAsTrueCorners) {
+  // A 3 x 2 board of 64-texel cells on a 0.6 x 0.4 m plane (0.2 m squares) facing +x at x = 1:
+  // 4 x 3 grid nodes, the 2 inner ones X-junctions; the noise plane gives none.
+  const std::string text = R"(duration: 0.2
+scene:
+  type: planes
+  planes:
+  - center_m: [1, 0, 0]
+    axis_u: [0, -1, 0]
+    axis_v: [0, 0, 1]
+    size_m: [0.6, 0.4]
+    texture: {procedural: checkerboard, size: [192, 128], cell_px: 64}
+  - center_m: [3, 0, 0]
+    axis_u: [0, -1, 0]
+    axis_v: [0, 0, 1]
+    size_m: [4, 3]
+    texture: {procedural: noise, size: [64, 48], seed: 3}
+trajectory: {type: sinusoid, rpy_deg: [-90, 0, -90], amplitude_m: [0, 0.1, 0], frequency_hz: [0, 1, 0]}
+)";
+  const SimulationConfig c = parse(text);
+  ASSERT_EQ(c.corners.size(), 12u);
+  // Row by row from the texture's top-left (texel u along axis_u = -y, rows down along -z).
+  EXPECT_NEAR((c.corners[0].p_w - Eigen::Vector3d(1, 0.3, 0.2)).norm(), 0, 1e-12);
+  EXPECT_NEAR((c.corners[1].p_w - Eigen::Vector3d(1, 0.1, 0.2)).norm(), 0, 1e-12);
+  EXPECT_NEAR((c.corners[5].p_w - Eigen::Vector3d(1, 0.1, 0.0)).norm(), 0, 1e-12);
+  EXPECT_NEAR((c.corners[11].p_w - Eigen::Vector3d(1, -0.3, -0.2)).norm(), 0, 1e-12);
+  int inner = 0;
+  for (const simulator::SceneCorner& k : c.corners) inner += k.inner;
+  EXPECT_EQ(inner, 2);
+  EXPECT_TRUE(c.corners[5].inner);
+  EXPECT_TRUE(c.corners[6].inner);
+  EXPECT_TRUE(parse(sub(text, "procedural: checkerboard", "procedural: shapes")).corners.empty());
+}
+
 TEST(SimulateConfig, SpritesOverABackgroundWithLabels) {
   const std::string text = R"(duration: 0.2
 scene:

@@ -3,8 +3,10 @@
 // determinism and APS frames.
 #include "evio/simulator/simulator.h"
 
+#include <algorithm>
 #include <cmath>
 #include <memory>
+#include <stdexcept>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -202,6 +204,30 @@ TEST(Simulator, TimeShiftMovesEventAndFrameStampsOnly) {
   ASSERT_FALSE(a.frames.empty());
   EXPECT_EQ(a.frames[0].t_ns - 1'234'567, b.frames[0].t_ns);
   EXPECT_EQ(cv::norm(a.frames[0].image, b.frames[0].image, cv::NORM_INF), 0.0);
+}
+
+TEST(Simulator, TrueLogViewIsTheLogOfTheCleanRenderOnTheCameraClock) {
+  cv::Mat i(1, 3, CV_32F);
+  i.at<float>(0, 0) = 1.0f;
+  i.at<float>(0, 1) = 0.0f;
+  i.at<float>(0, 2) = -0.5f;  // clamped to 0
+  const auto l = log_intensity_view(i, 1e-3);
+  EXPECT_FLOAT_EQ(l(0, 0), static_cast<float>(std::log(1.001)));
+  EXPECT_FLOAT_EQ(l(0, 1), static_cast<float>(std::log(1e-3)));
+  EXPECT_FLOAT_EQ(l(0, 2), static_cast<float>(std::log(1e-3)));
+  SimulatorOptions o = base_options();
+  o.time_shift_ns = 3'000'000;
+  o.events.log_eps = 0.01;
+  const Simulator sim(boxes_scene(), wobble(2.0), o);
+  const int64_t t_cam = 150'000'000;  // inside the 0.3 s span
+  const cv::Mat view = sim.render(t_cam + o.time_shift_ns, false).intensity;
+  const auto truth = sim.true_log_view(t_cam);
+  ASSERT_EQ(truth.rows(), view.rows);
+  ASSERT_EQ(truth.cols(), view.cols);
+  for (int y = 0; y < view.rows; y += 17)
+    for (int x = 0; x < view.cols; x += 13)
+      EXPECT_FLOAT_EQ(truth(y, x), static_cast<float>(std::log(std::max(0.0f, view.at<float>(y, x)) + 0.01)));
+  EXPECT_THROW(log_intensity_view(cv::Mat(2, 2, CV_8U), 1e-3), std::invalid_argument);
 }
 
 TEST(Simulator, DeterministicForTheSameSeedAndLargeTimestamps) {

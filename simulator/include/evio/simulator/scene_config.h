@@ -39,6 +39,15 @@ struct GroundTruthConfig {
   bool event_labels = false;        // event_labels.txt (default: on for sprite scenes)
 };
 
+// A true corner of the scene: a grid node of a checkerboard texture on a plane (scene type
+// planes; boxes, sprites and image textures give none). Inner nodes are X-junctions; nodes on the
+// texture's outline are T- or L-junctions against whatever lies behind. Occlusion by other planes
+// is not modelled.
+struct SceneCorner {
+  Eigen::Vector3d p_w = Eigen::Vector3d::Zero();  // world frame, m
+  bool inner = false;
+};
+
 struct SimulationConfig {
   std::string path;        // the YAML file
   std::string base_dir;    // its folder (relative paths in the YAML are relative to it)
@@ -61,6 +70,8 @@ struct SimulationConfig {
 
   bool imu_enabled = true;
   ImuSimOptions imu;                         // imu.noise.update_rate_hz == imu.rate_hz
+
+  std::vector<SceneCorner> corners;  // true corners (checkerboard planes), row by row per plane
 
   GroundTruthConfig ground_truth;
   bool write_h5 = true;                           // events.h5

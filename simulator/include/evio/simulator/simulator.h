@@ -11,6 +11,9 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+
 #include "evio/calib/camera.h"
 #include "evio/calib/geometry.h"
 #include "evio/sensors/measurements.h"
@@ -101,6 +104,11 @@ struct SimulationStats {
   double max_flow_pxps = 0;      // largest image speed seen, px/s
 };
 
+// log(max(0, I) + log_eps) of a CV_32F linear intensity image (RenderedView::intensity), the log
+// scale of the event model (events.h): H x W, row-major (mapping::ImageF).
+Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> log_intensity_view(const cv::Mat& intensity,
+                                                                                         double log_eps);
+
 class Simulator {
  public:
   // Throws std::invalid_argument when options are invalid or the span lies outside the
@@ -114,6 +122,10 @@ class Simulator {
   double illumination_gain(int64_t t_ns) const;
   // Renders the clean view at body-clock time t_ns (intensity times the illumination gain).
   RenderedView render(int64_t t_ns, bool with_flow) const;
+  // The true log intensity of the clean view at camera-clock time t_cam_ns (rendered at
+  // t_cam + time_shift on the body clock): log_intensity_view of its intensity with the event
+  // model's log_eps, the reference image reconstructions are scored against.
+  Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> true_log_view(int64_t t_cam_ns) const;
   // Runs the whole span. `progress` (if set) is called now and then with the fraction done and
   // the events so far.
   SimulationStats run(SimulationSink* sink, const std::function<void(double, uint64_t)>& progress = {});

@@ -92,12 +92,8 @@ inline SimulatedRecording simulate_recording(const std::string& yaml, double dur
         r->true_frames.push_back(f);
       }
       if (!std::binary_search(views.begin(), views.end(), v.t_ns)) return;
-      evio::mapping::ImageF l(v.intensity.rows, v.intensity.cols);
-      for (int y = 0; y < v.intensity.rows; ++y)
-        for (int x = 0; x < v.intensity.cols; ++x)
-          l(y, x) = static_cast<float>(std::log(std::max(0.0f, v.intensity.at<float>(y, x)) + r->log_eps));
       r->gt_t_ns.push_back(v.t_ns - shift);
-      r->gt_log.push_back(std::move(l));
+      r->gt_log.push_back(evio::simulator::log_intensity_view(v.intensity, r->log_eps));
     }
   } sink;
   SimulatedRecording r;
