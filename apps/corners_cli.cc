@@ -14,7 +14,7 @@ int main(int argc, char** argv) try {
   cli->add_option("--config", corners.config,
                   "YAML with refractory, background_activity, efast, tracker and frames sections (README.md)");
   cli->add_option("--calib", corners.calib,
-                  "Calibration (Kalibr camchain .yaml or ECD calib.txt); default: the dataset's own. Gives the sensor "
+                  "Calibration (Kalibr camchain .yaml or ECD calib.txt); default: the dataset folder's calib.yaml, else the dataset's own. Gives the sensor "
                   "size and the undistortion of track positions");
   cli->add_flag("--filter-sae", corners.filter_sae,
                 "Filtered SAE: an event updates the SAE (and is tested) only when the pixel's latest event of its "

@@ -25,6 +25,7 @@
 #include "json_util.h"
 #include "progress.h"
 #include "evio/sensors/config_table.h"
+#include "evio/sensors/dataset_calibration.h"
 #include "option_tables.h"
 #include "output_files.h"
 
@@ -200,8 +201,8 @@ int run_corners(const CornersArgs& args, std::ostream& out) {
       const SensorSize s = reader->sensor_size();
       cal = calib::load_ecd_calib(args.calib, s.known() ? s.width : 240, s.known() ? s.height : 180);
     }
-  } else {
-    cal = reader->read_calibration();
+  } else {  // the folder's calib.yaml (`evio simulate` writes it: size of a scaled camera), else the dataset's
+    cal = find_dataset_calibration(args.dataset, "", *reader).camera;
   }
   SensorSize sensor = reader->sensor_size();
   if (cal) sensor = {cal->camera.width(), cal->camera.height()};
@@ -253,7 +254,8 @@ int run_corners(const CornersArgs& args, std::ostream& out) {
     } else {
       truth_sim = std::make_unique<simulator::Simulator>(sc.scene, sc.trajectory, sc.simulator);
       const simulator::Simulator* sim = truth_sim.get();
-      const int64_t shift = sc.simulator.time_shift_ns;
+      // Written stamp -> simulator time: minus the scene's output.clock_offset_ns, plus its time shift.
+      const int64_t shift = sc.simulator.time_shift_ns - sc.clock_offset_ns;
       std::vector<bool> inner;
       for (const simulator::SceneCorner& c : true_corners) inner.push_back(c.inner);
       scorer = std::make_unique<evaluation::CornerEventScorer>(

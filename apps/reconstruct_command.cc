@@ -227,6 +227,7 @@ int run_reconstruct(const ReconstructArgs& args, std::ostream& out) {
       gt_scene = auto_scene.string();
   }
   std::unique_ptr<simulator::Simulator> truth;
+  int64_t truth_clock_offset_ns = 0;  // output.clock_offset_ns of the scene: written stamp - simulator time
   if (!gt_scene.empty()) {
     const simulator::SimulationConfig sc = simulator::load_simulation_config(gt_scene);
     if (sc.simulator.camera.width() != width || sc.simulator.camera.height() != height)
@@ -236,6 +237,7 @@ int run_reconstruct(const ReconstructArgs& args, std::ostream& out) {
                        "the scene the dataset was simulated from (" + std::to_string(width) + " x " +
                            std::to_string(height) + " px)");
     truth = std::make_unique<simulator::Simulator>(sc.scene, sc.trajectory, sc.simulator);
+    truth_clock_offset_ns = sc.clock_offset_ns;
   }
   struct ScoredImage {
     double t_s, psnr_db, ssim;
@@ -263,7 +265,7 @@ int run_reconstruct(const ReconstructArgs& args, std::ostream& out) {
     if (truth) {
       const auto g0 = clock::now();
       if (img.size() > 0 && img.minCoeff() < img.maxCoeff()) {
-        const mapping::ImageQuality q = mapping::compare_images(img, truth->true_log_view(t), nullptr);
+        const mapping::ImageQuality q = mapping::compare_images(img, truth->true_log_view(t - truth_clock_offset_ns), nullptr);
         scored.push_back({t * 1e-9, q.psnr_db, q.ssim});
       } else {
         ++unscored;

@@ -272,7 +272,11 @@ void read_cell_metrics(const std::string& algorithm, const std::string& out_dir,
     if (a.duration_start_path) r->duration_s -= number_at(file("stats.json"), a.duration_start_path);
   }
   const YAML::Node& stats = file("stats.json");
-  r->model_json = stats.IsMap() && stats["model"].IsMap() ? to_json(stats["model"]) : std::string();
+  r->model_json.clear();
+  if (stats.IsMap()) {
+    const YAML::Node model = stats["model"];  // invalid (false) when absent: IsMap() on it would throw
+    if (model && model.IsMap()) r->model_json = to_json(model);
+  }
 }
 
 namespace {
@@ -476,7 +480,7 @@ std::vector<SweepRecord> read_sweep_records(const std::string& results_path) {
     r.engine = text(n, "engine");
     r.host = text(n, "host");
     r.started_utc = text(n, "started_utc");
-    if (n["model"].IsMap()) r.model_json = to_json(n["model"]);
+    if (const YAML::Node model = n["model"]; model && model.IsMap()) r.model_json = to_json(model);
     out.push_back(std::move(r));
   }
   return out;
