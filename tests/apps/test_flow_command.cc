@@ -21,7 +21,7 @@
 #include "evio_test/real_data.h"
 #include "evio_test/temp_dir.h"
 #include "evio_test/text_file.h"
-#include "simulate_command.h"
+#include "simulated_scene.h"
 
 namespace evio::apps {
 namespace {
@@ -357,15 +357,8 @@ TEST(FlowCommandReal, EcdWindowRotationReachesTheGridOptimum) { real_window_reac
 // must agree with stats.json's model block.
 std::map<std::string, int> auto_model_wins(const std::string& scene, double duration_s, std::string* stats) {
   evio_test::TempDir dir;
-  SimulateArgs sa;
-  sa.scene = std::string(EVIO_SOURCE_DIR) + "/datasets/" + scene;
-  sa.out = dir.file("seq");
-  sa.overrides.duration_s = duration_s;
-  sa.progress = false;
-  std::ostringstream so;
-  EXPECT_EQ(run_simulate(sa, so), 0);
   FlowArgs a;
-  a.dataset = sa.out;
+  a.dataset = simulate_scene(dir, scene, duration_s);
   a.out = dir.file("out");
   a.model = "auto";
   a.progress = false;

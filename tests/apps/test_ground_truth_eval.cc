@@ -18,7 +18,7 @@
 #include "evio_test/text_file.h"
 #include "reconstruct_command.h"
 #include "segment_command.h"
-#include "simulate_command.h"
+#include "simulated_scene.h"
 
 namespace evio::apps {
 namespace {
@@ -27,22 +27,9 @@ namespace fs = std::filesystem;
 using evio_test::json_number;
 using evio_test::read_text;
 
-std::string simulate(const evio_test::TempDir& dir, const std::string& scene, double duration_s,
-                     const std::vector<std::string>& sets = {}) {
-  SimulateArgs sa;
-  sa.scene = std::string(EVIO_SOURCE_DIR) + "/datasets/" + scene;
-  sa.out = dir.file(scene + "_seq");
-  sa.overrides.duration_s = duration_s;
-  sa.overrides.set = sets;
-  sa.progress = false;
-  std::ostringstream so;
-  EXPECT_EQ(run_simulate(sa, so), 0) << so.str();
-  return sa.out;
-}
-
 TEST(GroundTruthEval, CornersAndReconstructOnTheCheckerboard) {
   evio_test::TempDir dir;
-  const std::string seq = simulate(dir, "checkerboard_6dof.yaml", 1.0);
+  const std::string seq = simulate_scene(dir, "checkerboard_6dof.yaml", 1.0);
   {
     CornersArgs a;
     a.dataset = seq;
@@ -105,8 +92,8 @@ TEST(GroundTruthEval, CornersAndReconstructOnTheCheckerboard) {
 // stopped with "SplineTrajectory::evaluate: t_ns 1700000000000005748 outside [0, ...]").
 TEST(GroundTruthEval, ClockOffsetStampsScoreAsWithout) {
   evio_test::TempDir plain_dir, offset_dir;
-  const std::string plain = simulate(plain_dir, "checkerboard_6dof.yaml", 0.3);
-  const std::string offset = simulate(offset_dir, "checkerboard_6dof.yaml", 0.3, {"output.clock_offset_ns=1700000000000000000"});
+  const std::string plain = simulate_scene(plain_dir, "checkerboard_6dof.yaml", 0.3);
+  const std::string offset = simulate_scene(offset_dir, "checkerboard_6dof.yaml", 0.3, {"output.clock_offset_ns=1700000000000000000"});
   std::map<std::string, double> got[2];
   for (int k = 0; k < 2; ++k) {
     const std::string seq = k == 0 ? plain : offset;
@@ -156,7 +143,7 @@ std::vector<long> read_ints(const std::string& path, int column) {
 
 TEST(GroundTruthEval, SegmentOnThreeObjects) {
   evio_test::TempDir dir;
-  const std::string seq = simulate(dir, "dynamic_3objects.yaml", 0.5, {"ground_truth.period_s=0"});
+  const std::string seq = simulate_scene(dir, "dynamic_3objects.yaml", 0.5, {"ground_truth.period_s=0"});
   SegmentArgs a;
   a.dataset = seq;
   a.out = dir.file("segment");

@@ -16,7 +16,7 @@
 #include "evio_test/moving_patches.h"
 #include "evio_test/temp_dir.h"
 #include "evio_test/text_file.h"
-#include "simulate_command.h"
+#include "simulated_scene.h"
 
 namespace evio::apps {
 namespace {
@@ -141,15 +141,9 @@ TEST(SegmentCommand, FlagsAndErrors) {
 // block the windows per count; 3 clusters is the modal count.
 TEST(SegmentCommand, ThreeObjectsGiveThreeClustersInMostWindows) {
   evio_test::TempDir dir;
-  SimulateArgs sa;
-  sa.scene = std::string(EVIO_SOURCE_DIR) + "/datasets/dynamic_3objects.yaml";
-  sa.out = dir.file("seq");
-  sa.overrides.duration_s = 1.6;
-  sa.progress = false;
-  std::ostringstream so;
-  ASSERT_EQ(run_simulate(sa, so), 0);
   SegmentArgs a;
-  a.dataset = sa.out;
+  a.dataset = simulate_scene(dir, "dynamic_3objects.yaml", 1.6);
+  ASSERT_FALSE(::testing::Test::HasFailure());
   a.out = dir.file("out");
   a.png = false;
   a.progress = false;

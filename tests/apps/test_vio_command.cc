@@ -18,7 +18,7 @@
 #include "evio_test/real_data.h"
 #include "evio_test/temp_dir.h"
 #include "evio_test/text_file.h"
-#include "simulate_command.h"
+#include "simulated_scene.h"
 
 namespace evio::apps {
 namespace {
@@ -26,18 +26,6 @@ namespace {
 std::string read(const std::string& p) { return evio_test::read_text(p); }
 
 double json_value(const std::string& j, const std::string& key) { return evio_test::json_number(j, key); }
-
-// Simulates `duration_s` of a datasets/ scene into dir/seq; returns the folder.
-std::string simulate(const evio_test::TempDir& dir, const std::string& scene, double duration_s) {
-  SimulateArgs sa;
-  sa.scene = std::string(EVIO_SOURCE_DIR) + "/datasets/" + scene;
-  sa.out = dir.file("seq");
-  sa.overrides.duration_s = duration_s;
-  sa.progress = false;
-  std::ostringstream so;
-  EXPECT_EQ(run_simulate(sa, so), 0);
-  return sa.out;
-}
 
 // Runs `evio vio DATASET --out OUT --gt DATASET/groundtruth.txt` (prints its summary); returns the args.
 // `evio vio DATASET --out OUT --gt DATASET/groundtruth.txt`, with the simulated sensor's config
@@ -186,7 +174,7 @@ TEST(VioCommand, OracleTracksNeedGroundTruthAndAPlanesScene) {
 
 TEST(VioCommand, ShortSimulatedSequenceEndToEnd) {
   evio_test::TempDir dir;
-  const VioArgs va = vio_on(simulate(dir, "poster_6dof.yaml", 6.0), dir.file("vio"));
+  const VioArgs va = vio_on(simulate_scene(dir, "poster_6dof.yaml", 6.0), dir.file("vio"));
   for (const char* f : {"trajectory.tum", "trajectory_causal.tum", "keyframes.txt", "map.ply", "observations.txt", "stats.json",
                         "vio_config.yaml", "eval.json"}) {
     EXPECT_TRUE(std::filesystem::exists(va.out + "/" + f)) << f;
@@ -288,15 +276,8 @@ TEST(VioCommand, MocapReplayKeepsSlowTranslationSixDof) {
   const auto real = evio_test::real_data_dir("trajectories");
   if (!real) GTEST_SKIP() << "real motion-capture trajectory not found";
   evio_test::TempDir dir;
-  SimulateArgs sa;
-  sa.scene = std::string(EVIO_SOURCE_DIR) + "/datasets/poster_6dof_mocap.yaml";
-  sa.out = dir.file("seq");
-  sa.overrides.duration_s = 12.0;
-  sa.overrides.set = {"trajectory.path=" + *real + "/poster_6dof_mocap.csv"};
-  sa.progress = false;
-  std::ostringstream so;
-  ASSERT_EQ(run_simulate(sa, so), 0);
-  const VioArgs va = vio_on(sa.out, dir.file("vio"));
+  const VioArgs va = vio_on(simulate_scene(dir, "poster_6dof_mocap.yaml", 12.0, {"trajectory.path=" + *real + "/poster_6dof_mocap.csv"}),
+                            dir.file("vio"));
   const std::string ev = read(va.out + "/eval.json");
   const double mpe = json_value(ev, "mean_position_error_percent");
   const double yaw = json_value(ev, "final_yaw_error_deg");
@@ -321,7 +302,7 @@ TEST(VioCommand, MocapReplayKeepsSlowTranslationSixDof) {
 // 6-DoF: measured 0 rotation-only keyframes (29 before, 1.96% -> 1.64% over 10 s).
 TEST(VioCommand, BoxesSceneNeverRotationOnly) {
   evio_test::TempDir dir;
-  const VioArgs va = vio_on(simulate(dir, "boxes_6dof.yaml", 7.0), dir.file("vio"));
+  const VioArgs va = vio_on(simulate_scene(dir, "boxes_6dof.yaml", 7.0), dir.file("vio"));
   const std::string stats = read(va.out + "/stats.json");
   EXPECT_EQ(json_value(stats, "rotation_only_keyframes"), 0.0);
   EXPECT_EQ(json_value(stats, "rotation_only_share"), 0.0);  // the model block says 6-DoF throughout
@@ -334,7 +315,7 @@ TEST(VioCommand, BoxesSceneNeverRotationOnly) {
 // orientation tracked (se3 evaluation falls back to the first pose: positions do not move).
 TEST(VioCommand, PureRotationChoosesTheRotationOnlyModel) {
   evio_test::TempDir dir;
-  const VioArgs va = vio_on(simulate(dir, "poster_rotation.yaml", 3.0), dir.file("vio"));
+  const VioArgs va = vio_on(simulate_scene(dir, "poster_rotation.yaml", 3.0), dir.file("vio"));
   const std::string stats = read(va.out + "/stats.json");
   const double kf = json_value(stats, "keyframes"), rot = json_value(stats, "rotation_only_keyframes");
   // Measured 97 of 142 keyframes with template tracking: rotation-only from 0.27 s after the
@@ -366,7 +347,7 @@ TEST(VioCommand, PureRotationChoosesTheRotationOnlyModel) {
 // drop is flagged as a tracking-lost segment.
 TEST(VioCommand, EventDropBurstAndImuGap) {
   evio_test::TempDir dir;
-  const std::string seq = simulate(dir, "poster_6dof.yaml", 6.0);
+  const std::string seq = simulate_scene(dir, "poster_6dof.yaml", 6.0);
   const EventBuffer events = read_ecd_events(seq + "/events.txt");
   const std::vector<ImuSample> imu = read_ecd_imu(seq + "/imu.txt");
   const int64_t t0 = events.front().t_ns;
