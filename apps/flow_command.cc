@@ -285,9 +285,15 @@ int run_flow(const FlowArgs& args, std::ostream& out) {
         *format_seconds(r.t1, t1) = '\0';
         std::fprintf(f.get(), "%s,%s,%.9g,%.9g,%.9g", t0, t1, w.x(), w.y(), w.z());
         const double deg = 180.0 / M_PI;
-        if (gt) std::fprintf(f.get(), ",%.9g,%.9g,%.9g,%.6g", g.x(), g.y(), g.z(), (w - g).norm() * deg);
-        if (imu.size() >= 2) std::fprintf(f.get(), ",%.9g,%.9g,%.9g,%.6g", y.x(), y.y(), y.z(), (w - y).norm() * deg);
-        if (gt && imu.size() >= 2) std::fprintf(f.get(), ",%.6g", (y - g).norm() * deg);
+        // A reference that does not cover the window (the ground truth's or the gyro's ends) leaves
+        // its fields empty: every number written is finite.
+        const bool has_g = g.allFinite(), has_y = y.allFinite();
+        if (gt && has_g) std::fprintf(f.get(), ",%.9g,%.9g,%.9g,%.6g", g.x(), g.y(), g.z(), (w - g).norm() * deg);
+        if (gt && !has_g) std::fputs(",,,,", f.get());
+        if (imu.size() >= 2 && has_y) std::fprintf(f.get(), ",%.9g,%.9g,%.9g,%.6g", y.x(), y.y(), y.z(), (w - y).norm() * deg);
+        if (imu.size() >= 2 && !has_y) std::fputs(",,,,", f.get());
+        if (gt && imu.size() >= 2 && has_g && has_y) std::fprintf(f.get(), ",%.6g", (y - g).norm() * deg);
+        if (gt && imu.size() >= 2 && !(has_g && has_y)) std::fputc(',', f.get());
         std::fputc('\n', f.get());
       }
       f.close();
