@@ -91,22 +91,7 @@ mid=$(date +%s.%N)
 end=$(date +%s.%N)
 echo "local: $($python -c "print(round($mid - $start, 1))") s, slurm: $($python -c "print(round($end - $mid, 1))") s"
 
-$python - "$t/local" "$t/slurm" << 'EOF' || fail "the rows differ"
-import json, os, sys
-def rows(d):
-    return {r["cell"]: r for r in map(json.loads, open(os.path.join(d, "results.jsonl")))}
-local, slurm = rows(sys.argv[1]), rows(sys.argv[2])
-assert local.keys() == slurm.keys(), (sorted(local), sorted(slurm))
-for cell, r in sorted(local.items()):
-    s = slurm[cell]
-    for k in ("algorithm", "dataset", "params", "exit_code", "duration_s"):
-        assert r[k] == s[k], (cell, k, r[k], s[k])
-    untimed = lambda m: {k: v for k, v in m.items() if "per_event" not in k}  # ns_per_event, time_per_event_us: times
-    assert untimed(r["metrics"]) == untimed(s["metrics"]), (cell, r["metrics"], s["metrics"])
-    assert s["engine"] == "slurm" and s["peak_rss_mb"] > 0, (cell, s)
-    assert any(v is not None for v in s["metrics"].values()), (cell, s["metrics"])
-print(f"{len(local)} cells: same exit codes and metrics through sbatch --array")
-EOF
+$python "$here/../tests/apps/compare_sweep_rows.py" "$t/local" "$t/slurm" slurm || fail "the rows differ"
 grep -q '^#SBATCH --array=0-5%2$' "$t/slurm/slurm/run1.sh" || fail "unexpected array script: $(cat "$t/slurm/slurm/run1.sh")"
 
 # A task cancelled mid-run (scancel: its runner dies with it and leaves no outcome file) is recorded

@@ -10,6 +10,7 @@
 set -u
 evio=$1
 spec=$2
+here=$(cd "$(dirname "$0")" && pwd)
 python=${3:-/usr/bin/python3}
 sshd=/usr/sbin/sshd
 for need in parallel:parallel rsync:rsync ssh:openssh-client ssh-keygen:openssh-client; do
@@ -79,26 +80,7 @@ mid=$(date +%s.%N)
 end=$(date +%s.%N)
 echo "local: $($python -c "print(round($mid - $start, 1))") s, parallel over 2 ssh logins: $($python -c "print(round($end - $mid, 1))") s"
 
-$python - "$t/local" "$t/ssh" << 'EOF' || fail "the rows differ"
-import json, os, sys
-def rows(d):
-    return {r["cell"]: r for r in map(json.loads, open(os.path.join(d, "results.jsonl")))}
-local, ssh = rows(sys.argv[1]), rows(sys.argv[2])
-assert local.keys() == ssh.keys(), (sorted(local), sorted(ssh))
-hosts = set()
-for cell, r in sorted(local.items()):
-    s = ssh[cell]
-    for k in ("algorithm", "dataset", "params", "exit_code", "duration_s"):
-        assert r[k] == s[k], (cell, k, r[k], s[k])
-    untimed = lambda m: {k: v for k, v in m.items() if "per_event" not in k}  # ns_per_event, time_per_event_us: times
-    assert untimed(r["metrics"]) == untimed(s["metrics"]), (cell, r["metrics"], s["metrics"])
-    assert s["engine"] == "parallel" and s["host"] in ("evio-a", "evio-b"), (cell, s["engine"], s["host"])
-    assert s["peak_rss_mb"] > 0 and s["cpu_s"] >= 0, (cell, s)
-    assert any(v is not None for v in s["metrics"].values()), (cell, s["metrics"])
-    assert os.path.exists(os.path.join(sys.argv[2], "cells", cell, "out", "stats.json")), cell
-    hosts.add(s["host"])
-print(f"{len(local)} cells: same exit codes and metrics; ran on {sorted(hosts)}")
-EOF
+$python "$here/compare_sweep_rows.py" "$t/local" "$t/ssh" parallel --hosts evio-a,evio-b --returned || fail "the rows differ"
 ls "$t/ssh/parallel/bin" | grep -q '^evio-sweep$' || fail "the runner was not shipped"
 
 # A cell killed mid-run: a cell of a few seconds (reconstruct on 2 s of the poster wall) whose
