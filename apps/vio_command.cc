@@ -156,7 +156,9 @@ class StateFile {
                     p.y(), p.z(), q.x(), q.y(), q.z(), q.w());
     }
     f_ << line;
+    ++count_;
   }
+  size_t count() const { return count_; }
   void close() {
     f_.close();
     if (!f_) throw InputError(path_, 0, "write failed (disk full?)", "a writable output folder");
@@ -165,6 +167,7 @@ class StateFile {
   std::string path_;
   bool full_;
   std::ofstream f_;
+  size_t count_ = 0;
 };
 
 std::string init_description(pipeline::VioInitMethod m) {
@@ -334,15 +337,25 @@ int run_vio(const VioArgs& args, std::ostream& out) {
   const double duration_s =
       static_cast<double>(cfg.inputs == pipeline::VioInputs::kAps ? vs.t_last_aps_ns - vs.t_first_aps_ns
                                                                   : vs.t_last_event_ns - vs.t_first_event_ns) * 1e-9;
+  // No state came (not initialised, or no frame after the initialisation): no trajectory files.
+  const auto no_state = [&](const std::string& why, const std::string& expected) {
+    std::error_code ec;
+    for (const char* f : {"trajectory.tum", "trajectory_causal.tum", "keyframes.txt"}) fs::remove(fs::path(args.out) / f, ec);
+    throw InputError(args.dataset, 0, why, expected);
+  };
   if (!r.initialized) {
     log_debug("vio: " + r.init_failure);
-    std::error_code ec;  // no state came: no trajectory files
-    for (const char* f : {"trajectory.tum", "trajectory_causal.tum", "keyframes.txt"}) fs::remove(fs::path(args.out) / f, ec);
-    throw InputError(args.dataset, 0, "could not initialise: " + r.init_failure,
-                     "a recording that starts still or moves with enough features in the first seconds, with at least "
-                     "frames.min_events events per frame");
+    no_state("could not initialise: " + r.init_failure,
+             "a recording that starts still or moves with enough features in the first seconds, with at least "
+             "frames.min_events events per frame");
   }
   const std::string init_method = init_description(r.init_method);
+  if (trajectory_file.count() == 0) {
+    no_state("initialised at " + format_seconds(r.init_t_ns) + " s (" + init_method +
+                 ") but no frame after it had features to track: no state to write",
+             "a scene with texture the front-end can track (" + std::to_string(vs.frontend_frames) +
+                 " front-end frames were made; see frames.* and tracker.* in --print-config)");
+  }
 
   // Outputs.
   std::vector<mapping::MapPoint> pts;

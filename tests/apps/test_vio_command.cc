@@ -45,6 +45,30 @@ VioArgs vio_on(const std::string& dataset, const std::string& out, const std::st
   return va;
 }
 
+// A static camera seeing only shot noise (the extremes suite's noise_only): the static
+// initialisation succeeds at the end of the 1 s, and no frame after it has features. The command
+// says so in one error and leaves no empty trajectory files (before: exit 1 from the --gt
+// evaluation, "trajectory.tum: no poses in the file").
+TEST(VioCommand, InitialisedWithoutAnyTrackedFrameIsAClearError) {
+  evio_test::TempDir dir;
+  VioArgs va;
+  va.config = kSimulatorConfig;
+  va.dataset = simulate_scene(dir, "static_noise.yaml", 1.0, {"events.shot_noise_rate_hz=5"});
+  va.out = dir.file("vio");
+  va.gt = va.dataset + "/groundtruth.txt";
+  va.progress = false;
+  std::ostringstream o;
+  try {
+    run_vio(va, o);
+    ADD_FAILURE() << "no error: " << o.str();
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("(static) but no frame after it had features to track"), std::string::npos)
+        << e.what();
+  }
+  EXPECT_FALSE(std::filesystem::exists(va.out + "/trajectory.tum"));
+  EXPECT_FALSE(std::filesystem::exists(va.out + "/eval.json"));
+}
+
 TEST(VioConfig, ErrorsNameFileLineAndKey) {
   evio_test::TempDir dir;
   const auto expect_error = [&](const std::string& yaml, const std::string& what) {
