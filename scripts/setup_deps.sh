@@ -1,7 +1,10 @@
 #!/usr/bin/env bash
 # Installs the Debian 12 packages evio builds against. Idempotent: installs only what is
 # missing, runs `apt-get update` at most once, works as root or through sudo.
-#   scripts/setup_deps.sh            # build + test dependencies
+#   scripts/setup_deps.sh            # build dependencies (what demo.sh needs)
+#   scripts/setup_deps.sh --tests    # and what only the tests use: a headless browser, GNU parallel,
+#                                    # an sshd and a one-node Slurm (test.sh; they start no service
+#                                    # the tests do not start themselves, but Debian enables munge)
 #   scripts/setup_deps.sh PKG...     # these Debian packages instead (e.g. python3-skimage)
 #   EVIO_SKIP_DEPS=1 scripts/...     # callers (demo.sh, test.sh) skip this step entirely
 set -euo pipefail
@@ -13,11 +16,15 @@ packages=(
   liblz4-dev libzstd-dev libbz2-dev hdf5-filter-plugin-blosc-serial
   clang libclang-rt-14-dev
   python3-numpy python3-matplotlib
-  chromium
+)
+test_packages=(
+  chromium                                       # the sweep report in a browser: cli.*report_browser
   parallel rsync openssh-client openssh-server   # evio sweep --engine parallel [--hosts]: cli.sweep_parallel_ssh
   slurm-wlm munge                                # evio sweep --engine slurm: cli.sweep_slurm (scripts/test_slurm.sh)
 )
-if [ $# -gt 0 ]; then
+if [ "${1:-}" = --tests ]; then
+  packages+=("${test_packages[@]}")
+elif [ $# -gt 0 ]; then
   packages=("$@")
 fi
 
