@@ -27,7 +27,8 @@ int main(int argc, char** argv) try {
       "exit_code (negative: the signal), wall_s, cpu_s, peak_rss_mb, metrics, outcome: ok | error (exit 1, its stderr\n"
       "line in outcome_detail) | crash (a signal or another exit code) | hang (timeout) | nonfinite (NaN/Inf in an\n"
       "output)). DIR/report/: pareto.md, pareto.tex, cells.csv, per-group CSVs, plots/ and index.html (self-contained);\n"
-      "the outcome table (outcomes.csv) when a cell is not ok or the spec has `report: [extremes]`. Exit code 1 when a\n"
+      "the outcome table (outcomes.csv) when a cell is not ok or the spec has `report: [extremes]`; with the spec's\n"
+      "`mean_over: [KEY]` (repeats, e.g. tracker.seed) also the cells averaged over those keys (<group>__means.csv). Exit code 1 when a\n"
       "cell failed (outcome not ok; with the spec's `accept_errors: true` only crash, hang and nonfinite fail; recorded,\n"
       "--resume reruns it), 130 when interrupted (--resume runs the rest).");
   CLI::Option* spec_opt = cli->add_option("SPEC", sweep.spec, "Sweep spec YAML")->check(CLI::ExistingFile);

@@ -123,11 +123,12 @@ class StopOnSignals {
   struct sigaction old_int_ {}, old_term_ {};
 };
 
-int write_report(const SweepArgs& args, const std::string& title, bool extremes, std::ostream& out) {
+int write_report(const SweepArgs& args, const SweepReportSettings& settings, std::ostream& out) {
   SweepReportOptions ro;
   ro.dir = args.out;
-  ro.title = title;
-  ro.extremes = extremes;
+  ro.title = settings.name;
+  ro.extremes = settings.extremes;
+  ro.mean_over = settings.mean_over;
   ro.python = args.python;
   const SweepReportResult r = write_sweep_report(ro);
   out << "report of " << r.cells << " cells: " << (fs::path(args.out) / "report" / "index.html").string() << ", pareto.md, pareto.tex, cells.csv"
@@ -140,7 +141,11 @@ int write_report(const SweepArgs& args, const std::string& title, bool extremes,
 
 int run_sweep(const SweepArgs& args, std::ostream& out) {
   if (args.out.empty()) throw InputError("evio sweep", 0, "no output folder", "--out DIR");
-  if (args.report_only) return write_report(args, "", false, out);
+  if (args.report_only) {  // the report the sweep wrote: its spec's report keys from the copy in DIR
+    const fs::path copy = fs::path(args.out) / "spec.yaml";
+    std::error_code ec;
+    return write_report(args, fs::exists(copy, ec) ? load_sweep_report_settings(copy.string()) : SweepReportSettings{}, out);
+  }
   const SweepSpec spec = load_sweep_spec(args.spec);
   const fs::path dir = fs::absolute(args.out).lexically_normal();  // absolute: parallel and slurm run cells from DIR
   const std::vector<SweepCell> cells = expand_sweep_cells(spec, (dir / "data").string());
@@ -239,7 +244,7 @@ int run_sweep(const SweepArgs& args, std::ostream& out) {
     return 130;
   }
   out << "ran " << done << " cells (" << failed << " failed); results: " << results.string() << "\n";
-  if (!args.no_report) write_report(args, spec.name, spec.report_extremes, out);
+  if (!args.no_report) write_report(args, SweepReportSettings{spec.name, spec.report_extremes, spec.mean_over}, out);
   if (failed > 0) {
     throw InputError(results.string(), 0, std::to_string(failed) + " of " + std::to_string(done) + " cells failed" +
                                               (spec.accept_errors ? " with a crash, hang or non-finite output" : "") + " (their stderr.log in " +

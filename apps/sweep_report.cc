@@ -157,6 +157,16 @@ struct Table {
     }
     return s;
   }
+  std::string csv() const {
+    std::string s;
+    for (size_t i = 0; i < header.size(); ++i) s += (i ? "," : "") + csv_field(header[i]);
+    s += "\n";
+    for (const auto& row : rows) {
+      for (size_t i = 0; i < row.size(); ++i) s += (i ? "," : "") + csv_field(row[i]);
+      s += "\n";
+    }
+    return s;
+  }
   std::string html_table() const {
     std::string s = "<table>\n<tr>";
     for (const auto& h : header) s += "<th>" + html(h) + "</th>";
@@ -313,6 +323,137 @@ Table cells_table(const Group& g, const char* form = nullptr) {
 
 std::string group_title(const Group& g) { return g.algorithm + " on " + g.dataset; }
 
+// The cells of a group that differ only in the repeat keys (mean_over), averaged: each metric's mean
+// and sample standard deviation over the cells that ran (exit 0) and have it.
+struct MeanRow {
+  std::string variant, params;           // params without the repeat keys
+  std::vector<const SweepRecord*> rows;  // the repeats
+  size_t ok = 0;                         // repeats with exit code 0 and a finite headline error (or no headline)
+  double cpu_s = NAN, wall_s = NAN, peak_rss_mb = NAN;  // means of the ok repeats (peak RSS: their maximum)
+  bool on_front = false;                 // on the Pareto front of the means (only rows whose every repeat is ok)
+};
+
+struct MeanStat {
+  double mean = NAN, sd = NAN, min = NAN, max = NAN;
+  size_t n = 0;
+};
+
+MeanStat mean_stat(const std::vector<double>& v) {
+  MeanStat s;
+  for (double x : v) {
+    if (!std::isfinite(x)) continue;
+    ++s.n;
+    s.mean = s.n == 1 ? x : s.mean + (x - s.mean) / static_cast<double>(s.n);
+    s.min = s.n == 1 ? x : std::min(s.min, x);
+    s.max = s.n == 1 ? x : std::max(s.max, x);
+  }
+  if (s.n >= 2) {
+    double ss = 0;
+    for (double x : v) {
+      if (std::isfinite(x)) ss += (x - s.mean) * (x - s.mean);
+    }
+    s.sd = std::sqrt(ss / static_cast<double>(s.n - 1));
+  }
+  return s;
+}
+
+std::vector<MeanRow> mean_rows(const Group& g, const std::vector<std::string>& over) {
+  std::vector<MeanRow> out;
+  std::map<std::string, size_t> index;
+  for (const SweepRecord* r : g.rows) {
+    std::string rest;
+    for (const auto& [k, v] : r->params) {
+      if (std::find(over.begin(), over.end(), k) != over.end()) continue;
+      rest += (rest.empty() ? "" : ", ") + k + "=" + v;
+    }
+    if (rest.empty()) rest = "(defaults)";
+    const auto [it, fresh] = index.emplace(r->variant + "\n" + rest, out.size());
+    if (fresh) out.push_back(MeanRow{r->variant, rest, {}});
+    out[it->second].rows.push_back(r);
+  }
+  for (MeanRow& m : out) {
+    std::vector<double> cpu, wall;
+    for (const SweepRecord* r : m.rows) {
+      const bool good = r->exit_code == 0 && (g.error_metric.empty() || std::isfinite(r->metric(g.error_metric)));
+      if (!good) continue;
+      ++m.ok;
+      cpu.push_back(r->cpu_s);
+      wall.push_back(r->wall_s);
+      m.peak_rss_mb = std::isfinite(m.peak_rss_mb) ? std::max(m.peak_rss_mb, r->peak_rss_mb) : r->peak_rss_mb;
+    }
+    m.cpu_s = mean_stat(cpu).mean;
+    m.wall_s = mean_stat(wall).mean;
+  }
+  std::stable_sort(out.begin(), out.end(), [](const MeanRow& a, const MeanRow& b) {
+    if ((a.ok > 0) != (b.ok > 0)) return a.ok > 0;
+    return a.cpu_s < b.cpu_s;
+  });
+  if (!g.error_metric.empty()) {
+    std::vector<std::pair<double, double>> te;
+    for (const MeanRow& m : out) {
+      std::vector<double> e;
+      for (const SweepRecord* r : m.rows) {
+        if (r->exit_code == 0) e.push_back(r->metric(g.error_metric));
+      }
+      te.emplace_back(m.ok == m.rows.size() ? m.cpu_s : NAN, mean_stat(e).mean);
+    }
+    for (size_t i : pareto_front(te)) out[i].on_front = true;
+  }
+  return out;
+}
+
+MeanStat metric_stat(const MeanRow& m, const std::string& metric) {
+  std::vector<double> v;
+  for (const SweepRecord* r : m.rows) {
+    if (r->exit_code == 0) v.push_back(r->metric(metric));
+  }
+  return mean_stat(v);
+}
+
+// The averaged table: the headline error's mean, sd, min and max (the pages), every metric's mean, sd
+// and count (the CSV, form "%.9g").
+Table means_table(const Group& g, const std::vector<MeanRow>& rows, bool csv) {
+  auto f = [csv](double v, const char* page_form) { return fmt(v, csv ? "%.9g" : page_form); };
+  Table t{{"variant", "params", "cells ok"}, {}};
+  const std::string label = g.error_metric.empty() ? "" : g.error_label;
+  if (!csv && !label.empty()) {
+    for (const char* s : {" mean", " sd", " min", " max"}) t.header.push_back(label + s);
+  }
+  for (const char* s : {"CPU s mean", "wall s mean", "peak RSS MiB max"}) t.header.push_back(s);
+  if (csv) {
+    for (const std::string& m : g.metric_names) {
+      for (const char* s : {"_mean", "_sd", "_n"}) t.header.push_back(m + s);
+    }
+  }
+  if (!label.empty()) t.header.push_back("Pareto");
+  for (const MeanRow& m : rows) {
+    std::vector<std::string> row = {m.variant, m.params, std::to_string(m.ok) + "/" + std::to_string(m.rows.size())};
+    if (!csv && !label.empty()) {
+      const MeanStat e = metric_stat(m, g.error_metric);
+      for (double v : {e.mean, e.sd, e.min, e.max}) row.push_back(f(v, "%.4g"));
+    }
+    for (double v : {m.cpu_s, m.wall_s}) row.push_back(f(v, "%.2f"));
+    row.push_back(f(m.peak_rss_mb, "%.0f"));
+    if (csv) {
+      for (const std::string& name : g.metric_names) {
+        const MeanStat s = metric_stat(m, name);
+        row.push_back(f(s.mean, ""));
+        row.push_back(f(s.sd, ""));
+        row.push_back(std::to_string(s.n));
+      }
+    }
+    if (!label.empty()) row.push_back(m.on_front ? "yes" : "");
+    t.rows.push_back(std::move(row));
+  }
+  return t;
+}
+
+std::string join(const std::vector<std::string>& v, const std::string& sep) {
+  std::string s;
+  for (const std::string& x : v) s += (s.empty() ? "" : sep) + x;
+  return s;
+}
+
 std::string front_caption(const Group& g) {
   return g.error_metric.empty() ? "" : "Pareto front of " + g.error_label + " against CPU time";
 }
@@ -444,17 +585,22 @@ SweepReportResult write_sweep_report(const SweepReportOptions& opts) {
       }
       body += front.rows.empty() ? "<p>" + html(none) + "</p>\n" : "<h3>" + html(front_caption(g)) + "</h3>\n" + front.html_table();
     }
+    if (!opts.mean_over.empty()) {
+      const std::vector<MeanRow> means = mean_rows(g, opts.mean_over);
+      const std::string caption = "Means over " + join(opts.mean_over, ", ") + " (cells that differ only in " +
+                                  (opts.mean_over.size() > 1 ? "these keys" : "it") + "; the Pareto front of the means " +
+                                  "counts only rows whose every cell ran)";
+      const Table mt = means_table(g, means, false);
+      md += "\n" + caption + ":\n\n" + mt.markdown();
+      body += "<h3>" + html(caption) + "</h3>\n" + mt.html_table();
+      tex += "\n" + mt.latex_table(group_title(g) + ": means over " + join(opts.mean_over, ", "));
+      const fs::path mfile = rep / (g.file_stem() + "__means.csv");
+      sweep_write_file(mfile, means_table(g, means, true).csv());
+      res.files.push_back(mfile.string());
+    }
     md += "\nEvery cell:\n\n" + cells.markdown();
     body += "<h3>Every cell</h3>\n" + cells.html_table();
-    const Table full = cells_table(g, "%.9g");
-    std::string gcsv;
-    for (size_t i = 0; i < full.header.size(); ++i) gcsv += (i ? "," : "") + csv_field(full.header[i]);
-    gcsv += "\n";
-    for (const auto& row : full.rows) {
-      for (size_t i = 0; i < row.size(); ++i) gcsv += (i ? "," : "") + csv_field(row[i]);
-      gcsv += "\n";
-    }
-    sweep_write_file(rep / (g.file_stem() + ".csv"), gcsv);
+    sweep_write_file(rep / (g.file_stem() + ".csv"), cells_table(g, "%.9g").csv());
     res.files.push_back((rep / (g.file_stem() + ".csv")).string());
   }
   // Model selection: what each cell's algorithm chose, and on what numbers (its stats.json "model").

@@ -21,6 +21,8 @@ struct SweepReportOptions {
   std::string python = "/usr/bin/python3";  // runs scripts/plot_sweep.py (needs matplotlib)
   std::string plot_script;              // default: scripts/plot_sweep.py of the sources or the install
   bool extremes = false;                // show the outcome table even when every cell is ok (spec `report: [extremes]`)
+  std::vector<std::string> mean_over;   // grid keys of repeats (spec `mean_over:`, e.g. tracker.seed): per group, a
+                                        // table of the cells averaged over them, with its own Pareto front
 };
 
 struct SweepReportResult {
@@ -31,7 +33,7 @@ struct SweepReportResult {
 };
 
 // Reads DIR/results.jsonl and writes DIR/report/{pareto.md, cells.csv, pareto.tex, index.html,
-// plots/*.png}; pareto.md and index.html open with the outcome table (rows = datasets, columns =
+// plots/*.png} (with opts.mean_over also <algorithm>__<dataset>__means.csv); pareto.md and index.html open with the outcome table (rows = datasets, columns =
 // algorithms, cell = ok / error / crash / hang / nonfinite, details as numbered notes) when a cell is
 // not ok or opts.extremes is set. Throws InputError when there is no record to report.
 SweepReportResult write_sweep_report(const SweepReportOptions& opts);

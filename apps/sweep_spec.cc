@@ -22,7 +22,7 @@ namespace {
 
 const char* kSpecForm =
     "a mapping with `datasets:` (a list of {name, path} or {name, scene, duration, seed, set}) and `algorithms:` (a list "
-    "of {algorithm, variant, datasets, args, grid, timeout_s}), optional `name:`, `timeout_s:`, `report: [extremes]` and `accept_errors: true|false`";
+    "of {algorithm, variant, datasets, args, grid, timeout_s}), optional `name:`, `timeout_s:`, `report: [extremes]`, `mean_over: [GRID_KEY]` and `accept_errors: true|false`";
 
 class SpecReader {
  public:
@@ -200,6 +200,23 @@ class SpecReader {
   std::string file_, dir_;
 };
 
+// The report's keys of a spec: `name:`, `report: [extremes]`, `mean_over: [GRID_KEY]`.
+SweepReportSettings report_settings(const SpecReader& r, const YAML::Node& root) {
+  SweepReportSettings rs;
+  if (root["name"]) rs.name = r.scalar(root["name"], "name");
+  if (root["report"]) {
+    for (const std::string& s : r.strings(root["report"], "report")) {
+      if (s != "extremes") r.fail(root["report"], "unknown report section '" + s + "'", "`report: [extremes]`");
+      rs.extremes = true;
+    }
+  }
+  if (root["mean_over"]) {
+    rs.mean_over = r.strings(root["mean_over"], "mean_over");
+    if (rs.mean_over.empty()) r.fail(root["mean_over"], "mean_over is empty", "grid keys, e.g. `mean_over: [tracker.seed]`");
+  }
+  return rs;
+}
+
 uint64_t fnv1a(const std::string& s) {
   uint64_t h = 1469598103934665603ull;
   for (unsigned char c : s) h = (h ^ c) * 1099511628211ull;
@@ -227,18 +244,15 @@ SweepSpec parse_sweep_spec(const std::string& text, const std::string& file, con
   }
   SpecReader r(file, dir);
   if (!root.IsMap()) throw InputError(file, root.IsDefined() && !root.IsNull() ? root.Mark().line + 1 : 0, "the spec is not a mapping", kSpecForm);
-  r.keys(root, {"name", "timeout_s", "report", "accept_errors", "datasets", "algorithms"}, "the spec", kSpecForm);
+  r.keys(root, {"name", "timeout_s", "report", "mean_over", "accept_errors", "datasets", "algorithms"}, "the spec", kSpecForm);
   SweepSpec spec;
   spec.file = file;
   spec.dir = dir;
-  if (root["name"]) spec.name = r.scalar(root["name"], "name");
+  const SweepReportSettings rs = report_settings(r, root);
+  spec.name = rs.name;
+  spec.report_extremes = rs.extremes;
+  spec.mean_over = rs.mean_over;
   if (root["timeout_s"]) spec.timeout_s = r.seconds(root["timeout_s"], "timeout_s");
-  if (root["report"]) {
-    for (const std::string& s : r.strings(root["report"], "report")) {
-      if (s != "extremes") r.fail(root["report"], "unknown report section '" + s + "'", "`report: [extremes]`");
-      spec.report_extremes = true;
-    }
-  }
   if (root["accept_errors"]) {
     const std::string v = r.scalar(root["accept_errors"], "accept_errors");
     if (v != "true" && v != "false") r.fail(root["accept_errors"], "accept_errors '" + v + "' is not true or false", "`accept_errors: true`");
@@ -255,7 +269,29 @@ SweepSpec parse_sweep_spec(const std::string& text, const std::string& file, con
     }
   }
   for (const YAML::Node& a : as) spec.algorithms.push_back(r.algorithm(a, names));
+  for (const std::string& k : spec.mean_over) {
+    const bool in_grid = std::any_of(spec.algorithms.begin(), spec.algorithms.end(), [&](const SweepAlgorithm& a) {
+      return std::any_of(a.grid.begin(), a.grid.end(), [&](const auto& g) { return g.first == k; });
+    });
+    if (!in_grid) r.fail(root["mean_over"], "mean_over key '" + k + "' is not a grid key of any algorithm entry", "grid keys, e.g. `mean_over: [tracker.seed]`");
+  }
   return spec;
+}
+
+SweepReportSettings load_sweep_report_settings(const std::string& file) {
+  std::ifstream f(file);
+  if (!f) throw InputError(file, 0, "cannot open the sweep spec", kSpecForm);
+  std::stringstream text;
+  text << f.rdbuf();
+  YAML::Node root;
+  try {
+    root = YAML::Load(text.str());
+  } catch (const YAML::Exception& e) {
+    throw InputError(file, e.mark.line >= 0 ? e.mark.line + 1 : 0, "YAML syntax: " + e.msg, kSpecForm);
+  }
+  if (!root.IsMap()) throw InputError(file, 0, "the spec is not a mapping", kSpecForm);
+  SpecReader r(file, ".");
+  return report_settings(r, root);
 }
 
 SweepSpec load_sweep_spec(const std::string& file) {

@@ -40,6 +40,7 @@ struct SweepSpec {
   bool report_extremes = false;  // `report: [extremes]`: the report shows the outcome table (dataset x algorithm)
   bool accept_errors = false;    // `accept_errors: true`: a cell that exits 1 with its one-line error passes;
                                  // the sweep fails only on crash, hang or non-finite output
+  std::vector<std::string> mean_over;  // `mean_over: [tracker.seed]`: grid keys the report averages over (repeats)
   std::vector<SweepDataset> datasets;
   std::vector<SweepAlgorithm> algorithms;
 };
@@ -64,6 +65,16 @@ const std::vector<std::string>& sweep_algorithms();
 SweepSpec load_sweep_spec(const std::string& file);
 // The same from YAML text (file: the name used in errors; dir: the folder paths resolve against).
 SweepSpec parse_sweep_spec(const std::string& text, const std::string& file, const std::string& dir);
+
+// What the report needs from a spec (its `name:`, `report:` and `mean_over:`), read from the copy a sweep
+// keeps in DIR/spec.yaml so that `evio sweep --report DIR` writes the same report; the other keys are
+// not checked. Throws InputError as load_sweep_spec.
+struct SweepReportSettings {
+  std::string name;
+  bool extremes = false;
+  std::vector<std::string> mean_over;
+};
+SweepReportSettings load_sweep_report_settings(const std::string& file);
 
 // The cells of the spec in a fixed order (algorithm entries, datasets, then the grid with the last
 // key varying fastest). data_dir: where simulated datasets live (OUT/data).

@@ -734,6 +734,71 @@ TEST(SweepReport, ModelSelectionReachesResultsAndReport) {
   EXPECT_NE(tex.find("Model selection per cell"), std::string::npos);
 }
 
+// `mean_over:` averages the cells that differ only in the repeat keys: mean, sd, min and max of the
+// headline error per remaining grid point, cells ok out of cells, a Pareto front of the means that
+// leaves out rows with a failed repeat, and every metric's mean/sd/n in __means.csv; `--report DIR`
+// rewrites the same from the spec's copy in DIR.
+TEST(SweepReport, MeansOverRepeatKeysWithTheirSpreadAndFront) {
+  evio_test::TempDir tmp;
+  const SweepArgs a = fake_sweep(tmp, "mean_over: [err, fail]\ndatasets: [rec]\nalgorithms:\n"
+                                      "  - {algorithm: flow, variant: v1, grid: {err: [1, 2, 6]}}\n"
+                                      "  - {algorithm: flow, variant: v2, grid: {err: [4, 5]}}\n"
+                                      "  - {algorithm: flow, variant: v3, grid: {err: [0.5], fail: [0, 1]}}\n");
+  EXPECT_EQ(run_quietly(a), 1);  // v3's second repeat fails on purpose
+  const std::string csv_path = a.out + "/report/flow__rec__means.csv";
+  auto check = [&] {
+    const std::string csv = evio_test::read_text(csv_path);
+    std::map<std::string, std::vector<std::string>> rows;  // variant -> fields
+    std::istringstream in(csv);
+    std::string line;
+    std::getline(in, line);
+    EXPECT_EQ(line.rfind("variant,params,cells ok,CPU s mean,wall s mean,peak RSS MiB max,angular_velocity_rms_degps_mean,"
+                         "angular_velocity_rms_degps_sd,angular_velocity_rms_degps_n,", 0), 0u) << line;
+    while (std::getline(in, line)) {
+      std::vector<std::string> f;
+      std::stringstream ls(line);
+      for (std::string x; std::getline(ls, x, ',');) f.push_back(x);
+      if (line.back() == ',') f.emplace_back();  // an empty last field
+      rows[f[0]] = f;
+    }
+    ASSERT_EQ(rows.size(), 3u) << csv;
+    EXPECT_EQ(rows["v1"][1], "(defaults)");
+    EXPECT_EQ(rows["v1"][2], "3/3");
+    EXPECT_NEAR(std::stod(rows["v1"][6]), 3.0, 1e-12);
+    EXPECT_NEAR(std::stod(rows["v1"][7]), std::sqrt(7.0), 1e-8);  // sample sd of 1, 2, 6
+    EXPECT_EQ(rows["v1"][8], "3");
+    EXPECT_EQ(rows["v2"][2], "2/2");
+    EXPECT_NEAR(std::stod(rows["v2"][6]), 4.5, 1e-12);
+    EXPECT_EQ(rows["v3"][2], "1/2");
+    EXPECT_NEAR(std::stod(rows["v3"][6]), 0.5, 1e-12);
+    EXPECT_EQ(rows["v3"][7], "-");  // one value: no sd
+    EXPECT_EQ(rows["v1"].back(), "yes");  // the lowest mean of the complete rows
+    EXPECT_EQ(rows["v3"].back(), "");     // lowest mean, but a repeat failed
+  };
+  check();
+  const std::string md = evio_test::read_text(a.out + "/report/pareto.md");
+  EXPECT_NE(md.find("Means over err, fail"), std::string::npos) << md;
+  EXPECT_NE(md.find("| v1 | (defaults) | 3/3 | 3 | 2.646 | 1 | 6 |"), std::string::npos) << md;
+  EXPECT_NE(evio_test::read_text(a.out + "/report/index.html").find("Means over err, fail"), std::string::npos);
+  EXPECT_NE(evio_test::read_text(a.out + "/report/pareto.tex").find("means over err, fail"), std::string::npos);
+  fs::remove_all(a.out + "/report");
+  SweepArgs r;
+  r.out = a.out;
+  r.report_only = true;
+  r.python = a.python;
+  ASSERT_EQ(run_quietly(r), 0);
+  check();
+}
+
+TEST(SweepSpec, MeanOverNamesGridKeys) {
+  evio_test::TempDir tmp;
+  const std::string err = spec_error("mean_over: [tracker.seed]\ndatasets: [{name: a, path: .}]\nalgorithms:\n"
+                                     "  - {algorithm: vio, grid: {frames.events_per_frame: [1, 2]}}\n", tmp.path());
+  EXPECT_NE(err.find("spec.yaml:1: mean_over key 'tracker.seed' is not a grid key of any algorithm entry"), std::string::npos) << err;
+  EXPECT_EQ(spec_error("mean_over: tracker.seed\ndatasets: [{name: a, path: .}]\nalgorithms:\n"
+                       "  - {algorithm: vio, grid: {tracker.seed: [1, 2]}}\n", tmp.path()), "");
+}
+
 TEST(SweepReport, SaysSoWhenNoCellHasAFiniteError) {
   evio_test::TempDir tmp;
   const SweepArgs a = fake_sweep(tmp, "datasets: [rec]\nalgorithms: [{algorithm: flow}]\n");  // err: null
