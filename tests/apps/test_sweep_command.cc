@@ -330,6 +330,16 @@ int run_quietly(const SweepArgs& a, std::string* error = nullptr) {
   }
 }
 
+// `evio sweep --report DIR` after removing DIR/report: the report from results.jsonl alone.
+int rewrite_report(const SweepArgs& a) {
+  fs::remove_all(a.out + "/report");
+  SweepArgs r;
+  r.out = a.out;
+  r.report_only = true;
+  r.python = a.python;
+  return run_quietly(r);
+}
+
 TEST(SweepRun, JobsTwoRecordsEveryCellOnceWithItsOutcomeAndMetrics) {
   evio_test::TempDir tmp;
   const SweepArgs a = fake_sweep(tmp,
@@ -686,13 +696,7 @@ TEST(SweepReport, TablesAndPageListEveryCellAndSayWhenPlotsAreMissing) {
   EXPECT_EQ(page.find("<script"), std::string::npos);
   EXPECT_TRUE(fs::exists(a.out + "/report/flow__rec.csv"));
   EXPECT_TRUE(fs::exists(a.out + "/report/corners__rec.csv"));
-  // The report mode rewrites it from results.jsonl alone.
-  fs::remove_all(a.out + "/report");
-  SweepArgs r;
-  r.out = a.out;
-  r.report_only = true;
-  r.python = a.python;
-  ASSERT_EQ(run_quietly(r), 0);
+  ASSERT_EQ(rewrite_report(a), 0);
   EXPECT_TRUE(fs::exists(a.out + "/report/index.html"));
 }
 
@@ -781,12 +785,7 @@ TEST(SweepReport, MeansOverRepeatKeysWithTheirSpreadAndFront) {
   EXPECT_NE(md.find("| v1 | (defaults) | 3/3 | 3 | 2.646 | 1 | 6 |"), std::string::npos) << md;
   EXPECT_NE(evio_test::read_text(a.out + "/report/index.html").find("Means over err, fail"), std::string::npos);
   EXPECT_NE(evio_test::read_text(a.out + "/report/pareto.tex").find("means over err, fail"), std::string::npos);
-  fs::remove_all(a.out + "/report");
-  SweepArgs r;
-  r.out = a.out;
-  r.report_only = true;
-  r.python = a.python;
-  ASSERT_EQ(run_quietly(r), 0);
+  ASSERT_EQ(rewrite_report(a), 0);
   check();
 }
 
