@@ -809,14 +809,19 @@ TEST(SweepReport, SaysSoWhenNoCellHasAFiniteError) {
 
 TEST(SweepReport, PlotsAreEmbeddedWhenMatplotlibIsThere) {
   if (std::system("/usr/bin/python3 -c 'import matplotlib' > /dev/null 2>&1") != 0) GTEST_SKIP() << "no matplotlib in /usr/bin/python3";
-  evio_test::TempDir tmp;
-  SweepArgs a = fake_sweep(tmp, "datasets: [rec]\nalgorithms:\n  - {algorithm: flow, grid: {err: [3, 1]}}\n");
-  a.python = "/usr/bin/python3";
-  ASSERT_EQ(run_quietly(a), 0);
-  EXPECT_TRUE(fs::exists(a.out + "/report/plots/flow__rec.png"));
-  const std::string page = evio_test::read_text(a.out + "/report/index.html");
-  EXPECT_NE(page.find("<img alt=\"flow on rec\" src=\"data:image/png;base64,iVBORw0KGgo"), std::string::npos);
-  EXPECT_EQ(page.find("Plots are missing"), std::string::npos);
+  // Single cells, and means over a repeat key (drawn with their spread and their own front).
+  for (const char* spec : {"datasets: [rec]\nalgorithms:\n  - {algorithm: flow, grid: {err: [3, 1]}}\n",
+                           "mean_over: [err]\ndatasets: [rec]\nalgorithms:\n  - {algorithm: flow, grid: {k: [a, b], err: [3, 1, 2]}}\n"}) {
+    evio_test::TempDir tmp;
+    SweepArgs a = fake_sweep(tmp, spec);
+    a.python = "/usr/bin/python3";
+    ASSERT_EQ(run_quietly(a), 0) << spec;
+    EXPECT_TRUE(fs::exists(a.out + "/report/plots/flow__rec.png")) << spec;
+    EXPECT_EQ(evio_test::read_text(a.out + "/report/plot_errors.log"), "") << spec;
+    const std::string page = evio_test::read_text(a.out + "/report/index.html");
+    EXPECT_NE(page.find("<img alt=\"flow on rec\" src=\"data:image/png;base64,iVBORw0KGgo"), std::string::npos) << spec;
+    EXPECT_EQ(page.find("Plots are missing"), std::string::npos) << spec;
+  }
 }
 
 // ---- the numerical-extremes suite: each cell's outcome, the outcome table, accept_errors ----
