@@ -512,6 +512,14 @@ SweepReportResult write_sweep_report(const SweepReportOptions& opts) {
   sweep_write_file(rep / "cells.csv", csv);
   res.files.push_back((rep / "cells.csv").string());
 
+  // The averages over repeat keys, which the plot script reads too.
+  for (const Group& g : groups) {
+    if (opts.mean_over.empty()) break;
+    const fs::path mfile = rep / (g.file_stem() + "__means.csv");
+    sweep_write_file(mfile, means_table(g, mean_rows(g, opts.mean_over), true).csv());
+    res.files.push_back(mfile.string());
+  }
+
   // Plots: one PNG (and PDF) per group with an error metric, by the project's matplotlib script.
   const std::string script = find_evio_script("plot_sweep.py", opts.plot_script);
   bool any_error = false;
@@ -594,9 +602,6 @@ SweepReportResult write_sweep_report(const SweepReportOptions& opts) {
       md += "\n" + caption + ":\n\n" + mt.markdown();
       body += "<h3>" + html(caption) + "</h3>\n" + mt.html_table();
       tex += "\n" + mt.latex_table(group_title(g) + ": means over " + join(opts.mean_over, ", "));
-      const fs::path mfile = rep / (g.file_stem() + "__means.csv");
-      sweep_write_file(mfile, means_table(g, means, true).csv());
-      res.files.push_back(mfile.string());
     }
     md += "\nEvery cell:\n\n" + cells.markdown();
     body += "<h3>Every cell</h3>\n" + cells.html_table();

@@ -108,6 +108,7 @@ def main():
         ax.legend(fontsize=8)
         fig.tight_layout()
         stem = os.path.join(args.out_dir, "%s__%s" % (alg, dataset))
+        print("%s__%s: %d cells%s" % (alg, dataset, len(pts), (", %d means with +-1 sd, the front of the means" % len(means)) if means else ""))
         fig.savefig(stem + ".png", dpi=110)
         fig.savefig(stem + ".pdf")
         plt.close(fig)

@@ -818,6 +818,9 @@ TEST(SweepReport, PlotsAreEmbeddedWhenMatplotlibIsThere) {
     ASSERT_EQ(run_quietly(a), 0) << spec;
     EXPECT_TRUE(fs::exists(a.out + "/report/plots/flow__rec.png")) << spec;
     EXPECT_EQ(evio_test::read_text(a.out + "/report/plot_errors.log"), "") << spec;
+    const bool means = std::string(spec).find("mean_over") != std::string::npos;
+    EXPECT_EQ(evio_test::read_text(a.out + "/report/plot.log"),
+              means ? "flow__rec: 6 cells, 2 means with +-1 sd, the front of the means\n" : "flow__rec: 2 cells\n") << spec;
     const std::string page = evio_test::read_text(a.out + "/report/index.html");
     EXPECT_NE(page.find("<img alt=\"flow on rec\" src=\"data:image/png;base64,iVBORw0KGgo"), std::string::npos) << spec;
     EXPECT_EQ(page.find("Plots are missing"), std::string::npos) << spec;
