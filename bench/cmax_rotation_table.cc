@@ -3,7 +3,8 @@
 // pyramid-levels pair, the RMS angular-velocity error against the ground truth (deg/s, camera
 // frame, evaluation::trajectory_angular_velocity) and the time per event (us, one core,
 // maximisation and window preparation; reading excluded). The events of the span are read once
-// into memory. Prints a Markdown table and writes a csv for scripts/plot_cmax_speed_accuracy.py.
+// into memory. Prints a Markdown table (and a csv with --csv). The README's tables of this grid come
+// from `evio sweep datasets/sweeps/cmax_rotation.yaml`; the tool stays for --diagnose.
 //
 //   cmax_rotation_table DATASET --gt groundtruth.txt [--calib FILE] [--t-start S] [--t-end S]
 //       [--windows 5000,10000,20000] [--levels 1,2,3] [--warm-levels 0] [--blur PX] [--tolerance PX]

@@ -12,7 +12,8 @@ DIR: sweep folders (their results.jsonl; the last record of each cell counts, as
 --rows / --cols: comma-separated fields: `algorithm`, `variant`, `dataset`, `cell`, or a grid key
   (a key of `params`, e.g. window.size). A row or column label joins the values with ", ".
 --value: a metric of `metrics` (e.g. rot_rms_deg) or a record field (cpu_s, wall_s, peak_rss_mb,
-  real_time_factor, real_time_factor_cpu, duration_s); repeat it for "a / b" cells.
+  real_time_factor, real_time_factor_cpu, duration_s), a ratio of two (duration_s/windows) and either
+  times a number (duration_s/windows*1000: ms per window); repeat --value for "a / b" cells.
 --mean-over: grid keys (comma-separated) whose cells are averaged (repeats such as seeds). Cells that
   land in one table cell and differ in anything else are an error: the table would hide a setting.
 --where FIELD=VALUE: keep only the cells whose field (as for --rows) has this value; repeatable.
@@ -65,7 +66,22 @@ def field(r, name):
     return None
 
 
-def value(r, name):
+def value(r, spec):
+    """A value of the record: NAME, or NAME/NAME2 (a ratio), either optionally times a number (NAME/NAME2*1000)."""
+    factor = 1.0
+    if "*" in spec:
+        spec, k = spec.rsplit("*", 1)
+        try:
+            factor = float(k)
+        except ValueError:
+            fail("--value: '%s' after '*' is not a number" % k)
+    if "/" in spec:
+        a, b = spec.split("/", 1)
+        return value1(r, a) / value1(r, b) * factor if value1(r, b) != 0 else math.nan
+    return value1(r, spec) * factor
+
+
+def value1(r, name):
     if name in RECORD_FIELDS:
         v = r.get(name)
     else:

@@ -53,6 +53,10 @@ with tempfile.TemporaryDirectory() as d:
     rc, out, err = run(d, *base, "--value", "err", "--value", "cpu_s", "--format", "%.1f", "--csv")
     expect("csv", out, "mode,poster,boxes\nsplit,0.5 / 2.0,failed (1/2) [1.0] / failed (1/2) [2.0]\ndrop,0.6 / 1.0,3.0 / 2.0\n")
 
+    # the mean of the per-cell ratios: (0.6 / 1 + 0.4 / 3) * 10 / 2
+    rc, out, err = run(d, *base, "--value", "err/cpu_s*10", "--format", "%.2f")
+    expect("ratio", out, "| mode | poster | boxes |\n|---|---|---|\n| split | 3.67 | failed (1/2) [5.00] |\n| drop | 6.00 | 15.00 |\n")
+
     rc, out, err = run(d, "--rows", "tracker.seed", "--cols", "dataset", "--value", "err", "--where", "inputs=events",
                        "--where", "mode=drop")
     expect("numeric order", out, "| tracker.seed | poster | boxes |\n|---|---|---|\n| 1 | 0.5 | 2 |\n| 2 | 0.7 | 4 |\n")
