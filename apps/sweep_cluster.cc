@@ -88,9 +88,9 @@ void write_atomically(const std::string& path, const std::string& text) {
   if (std::rename(tmp.c_str(), path.c_str()) != 0) throw std::runtime_error(path + ": rename failed: " + std::strerror(errno));
 }
 
-// The outcome of a job that left no outcome file: the exit code the scheduler gives (125 when that is
-// 0: the cell was not measured, so it is not a success), and a line in its stderr log.
-SweepOutcome outcome_without_file(const SweepJob& job, int exit_code, double wall_s, const std::string& host, const std::string& why) {
+}  // namespace
+
+SweepOutcome sweep_outcome_without_file(const SweepJob& job, int exit_code, double wall_s, const std::string& host, const std::string& why) {
   SweepOutcome o;
   o.exit_code = exit_code != 0 ? exit_code : 125;  // never a success: nothing was measured
   o.wall_s = wall_s;
@@ -100,6 +100,8 @@ SweepOutcome outcome_without_file(const SweepJob& job, int exit_code, double wal
   append_to(job.stderr_path, "evio sweep: the job's runner left no " + sweep_outcome_path(job) + ": " + why + "\n");
   return o;
 }
+
+namespace {
 
 bool read_outcome(const SweepJob& job, SweepOutcome* o) { return parse_sweep_outcome(sweep_read_file(sweep_outcome_path(job)), o); }
 
@@ -289,7 +291,7 @@ class ParallelEngine : public SweepEngine {
         const size_t i = e.seq - 1;
         SweepOutcome o;
         if (!read_outcome(jobs[i], &o)) {
-          o = outcome_without_file(jobs[i], e.signal ? -e.signal : e.exit_value, e.runtime_s, e.host,
+          o = sweep_outcome_without_file(jobs[i], e.signal ? -e.signal : e.exit_value, e.runtime_s, e.host,
                                    "GNU parallel's joblog says exit value " + std::to_string(e.exit_value) + ", signal " + std::to_string(e.signal) +
                                        " (its messages: " + log + ")");
         }
@@ -312,7 +314,7 @@ class ParallelEngine : public SweepEngine {
       if (reported[i]) continue;
       SweepOutcome o;
       if (!read_outcome(jobs[i], &o)) {
-        o = outcome_without_file(jobs[i], 127, s, remote ? "" : local_hostname(),
+        o = sweep_outcome_without_file(jobs[i], 127, s, remote ? "" : local_hostname(),
                                  "GNU parallel ended (" + std::string(WIFEXITED(status) ? "exit code " + std::to_string(WEXITSTATUS(status))
                                                                                        : "signal " + std::to_string(WTERMSIG(status))) +
                                      ") without running it; its messages: " + log);
@@ -413,7 +415,7 @@ class SlurmEngine : public SweepEngine {
     const std::string sub = capture("sbatch --parsable " + sweep_shell_quote(stem + ".sh"), &st);
     const std::string job_id = sub.substr(0, sub.find_first_of(";\n"));
     if (st != 0 || job_id.empty() || job_id.find_first_not_of("0123456789") != std::string::npos) {
-      for (size_t i = 0; i < jobs.size(); ++i) done(i, outcome_without_file(jobs[i], 127, 0, "", "sbatch failed: " + sub));
+      for (size_t i = 0; i < jobs.size(); ++i) done(i, sweep_outcome_without_file(jobs[i], 127, 0, "", "sbatch failed: " + sub));
       return;
     }
     sweep_write_file(stem + ".jobid", job_id + "\n");
@@ -450,7 +452,7 @@ class SlurmEngine : public SweepEngine {
         const auto [code, state] = task_exit(job_id, i);
         reported[i] = true;
         --left;
-        done(i, outcome_without_file(jobs[i], code, 0, "", "Slurm task " + job_id + "_" + std::to_string(i) + " ended " + state +
+        done(i, sweep_outcome_without_file(jobs[i], code, 0, "", "Slurm task " + job_id + "_" + std::to_string(i) + " ended " + state +
                                                                " (its Slurm log: " + stem + "-" + std::to_string(i) + ".err)"));
       }
       std::this_thread::sleep_for(std::chrono::seconds(1));

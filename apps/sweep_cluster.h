@@ -39,6 +39,10 @@ std::string sweep_outcome_path(const SweepJob& job);
 std::string sweep_outcome_json(const SweepOutcome& o);
 bool parse_sweep_outcome(const std::string& text, SweepOutcome* o);
 
+// The outcome of a job whose runner left no outcome file: exit_code (125 when it is 0: nothing was
+// measured, so it is not a success), no CPU time or RSS, and a line saying why in its stderr log.
+SweepOutcome sweep_outcome_without_file(const SweepJob& job, int exit_code, double wall_s, const std::string& host, const std::string& why);
+
 // The runner's arguments (after the runner program) for a job, and back: the job and its outcome
 // path from `--run-cell ...` arguments; throws InputError naming the expected form.
 std::vector<std::string> run_cell_arguments(const SweepJob& job);

@@ -161,6 +161,7 @@ int run_sweep(const SweepArgs& args, std::ostream& out) {
     eo.dir = args.out;
     eo.hosts = args.hosts;
     eo.runner = args.runner;
+    eo.local_runner = true;  // the cells' peak RSS is their own, not the sweep's (sweep_engine.h)
     eo.slurm_partition = args.slurm_partition;
     eo.slurm_args = args.slurm_args;
     if (!args.hosts.empty() && args.engine != "parallel") throw std::invalid_argument("--hosts needs --engine parallel");

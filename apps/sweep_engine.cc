@@ -1,6 +1,7 @@
 #include "sweep_engine.h"
 
 #include "sweep_cluster.h"
+#include "sweep_results.h"
 
 #include <fcntl.h>
 #include <signal.h>
@@ -129,10 +130,49 @@ void kill_group(pid_t pid) {
   if (kill(-pid, SIGKILL) != 0) kill(pid, SIGKILL);
 }
 
-// At most `jobs` children at once; a child past its timeout is killed with its process group.
+std::string self_program() {
+  char buf[4096];
+  const ssize_t n = readlink("/proc/self/exe", buf, sizeof(buf) - 1);
+  return n > 0 ? std::string(buf, static_cast<size_t>(n)) : std::string("evio-sweep");
+}
+
+// The job as `runner --run-cell ...` (sweep_cluster.h): the runner applies the job's timeout itself;
+// this engine kills it only 30 s after that (a runner that hangs). Its own messages go to
+// runner.log beside the job's logs; a stale outcome file is removed first.
+SweepJob through_runner(const SweepJob& job, const std::string& runner) {
+  SweepJob w;
+  w.program = runner;
+  w.args = run_cell_arguments(job);
+  const std::string outcome = sweep_outcome_path(job);
+  const size_t slash = outcome.rfind('/');
+  w.stdout_path = w.stderr_path = (slash == std::string::npos ? std::string() : outcome.substr(0, slash + 1)) + "runner.log";
+  w.timeout_s = job.timeout_s > 0 ? job.timeout_s + 30 : 0;
+  std::remove(outcome.c_str());
+  return w;
+}
+
+// The job's outcome from its runner's file; without one, what the runner's own end says.
+SweepOutcome runner_outcome(const SweepJob& job, const SweepOutcome& runner) {
+  SweepOutcome o;
+  if (parse_sweep_outcome(sweep_read_file(sweep_outcome_path(job)), &o)) {
+    o.host = runner.host;
+    o.started_utc = runner.started_utc;
+    return o;
+  }
+  o = sweep_outcome_without_file(job, runner.exit_code, runner.wall_s, runner.host,
+                                 "its runner ended with exit code " + std::to_string(runner.exit_code) +
+                                     (runner.timed_out ? " (killed 30 s after the cell's timeout)" : "") + "; see runner.log");
+  o.timed_out = runner.timed_out;
+  o.started_utc = runner.started_utc;
+  return o;
+}
+
+// At most `jobs` children at once; a child past its timeout is killed with its process group. With
+// a runner, each job runs as `runner --run-cell ...` (sweep_engine.h, "Peak RSS").
 class LocalEngine : public SweepEngine {
  public:
-  explicit LocalEngine(int jobs) : jobs_(jobs > 0 ? jobs : std::max(1u, std::thread::hardware_concurrency())) {}
+  explicit LocalEngine(int jobs, std::string runner = {})
+      : jobs_(jobs > 0 ? jobs : std::max(1u, std::thread::hardware_concurrency())), runner_(std::move(runner)) {}
   std::string name() const override { return "local"; }
 
   void run(const std::vector<SweepJob>& jobs, const std::function<void(size_t, const SweepOutcome&)>& done) override {
@@ -145,7 +185,7 @@ class LocalEngine : public SweepEngine {
         return;
       }
       while (static_cast<int>(running.size()) < jobs_ && next < jobs.size()) {
-        Running r = spawn(jobs[next], next);
+        Running r = spawn(runner_.empty() ? jobs[next] : through_runner(jobs[next], runner_), next);
         ++next;
         if (r.pid < 0) {
           done(r.index, r.outcome);
@@ -156,16 +196,16 @@ class LocalEngine : public SweepEngine {
       bool any = false;
       for (size_t k = 0; k < running.size();) {
         Running& r = running[k];
-        const double timeout = jobs[r.index].timeout_s;
+        const double timeout = jobs[r.index].timeout_s > 0 && !runner_.empty() ? jobs[r.index].timeout_s + 30 : jobs[r.index].timeout_s;
         if (!r.outcome.timed_out && timeout > 0 &&
             std::chrono::duration<double>(Clock::now() - r.start).count() > timeout) {
           r.outcome.timed_out = true;
-          kill_group(r.pid);
+          kill_group(r.pid);  // with a runner: its job dies with it (PR_SET_PDEATHSIG)
         }
         if (reap(&r, false)) {
           const Running finished = std::move(r);
           running.erase(running.begin() + static_cast<std::ptrdiff_t>(k));
-          done(finished.index, finished.outcome);
+          done(finished.index, runner_.empty() ? finished.outcome : runner_outcome(jobs[finished.index], finished.outcome));
           any = true;
         } else {
           ++k;
@@ -177,12 +217,15 @@ class LocalEngine : public SweepEngine {
 
  private:
   int jobs_;
+  std::string runner_;
 };
 
 }  // namespace
 
 std::unique_ptr<SweepEngine> make_sweep_engine(const std::string& name, const SweepEngineOptions& options) {
-  if (name == "local") return std::make_unique<LocalEngine>(options.jobs);
+  if (name == "local") {
+    return std::make_unique<LocalEngine>(options.jobs, options.local_runner ? (options.runner.empty() ? self_program() : options.runner) : "");
+  }
   if (name == "parallel") return make_parallel_engine(options);
   if (name == "slurm") return make_slurm_engine(options);
   throw std::invalid_argument("--engine " + name + ": unknown (engines: local, parallel, slurm)");

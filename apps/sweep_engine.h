@@ -49,6 +49,7 @@ struct SweepEngineOptions {
   int jobs = 0;                    // at most that many jobs at once (<= 0: the number of cores; slurm: no limit)
   std::string dir;                 // the sweep folder (parallel, slurm: their files go to DIR/parallel/, DIR/slurm/)
   std::string runner;              // evio-sweep itself (runs `--run-cell`); default: /proc/self/exe
+  bool local_runner = false;       // local: run each job through the runner too (the cells of a sweep; see below)
   std::string hosts;               // parallel: a GNU parallel --sshloginfile; empty: this machine only
   std::string slurm_partition;     // slurm: sbatch --partition; empty: the cluster's default
   std::string slurm_args;          // slurm: more #SBATCH options, split at spaces (e.g. "--mem=4G --qos=short")
@@ -57,6 +58,14 @@ struct SweepEngineOptions {
 // The engine called `name` (local, parallel, slurm). Throws std::invalid_argument naming the
 // engines that exist for any other name, or saying what an engine needs that is missing.
 std::unique_ptr<SweepEngine> make_sweep_engine(const std::string& name, const SweepEngineOptions& options);
+
+// Peak RSS: ru_maxrss of a child is at least the resident size of the process it was forked from
+// (Linux keeps the high-water mark across fork's copy of the address space and across exec), so a
+// cell forked from the sweep itself would be charged the sweep's memory (it reads every cell's
+// stats.json: 330 MiB after a one-hour vio run). With local_runner the local engine starts
+// `RUNNER --run-cell ...` (a fresh ~13 MiB process) and takes the job's outcome from the outcome
+// file the runner writes, as the parallel and slurm engines do: a cell's peak_rss_mb is its
+// program's own peak (exact above the runner's ~13 MiB, which no evio command is below).
 
 // Runs one job to its end on this machine (what the local engine does per cell).
 SweepOutcome run_job(const SweepJob& job);

@@ -317,6 +317,7 @@ SweepArgs fake_sweep(const evio_test::TempDir& tmp, const std::string& spec_text
   a.programs_dir = fake_programs(tmp);
   a.python = tmp.file("no_python");
   a.progress = false;
+  a.runner = EVIO_SWEEP;  // the local engine runs each cell through `evio-sweep --run-cell`
   return a;
 }
 
@@ -476,6 +477,25 @@ TEST(SweepRun, SweepKilledOutrightTakesItsCellsWithItAndResumeRunsThem) {
   EXPECT_TRUE(gone) << "the cell " << cell << " outlived the sweep";
   if (!gone) kill(cell, SIGKILL);
   expect_resume_records_the_cell(a);
+}
+
+// A cell forked from a big sweep process must not be charged its memory: ru_maxrss survives fork and
+// exec, so the local engine starts each cell from the small runner. Here the sweep holds 300 MiB
+// (touched); the stand-in program's peak stays near the runner's ~13 MiB. Forking the cells from the
+// sweep itself gave >= 300 MiB (after a one-hour vio cell, 327 MiB for corners cells of 56).
+TEST(SweepRun, PeakRssIsTheCellsOwnNotTheSweeps) {
+  evio_test::TempDir tmp;
+  std::vector<char> ballast(300u << 20);
+  for (size_t i = 0; i < ballast.size(); i += 4096) ballast[i] = static_cast<char>(i);
+  const SweepArgs a = fake_sweep(tmp, "datasets: [rec]\nalgorithms:\n  - {algorithm: flow, grid: {err: [1, 2]}}\n");
+  ASSERT_EQ(run_quietly(a), 0);
+  const auto recs = read_sweep_records(a.out + "/results.jsonl");
+  ASSERT_EQ(recs.size(), 2u);
+  for (const SweepRecord& r : recs) {
+    EXPECT_GT(r.peak_rss_mb, 0.5) << r.cell;
+    EXPECT_LT(r.peak_rss_mb, 40) << r.cell;
+  }
+  EXPECT_EQ(ballast[4096], static_cast<char>(4096));
 }
 
 TEST(SweepRun, UnknownEngineIsAnError) {
