@@ -18,8 +18,9 @@ DIR: sweep folders (their results.jsonl; the last record of each cell counts, as
   land in one table cell and differ in anything else are an error: the table would hide a setting.
 --where FIELD=VALUE: keep only the cells whose field (as for --rows) has this value; repeatable.
 Rows and columns: numbers ascending, other values in the order first met in results.jsonl (the
-spec's order when the sweep ran with -j 1). A table cell shows `-` when it has no cell, `failed (k/n)` when k of its n cells did not exit 0 or
-lack the value (the mean of the others follows in brackets), and the mean otherwise. Exit code 1 on
+spec's order when the sweep ran with -j 1). A table cell shows `-` when it has no cell, `failed (k/n)` when k of its n cells did not exit 0,
+`n/a` when its cells ran but do not report the value (`n/a (k/n)` for some of them; the mean of the
+others follows in brackets), and the mean otherwise. Exit code 1 on
 a bad argument or an ambiguous table, with a message that says why.
 """
 import argparse
@@ -159,16 +160,19 @@ def main():
 
     def cell_text(rs):
         texts, means = [], []
+        failed = sum(1 for r in rs if r.get("exit_code") != 0)
         for name in args.value:
             vals = [value(r, name) if r.get("exit_code") == 0 else math.nan for r in rs]
             good = [v for v in vals if math.isfinite(v)]
             mean = sum(good) / len(good) if good else math.nan
             means.append(mean if len(good) == len(vals) else math.nan)  # the mean column needs every cell
+            part = (" [" + args.format % mean + "]") if good else ""
             if len(good) == len(vals):
                 texts.append(args.format % mean)
-            else:
-                texts.append("failed (%d/%d)%s" % (len(vals) - len(good), len(vals),
-                                                   (" [" + args.format % mean + "]") if good else ""))
+            elif failed:
+                texts.append("failed (%d/%d)%s" % (failed, len(vals), part))
+            else:  # the cells ran and do not report it (e.g. no reference to score against)
+                texts.append("n/a" if not good else "n/a (%d/%d)%s" % (len(vals) - len(good), len(vals), part))
         return " / ".join(texts), means
 
     # Numbers in ascending order, other values in the order first met (the spec's order with -j 1).

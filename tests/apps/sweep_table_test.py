@@ -39,6 +39,8 @@ with tempfile.TemporaryDirectory() as d:
         rec("c1", "split", "boxes", 1, 1.0, 2.0), rec("c2", "split", "boxes", 2, 9.0, 2.0, exit_code=1),
         rec("d1", "drop", "boxes", 1, 2.0, 2.0), rec("d2", "drop", "boxes", 2, 4.0, 2.0),
         rec("e1", "split", "poster", 1, 0.0, 1.0, inputs="aps"),
+        rec("f1", "split", "room", 1, None, 1.0), rec("f2", "split", "room", 2, 1.5, 1.0),  # ran, no value
+        rec("g1", "drop", "room", 1, None, 1.0), rec("g2", "drop", "room", 2, None, 1.0),
         rec("a1", "split", "poster", 1, 0.6, 1.0),  # a rerun: the last record counts (0.6, not 0.2)
     ]
     with open(os.path.join(d, "results.jsonl"), "w") as f:
@@ -47,19 +49,21 @@ with tempfile.TemporaryDirectory() as d:
 
     rc, out, err = run(d, *base, "--value", "err", "--format", "%.2f", "--mean-column")
     expect("pivot rc", rc, 0)
-    expect("pivot", out, "| mode | poster | boxes | mean |\n|---|---|---|---|\n"
-                         "| split | 0.50 | failed (1/2) [1.00] | - |\n| drop | 0.60 | 3.00 | 1.80 |\n")
+    expect("pivot", out, "| mode | poster | boxes | room | mean |\n|---|---|---|---|---|\n"
+                         "| split | 0.50 | failed (1/2) [1.00] | n/a (1/2) [1.50] | - |\n| drop | 0.60 | 3.00 | n/a | - |\n")
 
     rc, out, err = run(d, *base, "--value", "err", "--value", "cpu_s", "--format", "%.1f", "--csv")
-    expect("csv", out, "mode,poster,boxes\nsplit,0.5 / 2.0,failed (1/2) [1.0] / failed (1/2) [2.0]\ndrop,0.6 / 1.0,3.0 / 2.0\n")
+    expect("csv", out, "mode,poster,boxes,room\nsplit,0.5 / 2.0,failed (1/2) [1.0] / failed (1/2) [2.0],n/a (1/2) [1.5] / 1.0\n"
+                       "drop,0.6 / 1.0,3.0 / 2.0,n/a / 1.0\n")
 
     # the mean of the per-cell ratios: (0.6 / 1 + 0.4 / 3) * 10 / 2
     rc, out, err = run(d, *base, "--value", "err/cpu_s*10", "--format", "%.2f")
-    expect("ratio", out, "| mode | poster | boxes |\n|---|---|---|\n| split | 3.67 | failed (1/2) [5.00] |\n| drop | 6.00 | 15.00 |\n")
+    expect("ratio", out, "| mode | poster | boxes | room |\n|---|---|---|---|\n| split | 3.67 | failed (1/2) [5.00] | n/a (1/2) [15.00] |\n"
+                         "| drop | 6.00 | 15.00 | n/a |\n")
 
     rc, out, err = run(d, "--rows", "tracker.seed", "--cols", "dataset", "--value", "err", "--where", "inputs=events",
                        "--where", "mode=drop")
-    expect("numeric order", out, "| tracker.seed | poster | boxes |\n|---|---|---|\n| 1 | 0.5 | 2 |\n| 2 | 0.7 | 4 |\n")
+    expect("numeric order", out, "| tracker.seed | poster | boxes | room |\n|---|---|---|---|\n| 1 | 0.5 | 2 | n/a |\n| 2 | 0.7 | 4 | n/a |\n")
 
     rc, out, err = run(d, "--rows", "mode", "--cols", "dataset", "--value", "err", "--mean-over", "tracker.seed")
     expect("ambiguous rc", rc, 1)
