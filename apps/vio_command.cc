@@ -421,7 +421,8 @@ int run_vio_estimation(const VioArgs& args, std::ostream& out) {
     }
     mj << ", \"summary\": \"" << json_escape(summary.str()) << "\"}";
   }
-  std::ostringstream j;
+  // Written as it is formatted: a long run's stats.json (7.5 MB for an hour) is not held in memory twice.
+  std::ofstream j((fs::path(args.out) / "stats.json").string());
   j << "{\n  \"dataset\": \"" << json_escape(args.dataset) << "\",\n  \"model\": " << mj.str() << ",\n  \"inputs\": \"" << pipeline::to_string(cfg.inputs)
     << "\",\n  \"frontend\": \"" << pipeline::to_string(cfg.frontend)
     << "\",\n  \"events\": " << vs.events << ",\n  \"corners\": " << vs.corner_events << ",\n  \"frames\": " << st.frames
@@ -484,12 +485,9 @@ int run_vio_estimation(const VioArgs& args, std::ostream& out) {
     << ",\n  \"observations_dropped\": " << st.observations_dropped
     << ",\n  \"tracked_landmarks_marginalised\": " << st.tracked_landmarks_marginalised << ",\n  \"rotation_only_keyframes\": " << st.rotation_only_keyframes;
   if (cfg.window.estimate_time_offset) j << ",\n  \"time_offset_correction_s\": " << num(st.time_offset_s);
-  j
-    << "\n}\n";
-  {
-    std::ofstream f((fs::path(args.out) / "stats.json").string());
-    f << j.str();
-  }
+  j << "\n}\n";
+  j.close();
+  if (!j) throw InputError((fs::path(args.out) / "stats.json").string(), 0, "write failed (disk full?)", "a writable output folder");
   char buf[512];
   std::snprintf(buf, sizeof(buf),
                 "events        %lld over %.2f s, %lld corner events, %lld frames, %lld keyframes, %zu landmarks\n"
