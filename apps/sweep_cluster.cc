@@ -33,18 +33,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-std::string local_hostname() {
-  char buf[256] = {0};
-  if (gethostname(buf, sizeof(buf) - 1) != 0) return "unknown";
-  return buf;
-}
-
-std::string self_exe() {
-  std::error_code ec;
-  const fs::path p = fs::read_symlink("/proc/self/exe", ec);
-  return ec ? std::string("evio-sweep") : p.string();
-}
-
 // Whether `program` is found on PATH (or is a path that exists).
 bool on_path(const std::string& program) {
   if (program.find('/') != std::string::npos) return access(program.c_str(), X_OK) == 0;
@@ -221,7 +209,7 @@ class ParallelEngine : public SweepEngine {
     if (!o_.hosts.empty() && !on_path("rsync")) {
       throw std::invalid_argument("--engine parallel --hosts: rsync is not installed (Debian: apt-get install rsync)");
     }
-    if (o_.runner.empty()) o_.runner = self_exe();
+    if (o_.runner.empty()) o_.runner = sweep_self_program();
     o_.dir = fs::absolute(o_.dir).lexically_normal().string();
     while (o_.dir.size() > 1 && o_.dir.back() == '/') o_.dir.pop_back();
   }
@@ -314,7 +302,7 @@ class ParallelEngine : public SweepEngine {
       if (reported[i]) continue;
       SweepOutcome o;
       if (!read_outcome(jobs[i], &o)) {
-        o = sweep_outcome_without_file(jobs[i], 127, s, remote ? "" : local_hostname(),
+        o = sweep_outcome_without_file(jobs[i], 127, s, remote ? "" : sweep_hostname(),
                                  "GNU parallel ended (" + std::string(WIFEXITED(status) ? "exit code " + std::to_string(WEXITSTATUS(status))
                                                                                        : "signal " + std::to_string(WTERMSIG(status))) +
                                      ") without running it; its messages: " + log);
@@ -370,7 +358,7 @@ class ParallelEngine : public SweepEngine {
   std::string remote_workdir() const {
     char hash[17];
     std::snprintf(hash, sizeof(hash), "%016zx", std::hash<std::string>()(o_.dir));
-    return ".evio-sweep/" + local_hostname() + "-" + hash;
+    return ".evio-sweep/" + sweep_hostname() + "-" + hash;
   }
 
   SweepEngineOptions o_;
@@ -390,7 +378,7 @@ class SlurmEngine : public SweepEngine {
     for (const char* p : {"sbatch", "squeue", "scancel", "scontrol"}) {
       if (!on_path(p)) throw std::invalid_argument(std::string("--engine slurm: ") + p + " is not on PATH (a Slurm client: Debian slurm-client or slurm-wlm)");
     }
-    if (o_.runner.empty()) o_.runner = self_exe();
+    if (o_.runner.empty()) o_.runner = sweep_self_program();
     o_.dir = fs::absolute(o_.dir).lexically_normal().string();
     while (o_.dir.size() > 1 && o_.dir.back() == '/') o_.dir.pop_back();
   }

@@ -28,12 +28,6 @@ volatile std::sig_atomic_t g_stop = 0;
 
 using Clock = std::chrono::steady_clock;
 
-std::string hostname() {
-  char buf[256] = {0};
-  if (gethostname(buf, sizeof(buf) - 1) != 0) return "unknown";
-  return buf;
-}
-
 std::string utc_now() {
   const std::time_t t = std::time(nullptr);
   std::tm tm{};
@@ -58,7 +52,7 @@ struct Running {
 Running spawn(const SweepJob& job, size_t index) {
   Running r;
   r.index = index;
-  r.outcome.host = hostname();
+  r.outcome.host = sweep_hostname();
   r.outcome.started_utc = utc_now();
   // Everything the child needs is prepared before fork (only async-signal-safe calls after it).
   std::vector<char*> argv;
@@ -128,12 +122,6 @@ bool reap(Running* r, bool block) {
 
 void kill_group(pid_t pid) {
   if (kill(-pid, SIGKILL) != 0) kill(pid, SIGKILL);
-}
-
-std::string self_program() {
-  char buf[4096];
-  const ssize_t n = readlink("/proc/self/exe", buf, sizeof(buf) - 1);
-  return n > 0 ? std::string(buf, static_cast<size_t>(n)) : std::string("evio-sweep");
 }
 
 // The job as `runner --run-cell ...` (sweep_cluster.h): the runner applies the job's timeout itself;
@@ -224,7 +212,7 @@ class LocalEngine : public SweepEngine {
 
 std::unique_ptr<SweepEngine> make_sweep_engine(const std::string& name, const SweepEngineOptions& options) {
   if (name == "local") {
-    return std::make_unique<LocalEngine>(options.jobs, options.local_runner ? (options.runner.empty() ? self_program() : options.runner) : "");
+    return std::make_unique<LocalEngine>(options.jobs, options.local_runner ? (options.runner.empty() ? sweep_self_program() : options.runner) : "");
   }
   if (name == "parallel") return make_parallel_engine(options);
   if (name == "slurm") return make_slurm_engine(options);
@@ -235,6 +223,18 @@ SweepOutcome run_job(const SweepJob& job) {
   SweepOutcome out;
   LocalEngine(1).run({job}, [&out](size_t, const SweepOutcome& o) { out = o; });
   return out;
+}
+
+std::string sweep_hostname() {
+  char buf[256] = {0};
+  if (gethostname(buf, sizeof(buf) - 1) != 0) return "unknown";
+  return buf;
+}
+
+std::string sweep_self_program() {
+  char buf[4096];
+  const ssize_t n = readlink("/proc/self/exe", buf, sizeof(buf) - 1);
+  return n > 0 ? std::string(buf, static_cast<size_t>(n)) : std::string("evio-sweep");
 }
 
 void request_sweep_stop() { g_stop = 1; }

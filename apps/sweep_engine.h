@@ -67,6 +67,11 @@ std::unique_ptr<SweepEngine> make_sweep_engine(const std::string& name, const Sw
 // file the runner writes, as the parallel and slurm engines do: a cell's peak_rss_mb is its
 // program's own peak (exact above the runner's ~13 MiB, which no evio command is below).
 
+// This machine's host name ("unknown" when it cannot be read), and this program's path
+// (/proc/self/exe; "evio-sweep" when it cannot be read): the runner's default.
+std::string sweep_hostname();
+std::string sweep_self_program();
+
 // Runs one job to its end on this machine (what the local engine does per cell).
 SweepOutcome run_job(const SweepJob& job);
 
