@@ -164,6 +164,10 @@ class LocalEngine : public SweepEngine {
   std::string name() const override { return "local"; }
 
   void run(const std::vector<SweepJob>& jobs, const std::function<void(size_t, const SweepOutcome&)>& done) override {
+    std::vector<SweepJob> started = jobs;  // what is spawned: the jobs, or their runners
+    if (!runner_.empty()) {
+      for (SweepJob& j : started) j = through_runner(j, runner_);
+    }
     std::vector<Running> running;
     size_t next = 0;
     while (next < jobs.size() || !running.empty()) {
@@ -173,7 +177,7 @@ class LocalEngine : public SweepEngine {
         return;
       }
       while (static_cast<int>(running.size()) < jobs_ && next < jobs.size()) {
-        Running r = spawn(runner_.empty() ? jobs[next] : through_runner(jobs[next], runner_), next);
+        Running r = spawn(started[next], next);
         ++next;
         if (r.pid < 0) {
           done(r.index, r.outcome);
@@ -184,7 +188,7 @@ class LocalEngine : public SweepEngine {
       bool any = false;
       for (size_t k = 0; k < running.size();) {
         Running& r = running[k];
-        const double timeout = jobs[r.index].timeout_s > 0 && !runner_.empty() ? jobs[r.index].timeout_s + 30 : jobs[r.index].timeout_s;
+        const double timeout = started[r.index].timeout_s;
         if (!r.outcome.timed_out && timeout > 0 &&
             std::chrono::duration<double>(Clock::now() - r.start).count() > timeout) {
           r.outcome.timed_out = true;
