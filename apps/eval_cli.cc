@@ -67,6 +67,13 @@ int main(int argc, char** argv) try {
       "--rpe-lengths", [&eval](const std::string& s) { parse_rpe_lengths(s, &eval.options.rpe); },
       "Sub-trajectory lengths of the relative error: 10,20,30,40,50% (of the ground-truth path length, the "
       "default) or metres, e.g. 5,10,20m");
+  cli->add_option("--rre-interval", eval.rre_interval_s,
+                  "Relative rotation error over this interval (from every 5th estimate pose), s; 0: off")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cli->add_option("--imu", eval.imu,
+                  "IMU of the recording (any dataset evio reads, e.g. the ECD folder or its imu.txt): the RRE of the "
+                  "measured gyro integrated alone over the same intervals, the reference for the estimate's RRE");
   cli->add_option("-o,--out", eval.out,
                   "Output folder: results.json, summary.{csv,yaml,json,tex}, per-estimate aligned TUM and error csv");
   cli->add_option("--plot", eval.plot,

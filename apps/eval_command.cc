@@ -17,6 +17,7 @@
 
 #include "evio/calib/error.h"
 #include "evio/evaluation/run_summary.h"
+#include "evio/sensors/dataset.h"
 #include "evio/calib/log.h"
 #include "evio/sensors/time.h"
 #include "script_path.h"
@@ -83,6 +84,21 @@ std::vector<EstimateEvaluation> evaluate_all(const EvalArgs& args) {
   TextReadOptions gt_read = args.read;
   gt_read.time_unit = args.groundtruth_time_unit;
   const Trajectory gt = read_trajectory(args.groundtruth, gt_read);
+  if (args.rre_interval_s < 0 || !std::isfinite(args.rre_interval_s))
+    throw InputError("evio eval", 0, "invalid RRE interval", "--rre-interval S with S >= 0 (0: off)");
+  // The gyro integrated alone, for the RRE's reference.
+  std::optional<Trajectory> gyro = args.gyro_orientation;
+  if (!gyro && !args.imu.empty() && args.rre_interval_s > 0) {
+    auto reader = open_dataset(args.imu);
+    evaluation::GyroIntegrator integrator;
+    std::vector<ImuSample> chunk;
+    while (reader->read_imu_samples(&chunk, 4096) > 0) {
+      for (const ImuSample& s : chunk) integrator.add(s);
+      chunk.clear();
+    }
+    if (integrator.samples() < 2) throw InputError(args.imu, 0, "no IMU samples", "a dataset or imu.txt with IMU samples");
+    gyro = integrator.trajectory();
+  }
   std::vector<EstimateEvaluation> out;
   for (size_t i = 0; i < args.estimates.size(); ++i) {
     EstimateEvaluation e;
@@ -95,6 +111,12 @@ std::vector<EstimateEvaluation> evaluate_all(const EvalArgs& args) {
       e.result = evaluation::evaluate(gt, est, args.options);
     } catch (const std::invalid_argument& ex) {
       throw InputError(e.file, 0, ex.what());
+    }
+    if (args.rre_interval_s > 0) {
+      evaluation::RelativeRotationOptions ro;
+      ro.interval_s = args.rre_interval_s;
+      e.rre = evaluation::relative_rotation_error(gt, est, ro);
+      if (gyro) e.rre_gyro = evaluation::relative_rotation_error_at(gt, *gyro, e.rre->start_ns, args.rre_interval_s);
     }
     for (size_t k = 1; k < e.result.aligned_estimate.size(); ++k) {
       e.estimate_length_m +=
@@ -149,6 +171,12 @@ std::string results_json(const EvalArgs& args, const std::vector<EstimateEvaluat
       << ", \"estimate_length_m\": " << num(e.estimate_length_m)
       << ", \"final_yaw_error_deg\": " << num(r.final_yaw_error_deg)
       << ", \"yaw_drift_deg_per_m\": " << num(r.yaw_drift_deg_per_m) << ",\n";
+    if (e.rre) {
+      j << "     \"rre\": {\"interval_s\": " << num(e.rre->interval_s) << ", \"count\": " << e.rre->deg.count
+        << ", \"deg\": " << stats_json(e.rre->deg);
+      if (e.rre_gyro) j << ", \"gyro_count\": " << e.rre_gyro->deg.count << ", \"gyro_deg\": " << stats_json(e.rre_gyro->deg);
+      j << "},\n";
+    }
     const auto& t = r.pairs.t_ns;
     j << "     \"time_span_s\": [" << (t.empty() ? "null" : format_seconds(t.front())) << ", "
       << (t.empty() ? "null" : format_seconds(t.back())) << "],\n";
@@ -263,14 +291,18 @@ std::string results_table(const EvalArgs& args, const std::vector<EstimateEvalua
       t << buf;
     }
   }
-  t << " " << "yaw drift" << "\n";
+  t << " " << "yaw drift";
+  const bool any_rre = std::any_of(results.begin(), results.end(), [](const EstimateEvaluation& e) { return e.rre.has_value(); });
+  const bool any_gyro = std::any_of(results.begin(), results.end(), [](const EstimateEvaluation& e) { return e.rre_gyro.has_value(); });
+  if (any_rre) t << "  " << fmt("RRE@%gs", args.rre_interval_s) << (any_gyro ? " (gyro)" : "");
+  t << "\n";
   std::snprintf(buf, sizeof(buf), "%-*s %7s %9s %9s %9s %9s %7s", static_cast<int>(width), "", "poses", "m", "m",
                 "m", "deg", "%");
   t << buf;
   if (!results.empty()) {
     for (size_t k = 0; k < results.front().result.rpe.size(); ++k) t << "         %";
   }
-  t << "     deg/m\n";
+  t << "     deg/m" << (any_rre ? "  deg rms" : "") << "\n";
   for (const auto& e : results) {
     const auto& r = e.result;
     std::snprintf(buf, sizeof(buf), "%-*s %7zu %9.4f %9.4f %9.4f %9.3f %7.3f", static_cast<int>(width),
@@ -285,8 +317,17 @@ std::string results_table(const EvalArgs& args, const std::vector<EstimateEvalua
       }
       t << buf;
     }
-    std::snprintf(buf, sizeof(buf), " %9.5f\n", r.yaw_drift_deg_per_m);
+    std::snprintf(buf, sizeof(buf), " %9.5f", r.yaw_drift_deg_per_m);
     t << buf;
+    if (e.rre) {
+      std::snprintf(buf, sizeof(buf), "  %.4f", e.rre->deg.rmse);
+      t << buf;
+      if (e.rre_gyro) {
+        std::snprintf(buf, sizeof(buf), " (%.4f)", e.rre_gyro->deg.rmse);
+        t << buf;
+      }
+    }
+    t << "\n";
   }
   return t.str();
 }

@@ -6,9 +6,11 @@
 #pragma once
 
 #include <iosfwd>
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "evio/evaluation/rotation_error.h"
 #include "evio/evaluation/run_summary.h"
 #include "evio/evaluation/trajectory_evaluation.h"
 #include "evio/sensors/trajectory.h"
@@ -27,6 +29,12 @@ struct EvalArgs {
                                          // or to `plot` when `out` is empty
   std::string python = "/usr/bin/python3";  // interpreter for the plot script
   std::string plot_script;               // empty: <source>/scripts or <prefix>/share/evio/scripts
+  // Relative rotation error over this interval (s, > 0; 0: not computed), from every 5th estimate
+  // pose; with a gyro (imu file, or gyro_orientation given by a caller) also the measured gyro
+  // integrated alone over the same intervals.
+  double rre_interval_s = 1.0;
+  std::string imu;                       // IMU file for the gyro's RRE (any dataset evio reads); empty: none
+  std::optional<Trajectory> gyro_orientation;  // or the integrated gyro itself (evaluation::GyroIntegrator)
 };
 
 // Result of one estimate, with what the outputs need.
@@ -36,6 +44,8 @@ struct EstimateEvaluation {
   std::string name;    // unique output prefix, e.g. "est0_run1"
   double estimate_length_m = 0;  // path length of the matched estimate after alignment, m
   evaluation::EvaluationResult result;
+  std::optional<evaluation::RelativeRotationError> rre;       // rre_interval_s > 0
+  std::optional<evaluation::RelativeRotationError> rre_gyro;  // the gyro alone over the same intervals
 };
 
 // Evaluates each estimate (throws evio::InputError when options are invalid or nothing associates).

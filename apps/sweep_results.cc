@@ -56,6 +56,8 @@ const std::vector<AlgorithmMetrics>& algorithm_metrics() {
         {"mean_position_error_percent_causal", "eval.json", "estimates.1.mean_position_error_percent"},
         {"yaw_drift_deg_per_m", "eval.json", "estimates.0.yaw_drift_deg_per_m"},
         {"final_yaw_error_deg", "eval.json", "estimates.0.final_yaw_error_deg"},
+        {"rre_1s_deg", "eval.json", "estimates.0.rre.deg.rmse"},
+        {"rre_1s_gyro_deg", "eval.json", "estimates.0.rre.gyro_deg.rmse"},
         {"keyframes", "stats.json", "keyframes"},
         {"rotation_only_keyframes", "stats.json", "rotation_only_keyframes"}},
        "sequence_duration_s", nullptr,

@@ -6,7 +6,8 @@
 // tracks lost while their landmark was in view. Prints a table; --json writes the figures.
 //   track_quality SEQ SCENE.yaml OBSERVATIONS.txt [--json FILE] [--residuals FILE] [--lag-scan] [--set key=value ...]
 // SEQ is the `evio simulate` folder (groundtruth.txt, calib.yaml); SCENE.yaml the scene it was
-// simulated from (with the same --set overrides, e.g. trajectory.path for the mocap replay).
+// simulated from (with the same --set overrides, e.g. trajectory.path for the mocap replay), or
+// SEQ/meta.json for a room sequence of the crosscheck simulator (../shared/crosscheck_sim).
 #include <cmath>
 #include <cstdio>
 #include <exception>
@@ -17,6 +18,7 @@
 #include <vector>
 
 #include "evio/calib/calibration_io.h"
+#include "evio/evaluation/box_room_scene.h"
 #include "evio/evaluation/track_evaluation.h"
 #include "evio/simulator/scene.h"
 #include "evio/sensors/trajectory.h"
@@ -95,16 +97,20 @@ int main(int argc, char** argv) {
         throw std::runtime_error("unknown argument '" + a + "'");
       }
     }
-    const simulator::SimulationConfig cfg = simulator::load_simulation_config(scene_yaml, ov);
-    const auto* planes = dynamic_cast<const simulator::PlanarScene*>(cfg.scene.get());
-    if (!planes) throw std::runtime_error(scene_yaml + ": track_quality needs a planes scene (got " + cfg.scene_type + ")");
+    // The true scene: evio's planar scene YAML, or the meta.json of a crosscheck-simulator room.
+    evaluation::RayCaster cast;
+    if (scene_yaml.size() > 5 && scene_yaml.substr(scene_yaml.size() - 5) == ".json") {
+      cast = evaluation::load_crosscheck_room(scene_yaml).caster();
+    } else {
+      const simulator::SimulationConfig cfg = simulator::load_simulation_config(scene_yaml, ov);
+      auto planes = std::dynamic_pointer_cast<const simulator::PlanarScene>(cfg.scene);
+      if (!planes) throw std::runtime_error(scene_yaml + ": track_quality needs a planes scene (got " + cfg.scene_type + ")");
+      cast = [planes](const Eigen::Vector3d& o, const Eigen::Vector3d& d) { return planes->intersect(o, d); };
+    }
     const auto cams = calib::load_kalibr_camchain(seq + "/calib.yaml");
     if (cams.empty()) throw std::runtime_error(seq + "/calib.yaml: no camera");
     const Trajectory gt = read_tum(seq + "/groundtruth.txt");
     const std::vector<FeatureObservations> frames = read_observations(obs_path);
-    const evaluation::RayCaster cast = [planes](const Eigen::Vector3d& o, const Eigen::Vector3d& d) {
-      return planes->intersect(o, d);
-    };
     evaluation::TrackEvaluationOptions anchored, triangulated;
     triangulated.reference = evaluation::TrackReference::kTriangulated;
     anchored.keep_residuals = !residuals.empty();

@@ -1,0 +1,66 @@
+// Relative rotation error over a fixed time interval (RRE): how far an estimate's orientation
+// change over dt seconds departs from the ground truth's, the figure that tells whether a VIO's
+// orientation is as good as its gyro. For a start time t, with both trajectories interpolated
+// (slerp) at t and t + dt, the error is the angle of (R_gt(t)^T R_gt(t+dt))^T (R_est(t)^T R_est(t+dt)).
+// The reference is the measured gyro integrated alone over the same intervals (GyroIntegrator):
+// an estimator whose RRE is near the gyro's adds no orientation error of its own.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "evio/evaluation/trajectory_evaluation.h"
+#include "evio/sensors/measurements.h"
+#include "evio/sensors/trajectory.h"
+
+namespace evio::evaluation {
+
+struct RelativeRotationOptions {
+  double interval_s = 1.0;  // dt, s, > 0
+  size_t stride = 5;        // every stride-th estimate pose starts an interval (count, >= 1)
+  bool Validate(std::string* why) const;
+};
+
+struct RelativeRotationError {
+  double interval_s = 0;
+  Stats deg;                        // over the intervals, deg
+  std::vector<int64_t> start_ns;    // the intervals' start times
+  std::vector<double> errors_deg;   // per interval
+};
+
+// Intervals start at every stride-th estimate stamp whose interval [t, t + dt] both trajectories
+// cover. No interval: count 0. Throws std::invalid_argument on invalid options.
+RelativeRotationError relative_rotation_error(const Trajectory& groundtruth, const Trajectory& estimate,
+                                              const RelativeRotationOptions& options);
+// The same at given start times (e.g. another estimate's, for a like-for-like comparison); starts
+// whose interval either trajectory does not cover are skipped.
+RelativeRotationError relative_rotation_error_at(const Trajectory& groundtruth, const Trajectory& estimate,
+                                                 const std::vector<int64_t>& start_ns, double interval_s);
+
+// The orientation obtained by integrating the measured angular rate alone (body frame, no bias
+// removed, trapezoid on consecutive samples: R <- R Exp((w_k + w_k+1) / 2 dt)), kept every
+// period_ns as an orientation-only trajectory (positions zero). Memory is one pose per period
+// (200 Hz: 14 MB per hour), so it can run beside a streaming reader.
+class GyroIntegrator {
+ public:
+  explicit GyroIntegrator(int64_t period_ns = 5'000'000);
+  // Samples in time order (IMU clock); others are ignored.
+  void add(const ImuSample& sample);
+  // The orientation samples so far (the last sample is always included).
+  Trajectory trajectory() const;
+  size_t samples() const { return samples_; }
+
+ private:
+  int64_t period_ns_;
+  std::vector<StampedPose> poses_;
+  calib::Quat q_ = calib::Quat::Identity();
+  ImuSample last_{};
+  bool have_last_ = false;
+  bool tentative_ = false;  // poses_.back() is the newest sample, less than a period after the last kept
+  int64_t kept_t_ns_ = 0;
+  size_t samples_ = 0;
+};
+
+}  // namespace evio::evaluation
