@@ -13,6 +13,8 @@ const Table<frontend::EventFrameOptions>& event_frame_table() {
           .integer("events_per_frame", &O::events_per_frame, 1, 100000000)
           .duration_ms("min_window_ms", &O::min_window_ns, Range::kNonNegative)
           .duration_ms("max_window_ms", &O::max_window_ns, Range::kPositive)
+          .duration_ms("sparse_max_window_ms", &O::sparse_max_window_ns, Range::kNonNegative)
+          .duration_ms("sparse_after_ms", &O::sparse_after_ns, Range::kNonNegative)
           .integer("min_events", &O::min_events, 1, 100000000)
           .number("overlap", &O::overlap, Range::kNonNegative, "fraction of a frame's events")
           .boolean("motion_compensation", &O::motion_compensation)
@@ -53,7 +55,7 @@ const Table<frontend::FeatureTrackerOptions>& feature_tracker_table() {
           .integer("anchor_frames", &O::anchor_frames, 0, 100000)
           .number("anchor_ransac_threshold_px", &O::anchor_ransac_threshold_px, Range::kPositive, "px")
           .choice("ransac", &O::ransac,
-                  {{"two_point", RansacModel::kTwoPoint}, {"five_point", RansacModel::kFivePoint}, {"none", RansacModel::kNone}})
+                  {{"two_point", RansacModel::kTwoPoint}, {"two_point_triangulating", RansacModel::kTwoPointTriangulating}, {"five_point", RansacModel::kFivePoint}, {"none", RansacModel::kNone}})
           .number("ransac_threshold_px", &O::ransac_threshold_px, Range::kPositive, "px")
           .integer("ransac_max_iterations", &O::ransac_max_iterations, 1, 1000000)
           .integer("min_tracks_before_detection", &O::min_tracks_before_detection, 0, 100000)

@@ -17,8 +17,9 @@ int main(int argc, char** argv) try {
   cli->add_option("--gt", vio.gt,
                   "Ground truth (TUM or csv): evaluate at the end (SE3 alignment on the first 5 s) into eval.json");
   cli->add_option("--oracle-tracks", vio.oracle_scene,
-                  "Error budget on a simulated sequence: SCENE.yaml it was simulated from (needs --gt). The estimator "
-                  "sees the true projections of the front-end's tracks (same tracks, lifetimes and frames)");
+                  "Error budget on a simulated sequence: SCENE.yaml it was simulated from, or the meta.json of a "
+                  "crosscheck-simulator room sequence (needs --gt). The estimator sees the true projections of the "
+                  "front-end's tracks (same tracks, lifetimes and frames)");
   cli->add_option("--oracle-noise-px", vio.oracle_noise_px,
                   "With --oracle-tracks: white Gaussian noise added per axis (px on the ideal pinhole)")
       ->check(CLI::NonNegativeNumber);
@@ -37,6 +38,10 @@ int main(int argc, char** argv) try {
   cli->add_flag("--oracle-frame-plane", vio.oracle_frame_plane,
                 "With --oracle-frame-motion: each event's depth from the least-squares plane through the true scene "
                 "points of the frame's tracks instead of their median depth");
+  cli->add_option("--dump-tracking-images", vio.dump_tracking_images,
+                  "Write every N-th image the frames front-end tracks (event frame or reconstruction, undistorted) to "
+                  "OUT/tracking_images/ as PNG (0: none)")
+      ->check(CLI::NonNegativeNumber);
   cli->add_option("--oracle-max-error-px", vio.oracle_max_error_px,
                   "With --oracle-error real or independent: drop observations whose own error is larger (px; 0 = keep "
                   "all)")

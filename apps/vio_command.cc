@@ -22,9 +22,12 @@
 #include "evio/calib/calibration_io.h"
 #include "evio/calib/error.h"
 #include "evio/calib/log.h"
+#include "evio/evaluation/box_room_scene.h"
+#include "evio/evaluation/rotation_error.h"
 #include "evio/evaluation/track_oracle.h"
 #include "evio/mapping/landmark_map.h"
 #include "evio/sensors/ecd.h"
+#include "evio/sensors/image_io.h"
 #include "evio/sensors/time.h"
 #include "json_util.h"
 #include "evio/sensors/dataset_calibration.h"
@@ -38,9 +41,11 @@ namespace {
 namespace fs = std::filesystem;
 using namespace yaml_config;  // NOLINT
 
-std::string num(double v) {
+std::string num(double v) { return json_number(v, 10); }  // null when not finite
+
+std::string fmt_g(double v) {
   char b[40];
-  std::snprintf(b, sizeof(b), "%.10g", v);
+  std::snprintf(b, sizeof(b), "%.4f", v);
   return b;
 }
 
@@ -60,6 +65,15 @@ const Table<C>& vio_config_table() {
 
     Table<C> frames("frame settings");
     frames.include(event_frame_table(), &C::frames).boolean("velocity_at_reference", &C::frame_velocity_at_reference);
+
+    Table<C> recon("reconstruction settings");
+    using CF = mapping::ComplementaryFilterOptions;
+    Table<CF> cf("high-pass filter settings");
+    cf.number("cutoff_hz", &CF::cutoff_hz, Range::kNonNegative, "Hz")
+        .number("contrast_on", &CF::contrast_on, Range::kPositive, "log intensity")
+        .number("contrast_off", &CF::contrast_off, Range::kPositive, "log intensity");
+    recon.include(cf, &C::reconstruction).number("grey_per_log", &C::reconstruction_grey_per_log, Range::kPositive, "grey levels per log unit")
+        .number("blur_px", &C::reconstruction_blur_px, Range::kNonNegative, "px (Gaussian sigma; 0: none)");
 
     Table<C> aps("APS settings");
     aps.number("pixel_sigma", &C::aps_pixel_sigma_px, Range::kPositive, "px")
@@ -92,7 +106,8 @@ const Table<C>& vio_config_table() {
     Table<C> reports("report settings");
     reports.integer("tracking_lost_min_tracks", &C::tracking_lost_min_tracks, 0, 100000)
         .duration_ms("tracking_lost_min_duration_ms", &C::tracking_lost_min_duration_ns, Range::kPositive)
-        .integer("event_rate_drop_windows", &C::event_rate_drop_windows, 1, 100000);
+        .integer("event_rate_drop_windows", &C::event_rate_drop_windows, 1, 100000)
+        .duration_ms("imu_only_min_duration_ms", &C::imu_only_min_duration_ns, Range::kPositive);
 
     Table<C> top("VIO settings");
     top.choice("inputs", &C::inputs,
@@ -100,12 +115,18 @@ const Table<C>& vio_config_table() {
         .choice("frontend", &C::frontend, {{"frames", VioFrontEnd::kFrames}, {"corners", VioFrontEnd::kCorners}})
         .section("filters", filters, self)
         .section("frames", frames, self)
+        .choice("tracking_image", &C::tracking_image,
+                {{"event_frame", pipeline::VioTrackingImage::kEventFrame},
+                 {"reconstruction", pipeline::VioTrackingImage::kReconstruction}})
+        .section("reconstruction", recon, self)
+        .section("reconstruction_tracker", feature_tracker_table(), &C::reconstruction_tracker)
         .section("tracker", feature_tracker_table(), &C::tracker)
         .section("aps_tracker", feature_tracker_table(), &C::aps_tracker)
         .section("aps", aps, self)
         .section("efast", efast_table(), &C::efast)
         .section("corner_tracker", corner_tracker, self)
         .section("window", sliding_window_table(), &C::window)
+        .boolean("keyframe_chaining", &C::keyframe_chaining)
         .section("imu", imu, self)
         .section("init", init, self)
         .section("reports", reports, self)
@@ -189,22 +210,27 @@ namespace {
 // Everything but the evaluation: reads, estimates, writes the outputs. Its memory (pipeline, map,
 // statistics) is released before the evaluation loads the ground truth, so that a run's peak is the
 // larger of the two, not their sum (one hour of shapes_6dof: 203 -> see README, "Peak memory").
-int run_vio_estimation(const VioArgs& args, std::ostream& out) {
+int run_vio_estimation(const VioArgs& args, std::ostream& out, evaluation::GyroIntegrator* gyro) {
   // One core: OpenCV's parallel loops (the KLT's per-point loop) run inline instead of handing
   // work to TBB worker threads, whose hand-offs and spinning cost CPU time for no gain here.
   cv::setNumThreads(1);
   // The oracle's scene first: its errors come before reading a dataset.
-  std::shared_ptr<const simulator::PlanarScene> oracle_planes;
+  evaluation::RayCaster oracle_cast;  // the true scene: evio's planar scenes, or a crosscheck room (meta.json)
   if (args.oracle_frame_plane && !args.oracle_frame_motion)
     throw InputError(args.dataset, 0, "--oracle-frame-plane needs --oracle-frame-motion", "--oracle-frame-motion --oracle-frame-plane");
   if (args.oracle_frame_motion && args.oracle_scene.empty())
     throw InputError(args.dataset, 0, "--oracle-frame-motion needs the scene", "--oracle-tracks SCENE.yaml and --gt GT.tum");
   if (!args.oracle_scene.empty()) {
     if (args.gt.empty()) throw InputError(args.oracle_scene, 0, "--oracle-tracks needs the true trajectory", "--gt GT.tum");
-    const simulator::SimulationConfig sc = simulator::load_simulation_config(args.oracle_scene);
-    oracle_planes = std::dynamic_pointer_cast<const simulator::PlanarScene>(sc.scene);
-    if (!oracle_planes)
-      throw InputError(args.oracle_scene, 0, "--oracle-tracks needs a planes scene (got " + sc.scene_type + ")", "scene: planes");
+    if (fs::path(args.oracle_scene).extension() == ".json") {
+      oracle_cast = evaluation::load_crosscheck_room(args.oracle_scene).caster();
+    } else {
+      const simulator::SimulationConfig sc = simulator::load_simulation_config(args.oracle_scene);
+      auto planes = std::dynamic_pointer_cast<const simulator::PlanarScene>(sc.scene);
+      if (!planes)
+        throw InputError(args.oracle_scene, 0, "--oracle-tracks needs a planes scene (got " + sc.scene_type + ")", "scene: planes");
+      oracle_cast = [planes](const Eigen::Vector3d& o, const Eigen::Vector3d& d) { return planes->intersect(o, d); };
+    }
   }
   std::string resolved;
   const VioConfig cfg = load_vio_config(args.config, &resolved, args.set);
@@ -248,7 +274,7 @@ int run_vio_estimation(const VioArgs& args, std::ostream& out) {
     vio.set_initial_state_provider([gt = read_trajectory(args.gt)](int64_t t_ns) { return evaluation::groundtruth_state(gt, t_ns); });
   }
   std::unique_ptr<evaluation::TrackOracle> oracle;
-  if (oracle_planes) {
+  if (oracle_cast) {
     evaluation::TrackOracleOptions oo;
     oo.white_noise_px = args.oracle_noise_px;
     oo.drift_px_per_frame = args.oracle_drift_px;
@@ -257,9 +283,7 @@ int run_vio_estimation(const VioArgs& args, std::ostream& out) {
                     : args.oracle_error == "independent" ? evaluation::OracleError::kIndependent
                     : args.oracle_error == "common_mode" ? evaluation::OracleError::kCommonMode
                                                          : evaluation::OracleError::kNone;
-    const evaluation::RayCaster cast = [p = oracle_planes](const Eigen::Vector3d& o, const Eigen::Vector3d& d) {
-      return p->intersect(o, d);
-    };
+    const evaluation::RayCaster& cast = oracle_cast;
     oracle = std::make_unique<evaluation::TrackOracle>(read_trajectory(args.gt), *cal, cast, oo);
     vio.set_observation_filter([o = oracle.get()](FeatureObservations* f) { o->apply(f); });
     if (args.oracle_frame_motion) {
@@ -269,6 +293,13 @@ int run_vio_estimation(const VioArgs& args, std::ostream& out) {
             return evaluation::true_frame_motion(gt, T_c_b, cast, f, v_c, depth_m, plane ? plane_c : nullptr);
           });
     }
+  }
+  if (args.dump_tracking_images > 0) {
+    const fs::path dir = fs::path(args.out) / "tracking_images";
+    fs::create_directories(dir);
+    vio.set_tracking_image_callback([dir, n = args.dump_tracking_images, k = int64_t{0}](int64_t t_ns, const cv::Mat& image) mutable {
+      if (k++ % n == 0) write_image((dir / ("frame_" + format_seconds(t_ns) + ".png")).string(), image);
+    });
   }
   std::ofstream obs_file((fs::path(args.out) / "observations.txt").string());
   obs_file << "# t[s] track_id bx by bz  (front-end observations: unit bearings in the camera frame, body clock)\n";
@@ -296,7 +327,10 @@ int run_vio_estimation(const VioArgs& args, std::ostream& out) {
   // it still needs; the result does not depend on the interleaving), all first for APS inputs.
   const auto add_imu_until = [&](int64_t t_imu_ns) {
     for (;;) {
-      for (; !imu.empty() && imu.front().t_ns <= t_imu_ns; imu.pop_front()) vio.add_imu(imu.front());
+      for (; !imu.empty() && imu.front().t_ns <= t_imu_ns; imu.pop_front()) {
+        vio.add_imu(imu.front());
+        if (gyro) gyro->add(imu.front());
+      }
       if (!imu.empty() || imu_done) break;
       read_imu_chunk();
     }
@@ -445,7 +479,7 @@ int run_vio_estimation(const VioArgs& args, std::ostream& out) {
     j << (i ? ",\n    " : "\n    ") << "{\"t\": " << format_seconds(m.t_ns) << ", \"tracks\": " << m.tracks
       << ", \"baseline_s\": " << num(m.baseline_s)
       << ", \"gric_static\": " << num(m.gric_static) << ", \"gric_rotation\": " << num(m.gric_rotation)
-      << ", \"gric_general\": " << num(m.gric_general) << ", \"imu_chi2\": " << num(m.imu_chi2) << ", \"best\": \""
+      << ", \"gric_general\": " << num(m.gric_general) << ", \"imu_chi2\": " << num(m.imu_chi2) << ", \"imu_dof\": " << m.imu_dof << ", \"landmarks\": " << m.landmarks << ", \"best\": \""
       << backend::two_view_model_name(m.best) << "\", \"imu_veto\": " << (m.imu_veto ? "true" : "false")
       << ", \"rotation_only\": " << (m.rotation_only ? "true" : "false") << "}";
   }
@@ -455,7 +489,16 @@ int run_vio_estimation(const VioArgs& args, std::ostream& out) {
     j << (i ? ", " : "") << "{\"t_begin\": " << format_seconds(l.t_begin_ns) << ", \"t_end\": " << format_seconds(l.t_end_ns)
       << ", \"reason\": \"" << l.what << "\"}";
   }
-  j << "],\n  \"frontend_stats\": {";
+  j << "],\n  \"imu_only_segments\": [";
+  double imu_only_s = 0;
+  for (size_t i = 0; i < r.imu_only.size(); ++i) {
+    const pipeline::VioSegment& l = r.imu_only[i];
+    imu_only_s += 1e-9 * static_cast<double>(l.t_end_ns - l.t_begin_ns);
+    j << (i ? ", " : "") << "{\"t_begin\": " << format_seconds(l.t_begin_ns) << ", \"t_end\": " << format_seconds(l.t_end_ns)
+      << ", \"reason\": \"" << l.what << "\"}";
+  }
+  j << "],\n  \"imu_only_s\": " << num(imu_only_s);
+  j << ",\n  \"frontend_stats\": {";
   if (use_frames) {
     const auto& ts = vs.tracker;
     const auto& fs_ = vs.event_frames;
@@ -508,7 +551,9 @@ int run_vio_estimation(const VioArgs& args, std::ostream& out) {
 }  // namespace
 
 int run_vio(const VioArgs& args, std::ostream& out) {
-  const int rc = run_vio_estimation(args, out);
+  // The measured gyro integrated alone (the reference of the evaluation's relative rotation error).
+  evaluation::GyroIntegrator gyro;
+  const int rc = run_vio_estimation(args, out, args.gt.empty() ? nullptr : &gyro);
   if (rc != 0) return rc;
   malloc_trim(0);  // hand the estimator's freed heap back before the evaluation allocates its own
   if (!args.gt.empty()) {
@@ -517,6 +562,7 @@ int run_vio(const VioArgs& args, std::ostream& out) {
     ea.estimates = {(fs::path(args.out) / "trajectory.tum").string(), (fs::path(args.out) / "trajectory_causal.tum").string()};
     ea.options.alignment.method = evaluation::Alignment::kSE3;
     ea.options.alignment.first_s = 5.0;
+    if (gyro.samples() >= 2) ea.gyro_orientation = gyro.trajectory();
     const auto results = evaluate_all(ea);
     std::ofstream f((fs::path(args.out) / "eval.json").string());
     f << results_json(ea, results);
@@ -528,6 +574,12 @@ int run_vio(const VioArgs& args, std::ostream& out) {
                   e.ate.trans_m.rmse, e.mean_position_error_percent, e.groundtruth_length_m, e.final_yaw_error_deg,
                   e.yaw_drift_deg_per_m);
     out << buf;
+    if (const auto& rre = results.front().rre; rre && rre->deg.count > 0) {
+      const auto& g = results.front().rre_gyro;
+      std::snprintf(buf, sizeof(buf), "              rotation error over %g s (RRE) %.4f deg rms%s\n", rre->interval_s, rre->deg.rmse,
+                    g && g->deg.count > 0 ? (", the gyro alone " + fmt_g(g->deg.rmse) + " deg").c_str() : "");
+      out << buf;
+    }
     if (results.size() > 1) {
       const auto& c = results[1].result;
       std::snprintf(buf, sizeof(buf), "              causal (as estimated online): mean position error %.3f%%, final yaw error %.2f deg\n",

@@ -63,6 +63,9 @@ struct VioArgs {
   double oracle_max_error_px = 0;
   std::string oracle_error = "none";
   bool oracle_frame_motion = false;
+  // Diagnostics: every n-th tracking image of the frames front-end as PNG into out/tracking_images/
+  // (0: none), with the frame's tracks drawn.
+  int dump_tracking_images = 0;
   bool oracle_frame_plane = false;  // with oracle_frame_motion: per-event depth from the plane through the tracks' true points  // with oracle_scene: the frames' translation compensation from the ground truth  // none | real | independent | common_mode (evaluation::OracleError)
 };
 

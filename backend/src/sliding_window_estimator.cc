@@ -74,6 +74,8 @@ bool SlidingWindowOptions::Validate(std::string* why) const {
     return fail("model_selection_accel_sigma_mps2 must be finite and >= 0 m/s^2");
   if (!(model_selection_velocity_sigma_mps >= 0) || !std::isfinite(model_selection_velocity_sigma_mps))
     return fail("model_selection_velocity_sigma_mps must be finite and >= 0 m/s");
+  if (!(model_selection_velocity_drift_mps2 >= 0) || !std::isfinite(model_selection_velocity_drift_mps2))
+    return fail("model_selection_velocity_drift_mps2 must be finite and >= 0 m/s^2");
   if (!(rotation_only_parallax_px >= 0) || !(rotation_only_translation_px >= 0))
     return fail("rotation_only_parallax_px and rotation_only_translation_px (deprecated) must be >= 0 px");
   if (max_iterations < 1) return fail("max_iterations must be >= 1");
@@ -120,6 +122,8 @@ void SlidingWindowEstimator::initialize(const VioState& state, const InitialSigm
   initial_ = state;
   initial_sigmas_ = sigmas;
   latest_ = state;
+  velocity_anchor_t_ns_ = state.t_ns;
+  velocity_anchor_sigma_mps_ = sigmas.velocity_mps > 0 ? sigmas.velocity_mps : options_.init_sigma_velocity_mps;
 }
 
 void SlidingWindowEstimator::add_imu(const ImuSample& sample) {
@@ -231,23 +235,38 @@ bool SlidingWindowEstimator::choose_rotation_only(const Keyframe& prev, const Fe
     }
     return static_cast<int>(b0.size());
   };
-  // The reference view: the newest window keyframe at least model_selection_min_interval_s before
-  // the frame that still shares model_selection_min_tracks tracks with it, else the previous
-  // keyframe. Keyframes made by track losses can be 10 ms apart (boxes_6dof): over such a
-  // baseline a translation shows no parallax and R wins the test.
+  // The reference view. Longest baseline (default): the oldest window keyframe at least
+  // model_selection_min_interval_s before the frame that still shares model_selection_min_tracks
+  // tracks with it. A slow translation far from the scene (0.1 m/s at 2-4 m) shows under a pixel of
+  // parallax over the 50 ms between keyframes of a fast rotation, and R wins every such test; over
+  // the window's span it shows. Otherwise the newest such keyframe (keyframes made by track losses
+  // can be 10 ms apart: too little baseline for a translation to show). Else the previous keyframe.
   const Keyframe* ref = &prev;
   std::optional<ImuPreintegration> ref_pre;
-  if (enabled && 1e-9 * static_cast<double>(frame.t_ns - prev.t_ns) < options_.model_selection_min_interval_s) {
+  const auto try_reference = [&](const Keyframe& k) {
+    if (&k == &prev) return true;
+    try {
+      ref_pre = ImuPreintegration::between(imu_, k.t_ns, frame.t_ns, predicted.bias_gyro, predicted.bias_accel, noise_);
+      ref = &k;
+      return true;
+    } catch (const std::exception&) {
+      ref_pre.reset();
+      return false;
+    }
+  };
+  if (enabled && options_.model_selection_longest_baseline) {
+    for (const auto& kp : window_) {
+      const Keyframe& k = *kp;
+      if (1e-9 * static_cast<double>(frame.t_ns - k.t_ns) < options_.model_selection_min_interval_s) break;
+      if (shared(k) < options_.model_selection_min_tracks) continue;
+      if (try_reference(k)) break;
+    }
+  } else if (enabled && 1e-9 * static_cast<double>(frame.t_ns - prev.t_ns) < options_.model_selection_min_interval_s) {
     for (auto it = window_.rbegin(); it != window_.rend(); ++it) {
       const Keyframe& k = **it;
       if (1e-9 * static_cast<double>(frame.t_ns - k.t_ns) < options_.model_selection_min_interval_s) continue;
       if (shared(k) < options_.model_selection_min_tracks) break;
-      try {
-        ref_pre = ImuPreintegration::between(imu_, k.t_ns, frame.t_ns, predicted.bias_gyro, predicted.bias_accel, noise_);
-        ref = &k;
-      } catch (const std::exception&) {
-        ref_pre.reset();
-      }
+      try_reference(k);
       break;
     }
   }
@@ -279,12 +298,20 @@ bool SlidingWindowEstimator::choose_rotation_only(const Keyframe& prev, const Fe
       // The predicted displacement of the camera centre, when landmarks make the velocity observable.
       int triangulated = 0;
       for (const auto& [track, lm] : landmarks_) triangulated += lm.triangulated ? 1 : 0;
-      if (options_.model_selection_velocity_sigma_mps > 0 && triangulated >= options_.model_selection_min_tracks) {
+      test.landmarks = triangulated;
+      // How well the reference keyframe's velocity is known: at the last keyframe whose window had
+      // model_selection_min_tracks triangulated landmarks (or at the initialisation, with its own
+      // sigma), growing at model_selection_velocity_drift_mps2 since then while only the IMU
+      // carried it. A fast turn leaves no landmarks for a while; the velocity is still known.
+      const double sigma_v = std::hypot(velocity_anchor_sigma_mps_,
+                                        options_.model_selection_velocity_drift_mps2 * 1e-9 *
+                                            static_cast<double>(std::max<int64_t>(0, ref->t_ns - velocity_anchor_t_ns_)));
+      if (options_.model_selection_velocity_sigma_mps > 0 && velocity_anchor_sigma_mps_ > 0) {
         const Eigen::Vector3d dp_c = predicted.T_w_b.translation + R1 * p_b_c - (pos_of(ref->pose) + R0 * p_b_c);
         const Eigen::Matrix3d cov_p =
             R0 * ref_interval.covariance().block<3, 3>(6, 6) * R0.transpose() +
-            (std::pow(options_.model_selection_velocity_sigma_mps * dt, 2) +
-             std::pow(0.5 * options_.model_selection_accel_sigma_mps2 * dt * dt, 2)) * Eigen::Matrix3d::Identity();
+            (std::pow(sigma_v * dt, 2) +
+             std::pow(0.5 * options_.model_selection_velocity_drift_mps2 * dt * dt, 2)) * Eigen::Matrix3d::Identity();
         chi2 += dp_c.dot(cov_p.ldlt().solve(dp_c));
         dof += 3;
       }
@@ -294,6 +321,7 @@ bool SlidingWindowEstimator::choose_rotation_only(const Keyframe& prev, const Fe
     test.gric_rotation = g.gric_rotation;
     test.gric_general = g.gric_general;
     test.imu_chi2 = g.imu_chi2;
+    test.imu_dof = g.imu_dof;
     test.best = g.best;
     // IMU veto: a camera centre whose velocity change (or displacement) the IMU rejects cannot
     // be rotating in place, whatever the image test says.
@@ -306,17 +334,23 @@ bool SlidingWindowEstimator::choose_rotation_only(const Keyframe& prev, const Fe
   if (test.best == TwoViewModel::kNone) {
     rotation_only_active_ = false;
     rotation_only_run_ = 0;
-  } else if (rotation_only_active_) {
-    // Off as soon as G wins; S (no motion) keeps the rotation-only model.
-    if (test.best == TwoViewModel::kGeneral) {
+  } else {
+    // A test is decisive for G when the IMU vetoes R or G wins by the margin; for R when R wins by
+    // the margin. Anything else (S, or a win by less than the margin: drifting tracks over a
+    // keyframe interval of 0.1-0.2 s can favour G by a few units in a pure rotation) leaves the
+    // state and the run as they are.
+    const double margin = options_.rotation_only_gric_margin;
+    const bool g_wins = test.best == TwoViewModel::kGeneral &&
+                        (test.imu_veto || test.gric_general + margin <= std::min(test.gric_static, test.gric_rotation));
+    const bool r_wins = test.best == TwoViewModel::kRotation &&
+                        test.gric_rotation + margin <= std::min(test.gric_static, test.gric_general);
+    if (g_wins) {
       rotation_only_active_ = false;
       rotation_only_run_ = 0;
+    } else if (r_wins && !rotation_only_active_) {
+      ++rotation_only_run_;
     }
-  } else {
-    const bool r_wins = test.best == TwoViewModel::kRotation &&
-                        test.gric_rotation + options_.rotation_only_gric_margin <= std::min(test.gric_static, test.gric_general);
-    rotation_only_run_ = r_wins ? rotation_only_run_ + 1 : 0;
-    if (rotation_only_run_ == 1) rotation_only_run_start_ns_ = frame.t_ns;
+    if (rotation_only_run_ == 1 && r_wins) rotation_only_run_start_ns_ = frame.t_ns;
     rotation_only_active_ = rotation_only_run_ >= options_.rotation_only_min_keyframes &&
                             static_cast<double>(frame.t_ns - rotation_only_run_start_ns_) * 1e-9 >=
                                 options_.rotation_only_min_duration_s;
@@ -332,16 +366,26 @@ bool SlidingWindowEstimator::choose_rotation_only(const Keyframe& prev, const Fe
   if (rotation_only_active_) {
     size_t common = 0;
     small_motion = parallax_px(frame, predicted, &common) < options_.rotation_only_parallax_px;
-    const Eigen::Matrix3d R_c_w = camera_.T_c_b.rotation.toRotationMatrix() * quat_of(prev.pose).toRotationMatrix().transpose();
+    // The translation over the test's baseline (from the reference view), seen at the median depth.
+    const Eigen::Matrix3d R_c_w = camera_.T_c_b.rotation.toRotationMatrix() * quat_of(ref->pose).toRotationMatrix().transpose();
     std::vector<double> depth;
     for (const auto& [track, lm] : landmarks_) {
       if (!lm.triangulated) continue;
-      const double z = (R_c_w * (Eigen::Vector3d(lm.p[0], lm.p[1], lm.p[2]) - pos_of(prev.pose))).z();
+      const double z = (R_c_w * (Eigen::Vector3d(lm.p[0], lm.p[1], lm.p[2]) - pos_of(ref->pose))).z();
       if (z > 0) depth.push_back(z);
     }
-    if (small_motion && !depth.empty()) {
-      const double d = std::max(median(depth), options_.min_depth_m);
-      small_motion = focal_px_ * (R_c_w * (predicted.T_w_b.translation - pos_of(prev.pose))).norm() / d <
+    // Without landmarks in the window (a fast turn leaves none), the depth last seen: a
+    // translation does not become invisible because the landmarks that showed it left the view.
+    double d = 0;
+    if (!depth.empty()) {
+      d = std::max(median(depth), options_.min_depth_m);
+    } else if (last_median_depth_m_ > 0) {
+      d = last_median_depth_m_;
+    }
+    // No depth seen yet (the start, or a scene at infinity): the translation cannot be judged in
+    // pixels; the IMU datum of the test alone speaks for it.
+    if (small_motion && d > 0) {
+      small_motion = focal_px_ * (R_c_w * (predicted.T_w_b.translation - pos_of(ref->pose))).norm() / d <
                      options_.rotation_only_translation_px;
     }
   }
@@ -569,6 +613,21 @@ bool SlidingWindowEstimator::add_frame(const FeatureObservations& frame) {
   stats_.solve_time_s.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
   stats_.time_offset_s = time_offset_[0];
   latest_ = state_of(*window_.back());
+  {
+    const Keyframe& k = *window_.back();
+    const Eigen::Matrix3d R_c_w = camera_.T_c_b.rotation.toRotationMatrix() * quat_of(k.pose).toRotationMatrix().transpose();
+    std::vector<double> depth;
+    for (const auto& [track, lm] : landmarks_) {
+      if (!lm.triangulated) continue;
+      const double z = (R_c_w * (Eigen::Vector3d(lm.p[0], lm.p[1], lm.p[2]) - pos_of(k.pose))).z();
+      if (z > 0) depth.push_back(z);
+    }
+    if (!depth.empty()) last_median_depth_m_ = std::max(median(depth), options_.min_depth_m);
+    if (static_cast<int>(depth.size()) >= options_.model_selection_min_tracks) {
+      velocity_anchor_t_ns_ = k.t_ns;
+      velocity_anchor_sigma_mps_ = options_.model_selection_velocity_sigma_mps;
+    }
+  }
   // Keep IMU samples from just before the oldest keyframe.
   const int64_t keep = window_.front()->t_ns;
   auto it = std::lower_bound(imu_.begin(), imu_.end(), keep, [](const ImuSample& s, int64_t t) { return s.t_ns < t; });

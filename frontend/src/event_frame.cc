@@ -53,6 +53,9 @@ bool EventFrameOptions::Validate(std::string* why) const {
   if (events_per_frame < 1) return fail("events_per_frame must be >= 1");
   if (max_window_ns <= 0) return fail("max_window_ns must be > 0 ns");
   if (min_window_ns < 0 || min_window_ns > max_window_ns) return fail("min_window_ns must be in 0..max_window_ns");
+  if (sparse_max_window_ns != 0 && sparse_max_window_ns < max_window_ns)
+    return fail("sparse_max_window_ns must be 0 (off) or >= max_window_ns");
+  if (sparse_after_ns < 0) return fail("sparse_after_ns must be >= 0 ns");
   if (min_events < 1 || min_events > events_per_frame) return fail("min_events must be in 1..events_per_frame");
   if (!(overlap >= 0.0 && overlap <= 0.9)) return fail("overlap must be in [0, 0.9]");
   if (use_depth && !motion_compensation) return fail("use_depth needs motion_compensation");
@@ -379,6 +382,7 @@ void EventFrameBuilder::emit_pending(std::vector<EventFrame>* out) {
   } else {
     out->push_back(build_frame(EventSpan(pending_.data(), pending_.size()), pending_.back().t_ns));
     ++stats_.frames_emitted;
+    last_emitted_end_ns_ = pending_.back().t_ns;
     carry = static_cast<size_t>(o_.overlap * static_cast<double>(pending_.size()));
   }
   // The latest `carry` events start the next frame (carry <= 0.9 of the frame: no overlap of the
@@ -393,7 +397,14 @@ void EventFrameBuilder::add_events(EventSpan events, std::vector<EventFrame>* ou
   const size_t n = static_cast<size_t>(o_.events_per_frame);
   for (const Event& e : events) {
     if (pending_.size() > fresh_) {
-      if (e.t_ns - pending_[fresh_].t_ns >= o_.max_window_ns) emit_pending(out);
+      const int64_t span = e.t_ns - pending_[fresh_].t_ns;
+      const bool sparse = static_cast<int>(pending_.size() - fresh_) < o_.min_events;
+      const bool starving = sparse_on_ && o_.sparse_max_window_ns > 0 &&
+                            (last_emitted_end_ns_ == std::numeric_limits<int64_t>::min() ||
+                             e.t_ns - last_emitted_end_ns_ >= o_.sparse_after_ns);
+      if (span >= o_.max_window_ns && (!sparse || !starving || span >= o_.sparse_max_window_ns)) {
+        emit_pending(out);
+      }
     }
     if (fresh_ > 0 && pending_.size() == fresh_ && e.t_ns - pending_.back().t_ns >= o_.max_window_ns) {
       pending_.clear();  // carried events this old describe another scene state: start afresh

@@ -8,6 +8,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <opencv2/features2d.hpp>
 #include <opencv2/imgproc.hpp>
@@ -17,6 +18,7 @@
 #include <opengv/sac/Ransac.hpp>
 #include <opengv/sac_problems/relative_pose/CentralRelativePoseSacProblem.hpp>
 #include <opengv/sac_problems/relative_pose/TranslationOnlySacProblem.hpp>
+
 
 namespace evio::frontend {
 namespace {
@@ -47,6 +49,122 @@ bool run_ransac(double threshold, int max_iterations, uint64_t seed, std::vector
   return true;
 }
 
+// Translation-only two-view RANSAC with the rotation known (Kneip et al., BMVC 2011): with the
+// previous bearing rotated into the current camera, m = R_cur_prev b_prev, a static point satisfies
+// t . (m x b_cur) = 0 for the translation direction t, so two correspondences give
+// t = n_1 x n_2 (n_i = m_i x b_cur_i). A correspondence's error is the angle of b_cur to its
+// epipolar plane span(t, m), sin e = |t . n| / |t x m|, or its rotation-compensated displacement
+// |n| (the sine of the angle between m and b_cur) when that is smaller: a point that hardly moved
+// fits every translation (far away, or a short baseline). This test needs no triangulation: over the
+// short baselines of 100 Hz event frames (a few mm), triangulated points come out at random depths
+// and a reprojection test rejects correct tracks.
+bool two_point_ransac(const std::vector<Eigen::Vector3d>& prev, const std::vector<Eigen::Vector3d>& cur,
+                      const Eigen::Matrix3d& R_cur_prev, double threshold_rad, int max_iterations, uint64_t seed,
+                      std::vector<bool>* inliers) {
+  const size_t n = prev.size();
+  const double s_max = std::sin(threshold_rad);
+  std::vector<Eigen::Vector3d> m(n), nrm(n);
+  size_t moved = 0;
+  for (size_t i = 0; i < n; ++i) {
+    m[i] = (R_cur_prev * prev[i]).normalized();
+    nrm[i] = m[i].cross(cur[i].normalized());
+    moved += nrm[i].norm() >= s_max ? 1 : 0;
+  }
+  inliers->assign(n, true);
+  if (moved < 2) return true;  // nothing moved beyond the threshold: every translation fits
+  // Cheirality: b_cur ~ lambda m + t with depth lambda > 0 puts b_cur x m along t x m, i.e.
+  // n . (t x m) < 0; a point that moved the other way along its epipolar line is behind the camera
+  // (a track sliding along an edge, say) and fits only as a point that did not move.
+  const auto error = [&](const Eigen::Vector3d& t, size_t i) {
+    const double d = nrm[i].norm();
+    const Eigen::Vector3d txm = t.cross(m[i]);
+    const double across = txm.norm();
+    if (!(across > 1e-12) || nrm[i].dot(txm) > 0) return d;
+    return std::min(d, std::abs(t.dot(nrm[i])) / across);
+  };
+  const auto count_of = [&](const Eigen::Vector3d& t) {
+    size_t c = 0;
+    for (size_t i = 0; i < n; ++i) c += error(t, i) < s_max ? 1 : 0;
+    return c;
+  };
+  std::mt19937_64 rng(seed);
+  std::uniform_int_distribution<size_t> pick(0, n - 1);
+  size_t best_count = 0;
+  Eigen::Vector3d best_t = Eigen::Vector3d::Zero();
+  int needed = max_iterations;
+  for (int it = 0; it < std::min(needed, max_iterations); ++it) {
+    const size_t a = pick(rng);
+    size_t b = pick(rng);
+    if (a == b) b = (b + 1) % n;
+    Eigen::Vector3d t = nrm[a].cross(nrm[b]);
+    const double tn = t.norm();
+    if (!(tn > 1e-12)) continue;
+    t /= tn;
+    // Both signs of the direction (the sample fixes the line only; cheirality picks the sign).
+    size_t count = count_of(t);
+    const size_t count_neg = count_of(-t);
+    if (count_neg > count) {
+      t = -t;
+      count = count_neg;
+    }
+    if (count > best_count) {
+      best_count = count;
+      best_t = t;
+      // Iterations for 99% confidence of one all-inlier sample at this inlier ratio.
+      const double w = static_cast<double>(count) / static_cast<double>(n);
+      const double p_fail = 1.0 - w * w;
+      needed = p_fail <= 1e-12 ? 0 : static_cast<int>(std::ceil(std::log(0.01) / std::log(p_fail)));
+    }
+  }
+  if (best_count == 0) return false;
+  // Refinement on the inliers (a minimal sample's direction carries its two points' noise): t is the
+  // direction most orthogonal to their epipolar-plane normals, each normal weighed by 1 / |t x m|^2
+  // so that its term is the squared error (the smallest eigenvector of sum n n^T / |t x m|^2).
+  for (int round = 0; round < 3; ++round) {
+    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+    size_t used = 0;
+    for (size_t i = 0; i < n; ++i) {
+      if (!(error(best_t, i) < s_max) || nrm[i].norm() < s_max) continue;  // points that did not move say nothing of t
+      const double across = best_t.cross(m[i]).norm();
+      if (!(across > 1e-6)) continue;
+      A += nrm[i] * nrm[i].transpose() / (across * across);
+      ++used;
+    }
+    if (used < 3) break;
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(A);
+    Eigen::Vector3d t = es.eigenvectors().col(0);
+    if (t.dot(best_t) < 0) t = -t;
+    const size_t count = count_of(t);
+    if (count < best_count) break;
+    best_count = count;
+    best_t = t;
+  }
+  // The zero translation (a rotation, or a baseline too short for any parallax) explains the points
+  // that did not move; a translation must also explain at least half of those that did (at least 3),
+  // else the moved points are outliers: its two sample points fit by construction, and a gross
+  // outlier lies along a chosen epipolar line by chance about once in four (1 px against 5 px).
+  const size_t still = n - moved;
+  if (best_count < still + std::max<size_t>(3, (moved + 1) / 2)) {
+    for (size_t i = 0; i < n; ++i) (*inliers)[i] = nrm[i].norm() < s_max;
+    return true;
+  }
+  // Points that did not move fit any translation, but only at a depth far beyond the others: over
+  // a long baseline (the moved inliers' median displacement above kStillRatio thresholds) a point
+  // without parallax is a track stuck on the image rather than a point at infinity, and is dropped.
+  constexpr double kStillRatio = 5.0;
+  std::vector<double> moved_disp;
+  for (size_t i = 0; i < n; ++i) {
+    if (nrm[i].norm() >= s_max && error(best_t, i) < s_max) moved_disp.push_back(nrm[i].norm());
+  }
+  std::nth_element(moved_disp.begin(), moved_disp.begin() + static_cast<std::ptrdiff_t>(moved_disp.size() / 2), moved_disp.end());
+  const bool long_baseline = moved_disp[moved_disp.size() / 2] > kStillRatio * s_max;
+  for (size_t i = 0; i < n; ++i) {
+    const bool still = nrm[i].norm() < s_max;
+    (*inliers)[i] = still ? !long_baseline : error(best_t, i) < s_max;
+  }
+  return true;
+}
+
 uint64_t splitmix64(uint64_t x) {
   x += 0x9E3779B97F4A7C15ull;
   x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
@@ -60,6 +178,7 @@ const char* ransac_model_name(RansacModel model) {
   switch (model) {
     case RansacModel::kNone: return "none";
     case RansacModel::kTwoPoint: return "two_point";
+    case RansacModel::kTwoPointTriangulating: return "two_point_triangulating";
     case RansacModel::kFivePoint: return "five_point";
   }
   return "unknown";
@@ -68,7 +187,8 @@ const char* ransac_model_name(RansacModel model) {
 int ransac_min_correspondences(RansacModel model) {
   switch (model) {
     case RansacModel::kNone: return 0;
-    case RansacModel::kTwoPoint: return 2;
+    case RansacModel::kTwoPoint:
+    case RansacModel::kTwoPointTriangulating: return 2;
     case RansacModel::kFivePoint: return 8;
   }
   return 0;
@@ -106,9 +226,15 @@ std::vector<bool> ransac_inliers(const std::vector<Eigen::Vector3d>& bearings_pr
   std::vector<int> inliers;
   bool ok = false;
   using opengv::sac_problems::relative_pose::CentralRelativePoseSacProblem;
-  using opengv::sac_problems::relative_pose::TranslationOnlySacProblem;
-  if (model == RansacModel::kTwoPoint) {
-    ok = run_ransac<TranslationOnlySacProblem>(threshold, max_iterations, seed, &inliers, adapter);
+  if (model == RansacModel::kTwoPointTriangulating) {
+    ok = run_ransac<opengv::sac_problems::relative_pose::TranslationOnlySacProblem>(threshold, max_iterations, seed, &inliers, adapter);
+  } else if (model == RansacModel::kTwoPoint) {
+    std::vector<bool> out;
+    if (!two_point_ransac(bearings_prev, bearings_cur, R_cur_prev ? *R_cur_prev : Eigen::Matrix3d::Identity(), threshold_rad,
+                          max_iterations, seed, &out)) {
+      return all;
+    }
+    return out;
   } else {
     ok = run_ransac<CentralRelativePoseSacProblem>(threshold, max_iterations, seed, &inliers,
                                                    adapter, CentralRelativePoseSacProblem::NISTER);
@@ -136,9 +262,9 @@ bool FeatureTrackerOptions::Validate(std::string* why) const {
   if (!(klt_epsilon_px > 0) || !std::isfinite(klt_epsilon_px)) return fail("klt_epsilon_px must be positive and finite");
   if (!(forward_backward_max_px > 0) || !std::isfinite(forward_backward_max_px))
     return fail("forward_backward_max_px must be positive and finite");
-  if (ransac != RansacModel::kNone && ransac != RansacModel::kTwoPoint &&
+  if (ransac != RansacModel::kNone && ransac != RansacModel::kTwoPoint && ransac != RansacModel::kTwoPointTriangulating &&
       ransac != RansacModel::kFivePoint)
-    return fail("ransac must be none, two_point or five_point");
+    return fail("ransac must be none, two_point, two_point_triangulating or five_point");
   if (!(ransac_threshold_px > 0) || !std::isfinite(ransac_threshold_px))
     return fail("ransac_threshold_px must be positive and finite");
   if (ransac_max_iterations < 1) return fail("ransac_max_iterations must be >= 1");
@@ -181,8 +307,25 @@ int FeatureTracker::cell_of(const cv::Point2f& px) const {
 
 bool FeatureTracker::inside(const cv::Point2f& px) const {
   const float b = static_cast<float>(options_.border_px);
-  return std::isfinite(px.x) && std::isfinite(px.y) && px.x >= b && px.y >= b &&
-         px.x <= K_.width - 1 - b && px.y <= K_.height - 1 - b;
+  if (!(std::isfinite(px.x) && std::isfinite(px.y) && px.x >= b && px.y >= b && px.x <= K_.width - 1 - b &&
+        px.y <= K_.height - 1 - b)) {
+    return false;
+  }
+  return valid_.empty() || valid_.at<uint8_t>(cvRound(px.y), cvRound(px.x)) != 0;
+}
+
+void FeatureTracker::set_valid_mask(const cv::Mat& mask) {
+  if (mask.empty()) {
+    valid_.release();
+    return;
+  }
+  if (mask.type() != CV_8UC1 || mask.cols != K_.width || mask.rows != K_.height) {
+    throw std::invalid_argument("FeatureTracker::set_valid_mask: a CV_8UC1 mask of the camera's size is required");
+  }
+  // A feature's whole KLT window must lie on valid pixels.
+  const int half = options_.klt_window_px / 2;
+  cv::erode(mask, valid_, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * half + 1, 2 * half + 1)), cv::Point(-1, -1), 1,
+            cv::BORDER_CONSTANT, cv::Scalar(255));
 }
 
 std::vector<std::pair<int64_t, cv::Point2f>> FeatureTracker::current() const {
@@ -420,7 +563,7 @@ FeatureObservations FeatureTracker::track(int64_t t_ns, const cv::Mat& frame,
       kept.push_back(i);
     }
     RansacModel model = options_.ransac;
-    if (model == RansacModel::kTwoPoint && !R_cur_prev) model = RansacModel::kFivePoint;
+    if ((model == RansacModel::kTwoPoint || model == RansacModel::kTwoPointTriangulating) && !R_cur_prev) model = RansacModel::kFivePoint;
     std::vector<bool> inlier(kept.size(), true);
     if (model != RansacModel::kNone) {
       std::vector<Eigen::Vector3d> b0, b1;

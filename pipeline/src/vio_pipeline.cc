@@ -11,6 +11,8 @@
 #include "evio/calib/log.h"
 #include "evio/sensors/time.h"
 
+#include <opencv2/imgproc.hpp>
+
 namespace evio::pipeline {
 
 const char* to_string(VioFrontEnd f) { return f == VioFrontEnd::kCorners ? "corners" : "frames"; }
@@ -23,6 +25,8 @@ const char* to_string(VioInputs i) {
   }
   return "events";
 }
+
+const char* to_string(VioTrackingImage i) { return i == VioTrackingImage::kReconstruction ? "reconstruction" : "event_frame"; }
 
 const char* to_string(VioInitMethod m) {
   switch (m) {
@@ -45,6 +49,11 @@ bool VioPipelineOptions::Validate(std::string* why) const {
   if (!frames.Validate(&w)) return fail("frames: " + w);
   if (!tracker.Validate(&w)) return fail("tracker: " + w);
   if (!aps_tracker.Validate(&w)) return fail("aps_tracker: " + w);
+  if (!reconstruction.Validate(&w)) return fail("reconstruction: " + w);
+  if (!reconstruction_tracker.Validate(&w)) return fail("reconstruction_tracker: " + w);
+  if (!(reconstruction_grey_per_log > 0) || !std::isfinite(reconstruction_grey_per_log))
+    return fail("reconstruction_grey_per_log must be finite and > 0");
+  if (!(reconstruction_blur_px >= 0) || !std::isfinite(reconstruction_blur_px)) return fail("reconstruction_blur_px must be finite and >= 0");
   if (inputs != VioInputs::kEvents && inputs != VioInputs::kAps && inputs != VioInputs::kEventsAndAps)
     return fail("inputs must be events, aps or events+aps");
   if (!(aps_pixel_sigma_px > 0) || !std::isfinite(aps_pixel_sigma_px)) return fail("aps_pixel_sigma_px must be finite and > 0");
@@ -68,6 +77,7 @@ bool VioPipelineOptions::Validate(std::string* why) const {
   if (tracking_lost_min_tracks < 0) return fail("tracking_lost_min_tracks must be >= 0");
   if (tracking_lost_min_duration_ns <= 0) return fail("tracking_lost_min_duration_ns must be > 0");
   if (event_rate_drop_windows < 1) return fail("event_rate_drop_windows must be >= 1");
+  if (imu_only_min_duration_ns <= 0) return fail("imu_only_min_duration_ns must be > 0");
   return true;
 }
 
@@ -96,8 +106,15 @@ struct VioPipeline::Impl {
         undistorter(camera.camera),
         refractory(width, height, o.refractory),
         background(width, height, o.background_activity) {
-    if (use_frames) {
+    if (use_frames && opt.tracking_image == VioTrackingImage::kReconstruction) {
+      recon_undistorter = std::make_unique<frontend::FrameUndistorter>(cal.camera);
+      frame_tracker = std::make_unique<frontend::FeatureTracker>(ideal_pinhole(), opt.reconstruction_tracker);
+      frame_tracker->set_valid_mask(recon_undistorter->mask());
+    } else if (use_frames) {
       frame_builder = std::make_unique<frontend::EventFrameBuilder>(cal, opt.frames);
+      // Sparse windows only once initialised: before, the frames of a slow start would take the
+      // initialisation from a still-window estimate to an alignment over almost no motion.
+      frame_builder->set_sparse_windows(false);
       if (opt.frames.use_depth)
         frame_builder->set_motion_provider([this](int64_t t_ref, frontend::FrameMotion* m) { return frame_motion_at(t_ref + shift, m); });
       // The tracker works on the builder's undistorted pinhole images.
@@ -109,6 +126,7 @@ struct VioPipeline::Impl {
     if (use_aps) {
       aps_undistorter = std::make_unique<frontend::FrameUndistorter>(cal.camera);
       aps_tracker = std::make_unique<frontend::FeatureTracker>(ideal_pinhole(), opt.aps_tracker);
+      aps_tracker->set_valid_mask(aps_undistorter->mask());
     }
   }
 
@@ -131,6 +149,7 @@ struct VioPipeline::Impl {
   InitialStateProvider initial_state;
   ObservationCallback on_observations;
   ObservationFilter observation_filter;
+  TrackingImageCallback on_tracking_image;
   FrameMotionOracle frame_motion_oracle;
   // Output states: to on_state, or collected in result. A frame's trajectory state waits in
   // `predictions` until the keyframes around it have left the window (release()); final_keyframes
@@ -138,6 +157,10 @@ struct VioPipeline::Impl {
   VioPipeline::StateCallback on_state;
   std::deque<backend::FramePrediction> predictions;  // per causal state not yet released
   std::map<int64_t, VioState> final_keyframes;
+  // keyframe_chaining: per keyframe, its pose relative to the next keyframe in the latest solve that
+  // held both, T_k^-1 T_k+1 (by k's time), and the output states chained from those relatives.
+  std::map<int64_t, std::pair<int64_t, calib::SE3>> relative_to_next;
+  std::map<int64_t, VioState> chained_keyframes;
   int64_t last_causal_t = std::numeric_limits<int64_t>::min();
   int64_t last_keyframe_out = std::numeric_limits<int64_t>::min();
   bool finished = false;
@@ -154,6 +177,14 @@ struct VioPipeline::Impl {
   frontend::RefractoryFilter refractory;
   frontend::BackgroundActivityFilter background;
   std::unique_ptr<frontend::EventFrameBuilder> frame_builder;
+  // tracking_image kReconstruction: the high-pass filter (made at the first event), its frame clock
+  // and the undistortion of its images.
+  std::unique_ptr<mapping::ComplementaryFilter> recon;
+  std::unique_ptr<frontend::FrameUndistorter> recon_undistorter;
+  int64_t recon_frame_start = -1;  // camera clock: the current frame's first event (-1: none yet)
+  int64_t recon_frame_events = 0;
+  mapping::ImageF recon_log;
+  cv::Mat recon_grey;
   std::unique_ptr<frontend::FeatureTracker> frame_tracker;
   std::unique_ptr<frontend::EfastDetector> detector;
   std::unique_ptr<frontend::CornerTracker> corner_tracker;
@@ -183,6 +214,11 @@ struct VioPipeline::Impl {
   VioResult result;
   bool in_gap = false;     // emitting the empty frames of an event-rate drop
   int64_t few_since = -1;  // start of the current run of frames with too few tracks (IMU clock)
+  // IMU-only spans: the last frame that gave the initialised estimator at least
+  // tracking_lost_min_tracks observations (IMU clock; -1: none yet), and whether the frames since
+  // were empty gap frames (no events) or frames with too few tracks.
+  int64_t last_visual_t = -1;
+  bool gap_since_visual = false;
 
   // ---- IMU ------------------------------------------------------------------------------------
 
@@ -247,11 +283,13 @@ struct VioPipeline::Impl {
   // spreads (repropagate_trajectory: a frame at or before a final keyframe was predicted from a
   // final keyframe towards a final one). Keeps the keyframes the remaining frames are anchored on.
   void release(int64_t t_final) {
+    if (opt.keyframe_chaining) chain_final(t_final);
+    const std::map<int64_t, VioState>& finals = opt.keyframe_chaining ? chained_keyframes : final_keyframes;
     size_t n = 0;
     while (n < predictions.size() && predictions[n].state.t_ns <= t_final) ++n;
     if (n > 0) {
       const std::vector<backend::FramePrediction> ready(predictions.begin(), predictions.begin() + static_cast<std::ptrdiff_t>(n));
-      for (const VioState& s : backend::repropagate_trajectory(ready, final_keyframes, est->options().gravity_w)) {
+      for (const VioState& s : backend::repropagate_trajectory(ready, finals, est->options().gravity_w)) {
         output(VioPipeline::StateKind::kTrajectory, s);
       }
       predictions.erase(predictions.begin(), predictions.begin() + static_cast<std::ptrdiff_t>(n));
@@ -260,12 +298,50 @@ struct VioPipeline::Impl {
     for (const backend::FramePrediction& f : predictions) {
       if (f.predicted) keep = std::min(keep, f.anchor.t_ns);
     }
+    if (!chained_keyframes.empty()) keep = std::min(keep, std::prev(chained_keyframes.end())->first);
     for (auto it = final_keyframes.begin(); it != final_keyframes.end() && it->first <= t_final;) {
       if (it->first > last_keyframe_out) {
-        output(VioPipeline::StateKind::kKeyframe, it->second);
+        output(VioPipeline::StateKind::kKeyframe, finals.at(it->first));
         last_keyframe_out = it->first;
       }
       it = it->first < keep ? final_keyframes.erase(it) : std::next(it);
+    }
+    // The newest chained keyframe stays (the next one is chained from it), with what it needs.
+    if (!chained_keyframes.empty()) {
+      const int64_t newest = std::prev(chained_keyframes.end())->first;
+      const int64_t cut = std::min(keep, newest);
+      chained_keyframes.erase(chained_keyframes.begin(), chained_keyframes.lower_bound(cut));
+      relative_to_next.erase(relative_to_next.begin(), relative_to_next.lower_bound(cut));
+    }
+  }
+
+  // keyframe_chaining: the output state of every final keyframe up to t_final, each one the previous
+  // output composed with the relative pose of the two in the last solve that held both. A sliding
+  // window's solves shift its keyframes together by small amounts (the gauge is held by a
+  // linearised prior); a keyframe leaves the window after one solve and its successor after the
+  // next, so their final states differ by that shift as well as by their relative motion. Chaining
+  // keeps only the relative motion (velocity rotated along; biases as optimised).
+  void chain_final(int64_t t_final) {
+    for (auto it = final_keyframes.begin(); it != final_keyframes.end() && it->first <= t_final; ++it) {
+      if (chained_keyframes.count(it->first)) continue;
+      const VioState& f = it->second;
+      VioState c = f;
+      const auto prev_c = chained_keyframes.empty() ? chained_keyframes.end() : std::prev(chained_keyframes.end());
+      if (prev_c != chained_keyframes.end() && prev_c->first < it->first) {
+        const VioState& pf = final_keyframes.at(prev_c->first);
+        const auto rel = relative_to_next.find(prev_c->first);
+        calib::SE3 T;
+        if (rel != relative_to_next.end() && rel->second.first == it->first) {
+          T = prev_c->second.T_w_b * rel->second.second;
+        } else {
+          // No common solve: carry the previous keyframe's correction over.
+          T = prev_c->second.T_w_b * pf.T_w_b.inverse() * f.T_w_b;
+        }
+        const Eigen::Matrix3d R_corr = T.rotation.toRotationMatrix() * f.T_w_b.rotation.toRotationMatrix().transpose();
+        c.T_w_b = T;
+        c.v_w = R_corr * f.v_w;
+      }
+      chained_keyframes[it->first] = c;
     }
   }
 
@@ -291,6 +367,8 @@ struct VioPipeline::Impl {
       for (const auto& [id, p] : est->landmarks()) result.landmarks[id] = p;
       const std::vector<VioState> window = est->keyframe_states();
       for (const VioState& k : window) final_keyframes[k.t_ns] = k;
+      for (size_t i = 0; i + 1 < window.size(); ++i)
+        relative_to_next[window[i].t_ns] = {window[i + 1].t_ns, window[i].T_w_b.inverse() * window[i + 1].T_w_b};
       // The keyframes before the window's oldest are final (no solve changes them again).
       const auto first_in_window = window.empty() ? final_keyframes.end() : final_keyframes.find(window.front().t_ns);
       if (first_in_window != final_keyframes.begin() && first_in_window != final_keyframes.end()) {
@@ -367,6 +445,7 @@ struct VioPipeline::Impl {
              (method == VioInitMethod::kStatic ? "static" : method == VioInitMethod::kAlignment ? "visual-inertial alignment"
                                                                                                : "the given initial state"));
     est = std::make_unique<backend::SlidingWindowEstimator>(opt.window, cal, noise);
+    if (frame_builder) frame_builder->set_sparse_windows(true);
     est->initialize(*s, method == VioInitMethod::kStatic ? sigmas : backend::InitialSigmas{});
     while (next_imu < imu.size() && imu[next_imu].t_ns < s->t_ns - opt.init_imu_history_ns) ++next_imu;
     for (const auto& f : pending)
@@ -390,11 +469,27 @@ struct VioPipeline::Impl {
       few_since = -1;
     }
     if (est) {
+      const bool visual = f.observations.size() >= static_cast<size_t>(std::max(1, opt.tracking_lost_min_tracks));
+      if (visual) {
+        close_imu_only_span(f.t_ns);
+        last_visual_t = f.t_ns;
+        gap_since_visual = false;
+      } else if (in_gap) {
+        gap_since_visual = true;
+      }
       feed(f);
     } else {
       pending.push_back(std::move(f));
       try_init(false);
+      if (est) last_visual_t = est->latest_state().t_ns;
     }
+  }
+
+  // An IMU-only span from the last frame with observations to t (IMU clock), when it lasted at least
+  // imu_only_min_duration_ns: the estimate there comes from the IMU alone.
+  void close_imu_only_span(int64_t t) {
+    if (last_visual_t < 0 || t - last_visual_t < opt.imu_only_min_duration_ns) return;
+    result.imu_only.push_back({last_visual_t, t, gap_since_visual ? "no event frames (event-rate drop)" : lost_reason()});
   }
 
   std::string lost_reason() const { return "fewer than " + std::to_string(opt.tracking_lost_min_tracks) + " tracks"; }
@@ -415,7 +510,10 @@ struct VioPipeline::Impl {
   // Frames front-end: one observation frame per event frame, tracked with the IMU rotation prior.
   void track_event_frame(const frontend::EventFrame& ef) {
     const int64_t max_window = opt.frames.max_window_ns;
-    if (prev_frame_t >= 0 && ef.t_ns - prev_frame_t > opt.event_rate_drop_windows * max_window) {
+    // A frame closes within max_window_ns, or with sparse windows (once initialised) within
+    // sparse_max_window_ns: a longer gap has had no events to build a frame from.
+    const int64_t longest = est && opt.frames.sparse_max_window_ns > 0 ? std::max(max_window, opt.frames.sparse_max_window_ns) : max_window;
+    if (prev_frame_t >= 0 && ef.t_ns - prev_frame_t > std::max<int64_t>(opt.event_rate_drop_windows * max_window, longest + max_window)) {
       result.tracking_lost.push_back({prev_frame_t + shift, ef.t_ns + shift, "no event frames (event-rate drop)"});
       in_gap = true;
       for (int64_t t = prev_frame_t + max_window; t < ef.t_ns; t += max_window) {
@@ -428,6 +526,7 @@ struct VioPipeline::Impl {
     Eigen::Matrix3d R_cur_prev;
     const bool have_prior = prev_frame_t >= 0 && rotation_prior(prev_frame_t, ef.t_ns, &R_cur_prev);
     prev_frame_t = ef.t_ns;
+    if (on_tracking_image) on_tracking_image(ef.t_ns + shift, ef.image);
     FeatureObservations f = frame_tracker->track(ef.t_ns + shift, ef.image, have_prior ? &R_cur_prev : nullptr);
     if (est) feed_back_motion(f);
     emit_event_frame(std::move(f));
@@ -543,6 +642,7 @@ struct VioPipeline::Impl {
   // use_depth without frame_velocity_at_reference the latest state's camera velocity and median
   // landmark depth for the frames to come (frame_motion_at answers with them).
   void feed_back_motion(const FeatureObservations& f) {
+    if (!frame_builder) return;
     frame_builder->set_gyro_bias(est->latest_state().bias_gyro);
     if (!opt.frames.use_depth) return;
     if (frame_motion_oracle) last_tracked = f;
@@ -657,7 +757,9 @@ struct VioPipeline::Impl {
       ++st.corner_events;
       corner_tracker->add(e);
     }
-    if (use_frames) {
+    if (use_frames && recon_undistorter) {
+      reconstruct_and_track(filtered);
+    } else if (use_frames) {
       // In slices of a quarter frame, so each frame is built with the estimate (gyro bias,
       // velocity, depth) fed back after the frame before it, not with the one of the chunk's start.
       const size_t slice = static_cast<size_t>(std::max<int64_t>(256, opt.frames.events_per_frame / 4));
@@ -668,6 +770,54 @@ struct VioPipeline::Impl {
       }
     }
     prune_imu();
+  }
+
+  // tracking_image kReconstruction: the filtered events into the high-pass filter, in runs that
+  // end where a frame closes (the frame clock of `frames`: events_per_frame events and at least
+  // min_window_ns, or max_window_ns whatever the count: the reconstruction holds the texture
+  // through event-rate drops), and each frame's image to the tracker.
+  void reconstruct_and_track(const std::vector<Event>& ev) {
+    if (ev.empty()) return;
+    if (!recon) recon = std::make_unique<mapping::ComplementaryFilter>(width, height, ev.front().t_ns, opt.reconstruction);
+    const frontend::EventFrameOptions& fo = opt.frames;
+    size_t begin = 0;
+    for (size_t i = 0; i < ev.size(); ++i) {
+      const int64_t t = ev[i].t_ns;
+      if (recon_frame_start < 0) recon_frame_start = t;
+      // Frames that close before this event (max_window_ns passed without enough events).
+      while (t - recon_frame_start > fo.max_window_ns) {
+        recon->process(ev.data() + begin, i - begin);
+        begin = i;
+        close_recon_frame(recon_frame_start + fo.max_window_ns);
+        recon_frame_start += fo.max_window_ns;
+      }
+      ++recon_frame_events;
+      if (recon_frame_events >= fo.events_per_frame && t - recon_frame_start >= fo.min_window_ns) {
+        recon->process(ev.data() + begin, i + 1 - begin);
+        begin = i + 1;
+        close_recon_frame(t);
+        recon_frame_start = -1;
+      }
+    }
+    recon->process(ev.data() + begin, ev.size() - begin);
+  }
+
+  void close_recon_frame(int64_t t_cam) {
+    recon_frame_events = 0;
+    recon->log_intensity(t_cam, &recon_log);
+    cv::Mat grey(height, width, CV_8UC1);
+    const float k = static_cast<float>(opt.reconstruction_grey_per_log);
+    for (int y = 0; y < height; ++y) {
+      uint8_t* row = grey.ptr<uint8_t>(y);
+      for (int x = 0; x < width; ++x) row[x] = cv::saturate_cast<uint8_t>(128.0f + k * recon_log(y, x));
+    }
+    if (opt.reconstruction_blur_px > 0) cv::GaussianBlur(grey, grey, cv::Size(0, 0), opt.reconstruction_blur_px);
+    recon_grey = recon_undistorter->undistort(grey);
+    frontend::EventFrame ef;
+    ef.t_ns = ef.t_end_ns = t_cam;
+    ef.image = recon_grey;
+    ++result.stats.event_frames.frames_emitted;
+    track_event_frame(ef);
   }
 
   // Processes the waiting chunks the IMU covers (all of them with `all`).
@@ -695,6 +845,7 @@ void VioPipeline::set_initial_state_provider(InitialStateProvider provider) { im
 
 void VioPipeline::set_observation_callback(ObservationCallback callback) { impl_->on_observations = std::move(callback); }
 void VioPipeline::set_observation_filter(ObservationFilter filter) { impl_->observation_filter = std::move(filter); }
+void VioPipeline::set_tracking_image_callback(TrackingImageCallback callback) { impl_->on_tracking_image = std::move(callback); }
 void VioPipeline::set_frame_motion_oracle(FrameMotionOracle oracle) { impl_->frame_motion_oracle = std::move(oracle); }
 void VioPipeline::set_state_callback(StateCallback callback) { impl_->on_state = std::move(callback); }
 size_t VioPipeline::buffered_states() const { return impl_->predictions.size() + impl_->final_keyframes.size(); }
@@ -747,10 +898,12 @@ VioResult VioPipeline::finish() {
   p.drain_frames(true);
   p.drain(true);
   // Event-rate drops at the end: frames up to the last IMU sample keep the state propagating.
-  if (p.use_frames) {
+  if (p.frame_builder) {
     p.built.clear();
     p.frame_builder->flush(&p.built);
     for (const auto& ef : p.built) p.track_event_frame(ef);
+  } else if (p.recon && p.recon_frame_start >= 0 && p.recon_frame_events >= options_.frames.min_events) {
+    p.close_recon_frame(p.result.stats.t_last_event_ns);
   }
   // APS frames after the last event frame: without event tracks.
   while (!p.aps_ready.empty()) {
@@ -766,6 +919,13 @@ VioResult VioPipeline::finish() {
     }
   }
   if (!p.est) p.try_init(true);
+  if (p.est && p.imu.size() > 0) p.close_imu_only_span(std::max(p.last_causal_t, p.last_visual_t));
+  for (const VioSegment& s : p.result.imu_only) {
+    if (s.t_end_ns - s.t_begin_ns >= options_.tracking_lost_min_duration_ns) {
+      log_warning("IMU only (" + s.what + ") from " + format_seconds(s.t_begin_ns) + " to " + format_seconds(s.t_end_ns) +
+                  " s: the estimate there drifts with the IMU");
+    }
+  }
   if (p.few_since >= 0 && st.t_last_event_ns + p.shift - p.few_since >= options_.tracking_lost_min_duration_ns) {
     p.result.tracking_lost.push_back({p.few_since, st.t_last_event_ns + p.shift, p.lost_reason()});
   }
@@ -775,7 +935,7 @@ VioResult VioPipeline::finish() {
                                                                             : "no APS frames";
   }
   if (p.use_frames) {
-    st.event_frames = p.frame_builder->stats();
+    if (p.frame_builder) st.event_frames = p.frame_builder->stats();
     st.tracker = p.frame_tracker->stats();
   } else {
     st.corner_tracker = p.corner_tracker->stats();
@@ -783,8 +943,14 @@ VioResult VioPipeline::finish() {
   if (p.use_aps) st.aps_tracker = p.aps_tracker->stats();
   if (p.est) {
     st.window = p.est->stats();
-    for (const VioState& k : p.est->keyframe_states()) p.final_keyframes[k.t_ns] = k;
+    const std::vector<VioState> window = p.est->keyframe_states();
+    for (const VioState& k : window) p.final_keyframes[k.t_ns] = k;
+    for (size_t i = 0; i + 1 < window.size(); ++i)
+      p.relative_to_next[window[i].t_ns] = {window[i + 1].t_ns, window[i].T_w_b.inverse() * window[i + 1].T_w_b};
     p.release(std::numeric_limits<int64_t>::max());
+    p.final_keyframes.clear();  // everything is out: nothing more is chained from them
+    p.chained_keyframes.clear();
+    p.relative_to_next.clear();
     // Motion-model segments from the keyframes' models.
     for (const auto& [t, rotation_only] : st.window.motion_model) {
       const std::string m = rotation_only ? "rotation_only" : "6dof";

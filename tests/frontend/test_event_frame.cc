@@ -406,9 +406,10 @@ TEST(EventFrame, WindowRules) {
     EXPECT_EQ(b.stats().frames_emitted, 10);
     EXPECT_EQ(b.stats().frames_uncompensated, 0);  // compensation off is not a fallback
   }
-  {  // min_events above the window's count: every frame dropped and counted.
+  {  // min_events above the window's count, sparse windows off: every frame dropped and counted.
     EventFrameOptions o2 = o;
     o2.min_events = 150;
+    o2.sparse_max_window_ns = 0;
     EventFrameBuilder b(cam, o2);
     std::vector<EventFrame> out;
     b.add_events(EventSpan(sparse.data(), sparse.size()), &out);
@@ -416,6 +417,42 @@ TEST(EventFrame, WindowRules) {
     EXPECT_TRUE(out.empty());
     EXPECT_EQ(b.stats().frames_dropped_sparse, 10);
     EXPECT_EQ(b.stats().events_dropped_sparse, 1000);
+  }
+  {  // ... with sparse windows (default 500 ms) and no wait (sparse_after_ns 0): a frame past
+     // max_window_ns keeps its events until it has min_events (150 events, 15 ms each); the last
+     // 100 are too few at the flush.
+    EventFrameOptions o2 = o;
+    o2.min_events = 150;
+    o2.sparse_after_ns = 0;
+    EventFrameBuilder b(cam, o2);
+    std::vector<EventFrame> out;
+    b.add_events(EventSpan(sparse.data(), sparse.size()), &out);
+    b.flush(&out);
+    ASSERT_EQ(out.size(), 6u);
+    for (const EventFrame& f : out) EXPECT_EQ(f.events, 150u);
+    EXPECT_EQ(b.stats().frames_dropped_sparse, 1);
+    EXPECT_EQ(b.stats().events_dropped_sparse, 100);
+    // ... but no longer than sparse_max_window_ns: 12 ms windows of 120 events are dropped.
+    EventFrameOptions o3 = o2;
+    o3.sparse_max_window_ns = 12'000'000;
+    EventFrameBuilder c(cam, o3);
+    out.clear();
+    c.add_events(EventSpan(sparse.data(), sparse.size()), &out);
+    c.flush(&out);
+    EXPECT_TRUE(out.empty());
+    EXPECT_EQ(c.stats().events_dropped_sparse, 1000);
+    // Default sparse_after_ns (200 ms): before the first frame the sparse window applies; after it,
+    // only once 200 ms have passed without a frame, so within the 100 ms of data the 10 ms windows
+    // of 100 events that follow the first frame are dropped as before.
+    EventFrameOptions o4 = o;
+    o4.min_events = 150;
+    EventFrameBuilder d(cam, o4);
+    out.clear();
+    d.add_events(EventSpan(sparse.data(), sparse.size()), &out);
+    d.flush(&out);
+    ASSERT_EQ(out.size(), 1u);
+    EXPECT_EQ(out[0].events, 150u);
+    EXPECT_EQ(d.stats().events_dropped_sparse, 850);
   }
   {  // Dense: frames of exactly N events, the remainder on flush.
     const std::vector<Event> dense = uniform_events(2500, 0, 1'000);

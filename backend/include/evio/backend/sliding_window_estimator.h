@@ -134,6 +134,11 @@ struct SlidingWindowOptions {
   // one): keyframes made by track losses can be 10 ms apart (boxes_6dof), too little baseline for
   // a translation to show (s, >= 0).
   double model_selection_min_interval_s = 0.05;
+  // true: the test's reference view is the oldest window keyframe (at least
+  // model_selection_min_interval_s old) that still shares model_selection_min_tracks tracks: the
+  // longest baseline the window offers, so a slow translation far from the scene shows its parallax;
+  // false: the newest such keyframe.
+  bool model_selection_longest_baseline = false;
   // IMU veto: R cannot win when the IMU datum rejects a static camera centre at this significance
   // (its chi2 above the chi-square upper quantile for its degrees of freedom: 16.27 for the
   // velocity change alone, 3 dof; 22.46 with the displacement, 6 dof). On boxes_6dof at 0.1-0.15
@@ -152,6 +157,12 @@ struct SlidingWindowOptions {
   // replay, 0.1-0.2 m/s, 1-2 m) looks rotational to the image test (a fronto-parallel plane's
   // homography); this datum only helps once landmarks are triangulated.
   double model_selection_velocity_sigma_mps = 0.02;
+  // Growth of that sigma while no landmarks constrain the velocity (after the initialisation, or
+  // when a fast turn leaves none in the window): the IMU alone carries the velocity, with the
+  // accelerometer-bias and tilt errors of the estimate (m/s^2, >= 0). The datum is then used with
+  // sigma = hypot(sigma at the last landmark-rich keyframe or at the initialisation, this * time since);
+  // the same acceleration error enters the predicted displacement as this * dt^2 / 2.
+  double model_selection_velocity_drift_mps2 = 0.05;
   // Pixel conditions of the former test, kept as necessary conditions next to the GRIC test (both
   // must agree, see choose_rotation_only): the median rotation-compensated displacement from the
   // previous keyframe below rotation_only_parallax_px (0 disables the model), and the
@@ -181,7 +192,12 @@ struct SlidingWindowOptions {
   // is known better (a calibrated IMU, a simulator that starts at zero bias), a smaller turn-on
   // sigma keeps the visual tracks from pulling it: their slowly varying common-mode error looks
   // like a gyro bias. A still start measures the bias, and initialize() then takes its sigma.
-  double init_bias_gyro_turn_on_radps = 0.01;   // rad/s, > 0
+  // Default 5e-4 rad/s (0.03 deg/s): an IMU whose noise model comes with the calibration (a
+  // Kalibr imu0 section) and a bias that has been calibrated or that a still start measures. With
+  // 0.01 rad/s the event tracks' slowly varying common-mode error went into the gyro bias (0.2-2
+  // deg/s off on the crosscheck sequences; docs/results/vio.md). Give an uncalibrated MEMS gyro
+  // its datasheet turn-on bias (0.01 rad/s in datasets/vio/davis240c.yaml and davis346.yaml).
+  double init_bias_gyro_turn_on_radps = 5e-4;   // rad/s, > 0
   double init_bias_accel_turn_on_mps2 = 0.1;    // m/s^2, > 0
   double init_bias_horizon_s = 60.0;            // s, >= 0
   bool Validate(std::string* why) const;
@@ -204,6 +220,8 @@ struct SlidingWindowStats {
     double baseline_s = 0;          // time from the reference keyframe (s)
     double gric_static = 0, gric_rotation = 0, gric_general = 0;  // GRIC units (-2 log likelihood)
     double imu_chi2 = 0;            // chi2 of "the camera centre does not accelerate (3 dof) / move (3 more)"
+    int imu_dof = 0;                // its degrees of freedom (0: the IMU datum was not used)
+    int landmarks = 0;              // triangulated landmarks in the window at the test
     TwoViewModel best = TwoViewModel::kNone;  // lowest GRIC (kNone: too few tracks, not tested); kGeneral when vetoed
     bool imu_veto = false;          // R had the lowest GRIC but the IMU rejected a static centre
     int run = 0;                    // consecutive keyframes R has won by the margin
@@ -305,6 +323,11 @@ class SlidingWindowEstimator {
   std::optional<std::pair<VioState, VioState>> last_prediction_;  // (anchor keyframe, predicted)
   std::optional<Eigen::Matrix<double, 6, 6>> latest_cov_;
   bool rotation_only_active_ = false;  // hysteresis state of the rotation-only model
+  double last_median_depth_m_ = 0;     // median camera depth of the triangulated landmarks at the last solve that had any (m)
+  // The velocity is known (model selection's displacement datum) to velocity_anchor_sigma_mps_ at
+  // velocity_anchor_t_ns_: the initialisation, or the last solve with enough triangulated landmarks.
+  int64_t velocity_anchor_t_ns_ = 0;
+  double velocity_anchor_sigma_mps_ = 0;
   int rotation_only_run_ = 0;          // consecutive keyframes R has won by the margin
   int64_t rotation_only_run_start_ns_ = 0;  // time of the first of them
   SlidingWindowStats stats_;

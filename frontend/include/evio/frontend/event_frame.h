@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <deque>
 #include <functional>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -32,6 +33,16 @@ struct EventFrameOptions {
   // frame's first event the frame is closed with the events it has (event-rate drops, a still
   // camera), so frames keep coming at >= 1 / max_window_ns.
   int64_t max_window_ns = 50'000'000;
+  // Low event rates (a hover, a low-texture view): a frame that reaches max_window_ns with fewer
+  // than min_events events is not dropped but keeps its events until it has min_events, up to this
+  // long (ns, >= max_window_ns; 0: off, such frames are dropped as before). The motion compensation
+  // carries the longer window: slow motion is what makes the rate low (VioPipeline turns them on
+  // once initialised).
+  int64_t sparse_max_window_ns = 500'000'000;
+  // ... only after this long without a frame (ns, >= 0): a short dip of the rate (a velocity
+  // reversal) drops its sparse frames as before, and only a real starvation gets the long ones,
+  // whose compensation over 0.1-0.5 s is less precise than a 50 ms frame's.
+  int64_t sparse_after_ns = 200'000'000;
   // Shortest frame window, ns, 0..max_window_ns (default 0: N events decide). At high event rates
   // a frame then holds more than events_per_frame events (every event until min_window_ns), which
   // bounds the frame rate at 1 / min_window_ns: adaptive to the event rate.
@@ -145,6 +156,9 @@ class EventFrameBuilder {
   // tracks run ahead along their motion by 0.2-0.7 px, none with the velocity at the reference
   // time). An empty function removes it. A provider's answer is checked like set_motion's.
   void set_motion_provider(FrameMotionProvider provider) { provider_ = std::move(provider); }
+  // Turns the sparse windows (options().sparse_max_window_ns) on or off from the next frame on
+  // (a caller may hold them off until its estimate can compensate long windows).
+  void set_sparse_windows(bool on) { sparse_on_ = on; }
 
   // Adds time-ordered events (camera clock); appends every completed frame to *out.
   void add_events(EventSpan events, std::vector<EventFrame>* out);
@@ -184,6 +198,8 @@ class EventFrameBuilder {
   Eigen::Vector3d plane_n_ = Eigen::Vector3d::UnitZ();
   double plane_d_ = 0;  // > 0: per-event depth from the plane (set_motion_plane)
   FrameMotionProvider provider_;
+  bool sparse_on_ = true;
+  int64_t last_emitted_end_ns_ = std::numeric_limits<int64_t>::min();  // camera clock: the last emitted frame's last event
 
   std::vector<Event> pending_;
   size_t fresh_ = 0;  // pending_[0, fresh_) were carried from the previous frame (overlap)

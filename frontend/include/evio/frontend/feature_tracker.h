@@ -20,15 +20,17 @@ namespace evio::frontend {
 
 enum class RansacModel {
   kNone,      // no geometric verification
-  kTwoPoint,  // translation only (opengv TranslationOnlySacProblem), rotation from the IMU
+  kTwoPoint,  // translation only, rotation from the IMU: epipolar-plane angle test (no triangulation)
+  kTwoPointTriangulating,  // the same model scored by OpenGV (TranslationOnlySacProblem): each pair
+                           // triangulated and reprojected; rejects correct tracks over short baselines
   kFivePoint  // essential matrix, Nister's 5-point solver (opengv CentralRelativePoseSacProblem)
 };
 
-// "none", "two_point", "five_point".
+// "none", "two_point", "two_point_triangulating", "five_point".
 const char* ransac_model_name(RansacModel model);
 
 // Smallest number of correspondences ransac_inliers() runs RANSAC on: OpenGV's sample size,
-// 2 for kTwoPoint, 8 for kFivePoint (5 for Nister's solver + 3 to pick among its solutions),
+// 2 for kTwoPoint and kTwoPointTriangulating, 8 for kFivePoint (5 for Nister's solver + 3 to pick among its solutions),
 // 0 for kNone.
 int ransac_min_correspondences(RansacModel model);
 
@@ -142,6 +144,12 @@ class FeatureTracker {
   FeatureObservations track(int64_t t_ns, const cv::Mat& frame,
                             const Eigen::Matrix3d* R_cur_prev = nullptr);
 
+  // Pixels that carry image content (CV_8UC1 of the camera's size, non-zero = valid; empty: all):
+  // no feature is detected, and no track continues, where its KLT window would reach an invalid
+  // pixel (e.g. the border of an undistorted frame that repeats the nearest sensor pixel, a
+  // texture that does not move with the scene). Throws std::invalid_argument for another size or type.
+  void set_valid_mask(const cv::Mat& mask);
+
   // Current tracks' pixel positions (for drawing overlays), in the order of the last observations.
   std::vector<std::pair<int64_t, cv::Point2f>> current() const;
   const FeatureTrackerStats& stats() const { return stats_; }
@@ -169,6 +177,7 @@ class FeatureTracker {
   FeatureTrackerOptions options_;
   FeatureTrackerStats stats_;
   std::vector<Track> tracks_;
+  cv::Mat valid_;  // eroded valid-pixel mask (set_valid_mask); empty: every pixel
   std::vector<cv::Mat> prev_pyramid_;
   // The frames still referenced by a track's template: pyramid, and the rotation from there to
   // the current frame (chained IMU priors; unknown once a frame came without one).

@@ -29,6 +29,7 @@
 #include "evio/frontend/event_frame.h"
 #include "evio/frontend/feature_tracker.h"
 #include "evio/frontend/frame_undistorter.h"
+#include "evio/mapping/reconstruction.h"
 #include "evio/sensors/event_buffer.h"
 #include "evio/sensors/measurements.h"
 #include "evio/sensors/vio_types.h"
@@ -49,6 +50,15 @@ enum class VioInitMethod {
   kGiven,      // the state of VioPipeline::set_initial_state_provider at the first frame
 };
 
+// The image the frames front-end tracks features in.
+enum class VioTrackingImage {
+  kEventFrame,      // motion-compensated event frames (EventFrameBuilder): the events' edges, whose look
+                    // changes with the direction of motion
+  kReconstruction,  // the log intensity reconstructed from the events alone by the high-pass filter
+                    // (mapping::ComplementaryFilter without frames, Scheerlinck et al., ACCV 2018),
+                    // undistorted like an APS frame: the scene's texture, whatever the motion
+};
+
 // Which measurement streams feed the estimator.
 enum class VioInputs {
   kEvents,        // events through the chosen event front-end (VioFrontEnd)
@@ -62,9 +72,11 @@ enum class VioInputs {
 const char* to_string(VioFrontEnd f);
 const char* to_string(VioInitMethod m);
 const char* to_string(VioInputs i);
+const char* to_string(VioTrackingImage i);  // "event_frame", "reconstruction"
 inline bool operator==(VioFrontEnd f, std::string_view name) { return name == to_string(f); }
 inline bool operator==(VioInitMethod m, std::string_view name) { return name == to_string(m); }
 inline bool operator==(VioInputs i, std::string_view name) { return name == to_string(i); }
+inline bool operator==(VioTrackingImage i, std::string_view name) { return name == to_string(i); }
 inline bool operator!=(VioFrontEnd f, std::string_view name) { return !(f == name); }
 inline bool operator!=(VioInitMethod m, std::string_view name) { return !(m == name); }
 inline bool operator!=(VioInputs i, std::string_view name) { return !(i == name); }
@@ -128,6 +140,33 @@ struct VioPipelineOptions {
     return t;
   }();                                                           // grid, FAST, KLT (px), RANSAC (px)
 
+  // Frames front-end: what the features are tracked in. With kReconstruction, frames are taken
+  // at the event frames' times (events_per_frame, min/max_window_ns of `frames`; also through
+  // event-rate drops: the reconstruction keeps the texture it has seen) and the tracker gets the
+  // high-pass filter's log intensity, undistorted, as 8-bit grey 128 + reconstruction_grey_per_log * L.
+  VioTrackingImage tracking_image = VioTrackingImage::kEventFrame;
+  mapping::ComplementaryFilterOptions reconstruction = [] {
+    mapping::ComplementaryFilterOptions r;
+    r.high_pass = true;
+    r.use_frames = false;
+    r.cutoff_hz = 0.5;
+    r.contrast_on = r.contrast_off = 0.2;
+    return r;
+  }();                                                           // cutoff_hz (Hz), contrast_on/off (log units)
+  double reconstruction_grey_per_log = 64.0;                     // grey levels per log-intensity unit, > 0
+  // Gaussian smoothing of the reconstruction before tracking (px, >= 0; 0: none): each pixel's
+  // log intensity carries its own contrast-threshold error, a white spatial noise the corner
+  // detector would otherwise take for texture.
+  double reconstruction_blur_px = 1.0;
+  frontend::FeatureTrackerOptions reconstruction_tracker = [] {
+    frontend::FeatureTrackerOptions t;
+    t.fast_threshold = 10;
+    t.template_max_age_frames = 10;
+    t.template_fallback = true;
+    t.template_max_rotation_deg = 4.0;
+    return t;
+  }();
+
   // Corners front-end.
   frontend::EfastOptions efast;                                  // filter_sae, filter_window_ns (ns)
   frontend::CornerTrackerOptions corner_tracker;                 // max_distance_px (px), max_gap_ns (ns), ...
@@ -144,9 +183,14 @@ struct VioPipelineOptions {
   // on simulated 24 Hz frames with 5 ms exposure: 0.04 px between consecutive frames, 0.12 px
   // against the best-fit landmark, against 0.3-0.45 px for event frames; 0.3 px leaves room for
   // real sensors' blur and noise); event observations take aps_event_pixel_sigma_px.
+  // RANSAC two_point_triangulating on APS frames: at 20-25 Hz they have the baseline its test needs,
+  // and it drops tracks that drift during a hover, which the epipolar-plane test (right for the
+  // 100 Hz event frames) keeps as points that did not move (crosscheck planes_quadrotor, APS only:
+  // docs/results/vio.md).
   frontend::FeatureTrackerOptions aps_tracker = [] {
     frontend::FeatureTrackerOptions t;
     t.fast_threshold = 5;
+    t.ransac = frontend::RansacModel::kTwoPointTriangulating;
     return t;
   }();
   double aps_pixel_sigma_px = 0.3;
@@ -163,6 +207,12 @@ struct VioPipelineOptions {
 
   // Back-end.
   backend::SlidingWindowOptions window;                          // window size, solver, keyframe rules (see its header)
+  // Output trajectory (trajectory.tum, keyframes.txt): each final keyframe is the previous one
+  // composed with their relative pose in the last solve that held both (true), or its own last
+  // optimised state (false). The window's solves move its keyframes together by small amounts (the
+  // gauge rests on a linearised prior), and a keyframe and its successor leave the window after
+  // different solves: without chaining that shift shows as orientation noise between keyframes.
+  bool keyframe_chaining = true;
 
   // Initialisation. Frames are collected until they span init_window_ns, then the method is
   // tried on the first frame (alignment: on the frames within init_window_ns of it); on failure
@@ -188,6 +238,9 @@ struct VioPipelineOptions {
   // an event-rate drop (count, >= 1); empty frames every max_window_ns keep the IMU propagation
   // going through it, and it is reported as a segment (not as tracking lost).
   int event_rate_drop_windows = 2;
+  // An interval of at least this long without a frame that gave the estimator
+  // tracking_lost_min_tracks observations is an IMU-only span (VioResult::imu_only), ns, > 0.
+  int64_t imu_only_min_duration_ns = 100'000'000;
 
   bool Validate(std::string* why) const;
 };
@@ -233,6 +286,9 @@ struct VioResult {
   std::map<int64_t, Eigen::Vector3d> landmarks;      // the window's landmarks after every keyframe (world, m), by track id, latest value
   std::vector<VioSegment> motion_models;             // runs of keyframes with the same motion model
   std::vector<VioSegment> tracking_lost;             // event-rate drops and runs with too few tracks
+  // Spans (after the initialisation) where the estimate came from the IMU alone: no frame with at
+  // least tracking_lost_min_tracks observations for imu_only_min_duration_ns or longer.
+  std::vector<VioSegment> imu_only;
   VioStats stats;
 };
 
@@ -241,6 +297,8 @@ class VioPipeline {
   using InitialStateProvider = std::function<std::optional<VioState>(int64_t t_ns)>;
   using ObservationCallback = std::function<void(const FeatureObservations&)>;
   using ObservationFilter = std::function<void(FeatureObservations*)>;
+  // The image the frames front-end tracks (undistorted CV_8UC1) and its time (IMU clock).
+  using TrackingImageCallback = std::function<void(int64_t t_ns, const cv::Mat& image)>;
   // Diagnostic: the camera velocity (camera frame, m/s) at frame.t_ns (IMU clock: an event frame's
   // reference time) and the median z-depth (m) of the tracks of `frame` (the bearings of the latest
   // tracked event frame) for the event frames' translation compensation, in place of the estimate's, and optionally a scene plane (n, d: n . P = d in the camera frame,
@@ -262,6 +320,8 @@ class VioPipeline {
   void set_initial_state_provider(InitialStateProvider provider);
   // Called with every front-end frame (IMU clock), before the estimator sees it.
   void set_observation_callback(ObservationCallback callback);
+  // Called with every tracking image of the frames front-end before it is tracked (diagnostics).
+  void set_tracking_image_callback(TrackingImageCallback callback);
   // Called with every front-end frame before the callback and the estimator, and may change it
   // (e.g. evaluation::TrackOracle replaces the bearings by true projections for an error budget).
   // The front-end keeps tracking its own observations.
