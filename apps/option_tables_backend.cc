@@ -22,6 +22,8 @@ const Table<backend::SlidingWindowOptions>& sliding_window_table() {
           .number("keyframe_min_parallax_px", &O::keyframe_min_parallax_px, Range::kPositive, "px")
           .number("keyframe_min_tracked_ratio", &O::keyframe_min_tracked_ratio, Range::kUnit, "")
           .seconds_as_ms("keyframe_max_interval_ms", &O::keyframe_max_interval_s, Range::kPositive)
+          .integer("keyframe_min_tracks", &O::keyframe_min_tracks, 0, 100000)
+          .seconds_as_ms("keyframe_max_interval_without_tracks_ms", &O::keyframe_max_interval_without_tracks_s, Range::kPositive)
           .number("min_triangulation_angle_deg", &O::min_triangulation_angle_deg, Range::kNonNegative, "deg")
           .number("max_reprojection_px", &O::max_reprojection_px, Range::kPositive, "px")
           .number("min_depth_m", &O::min_depth_m, Range::kPositive, "m")
@@ -31,6 +33,7 @@ const Table<backend::SlidingWindowOptions>& sliding_window_table() {
                    {"restart", TrackedLandmarkMarginalisation::kRestart},
                    {"split", TrackedLandmarkMarginalisation::kSplit}})
           .boolean("rotation_only_model", &O::rotation_only_model)
+          .boolean("rotation_only_static_centre", &O::rotation_only_static_centre)
           .number("rotation_only_gric_margin", &O::rotation_only_gric_margin, Range::kAny, "GRIC units")
           .integer("rotation_only_min_keyframes", &O::rotation_only_min_keyframes, 1, 1000)
           .seconds_as_ms("rotation_only_min_duration_ms", &O::rotation_only_min_duration_s, Range::kNonNegative)

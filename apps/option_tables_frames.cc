@@ -54,6 +54,8 @@ const Table<frontend::FeatureTrackerOptions>& feature_tracker_table() {
           .number("template_max_rotation_deg", &O::template_max_rotation_deg, Range::kNonNegative, "deg")
           .integer("anchor_frames", &O::anchor_frames, 0, 100000)
           .number("anchor_ransac_threshold_px", &O::anchor_ransac_threshold_px, Range::kPositive, "px")
+          .number("reacquire_max_age_s", &O::reacquire_max_age_s, Range::kNonNegative, "s")
+          .number("reacquire_max_px", &O::reacquire_max_px, Range::kPositive, "px")
           .choice("ransac", &O::ransac,
                   {{"two_point", RansacModel::kTwoPoint}, {"two_point_triangulating", RansacModel::kTwoPointTriangulating}, {"five_point", RansacModel::kFivePoint}, {"none", RansacModel::kNone}})
           .number("ransac_threshold_px", &O::ransac_threshold_px, Range::kPositive, "px")

@@ -21,7 +21,7 @@ namespace fs = std::filesystem;
 namespace {
 
 const char* kSpecForm =
-    "a mapping with `datasets:` (a list of {name, path} or {name, scene, duration, seed, set}) and `algorithms:` (a list "
+    "a mapping with `datasets:` (a list of {name, path}, {name, scene, duration, seed, set} or {name, generate: [PROGRAM, ARG, ..., {out}]}) and `algorithms:` (a list "
     "of {algorithm, variant, datasets, args, grid, timeout_s}), optional `name:`, `timeout_s:`, `report: [extremes]`, `mean_over: [GRID_KEY]` and `accept_errors: true|false`";
 
 class SpecReader {
@@ -100,6 +100,12 @@ class SpecReader {
     return p.string();
   }
 
+  // `{spec_dir}` replaced by the spec's folder (a generator's program or its files next to the spec).
+  std::string substitute_spec_dir(std::string s) const {
+    for (size_t p = s.find("{spec_dir}"); p != std::string::npos; p = s.find("{spec_dir}", p + dir_.size())) s.replace(p, 10, dir_);
+    return s;
+  }
+
   void keys(const YAML::Node& n, const std::set<std::string>& allowed, const std::string& what, const std::string& form) const {
     if (!n.IsMap()) fail(n, what + " is not a mapping", form);
     for (const auto& kv : n) {
@@ -114,13 +120,24 @@ class SpecReader {
   }
 
   SweepDataset dataset(const YAML::Node& n) const {
-    const std::string form = "{name: NAME, path: RECORDING} or {name: NAME, scene: SCENE.yaml, duration: S, seed: N, set: [key=value]}";
+    const std::string form = "{name: NAME, path: RECORDING}, {name: NAME, scene: SCENE.yaml, duration: S, seed: N, set: [key=value]} "
+                             "or {name: NAME, generate: [PROGRAM, ARG, ..., {out}]}";
     SweepDataset d;
     if (n.IsScalar()) {
       d.path = existing_path(n, "dataset path");
     } else {
-      keys(n, {"name", "path", "scene", "duration", "seed", "set"}, "a dataset", form);
-      if (n["path"].IsDefined() == n["scene"].IsDefined()) fail(n, "a dataset needs exactly one of `path` and `scene`", form);
+      keys(n, {"name", "path", "scene", "duration", "seed", "set", "generate"}, "a dataset", form);
+      if (n["generate"]) {
+        if (n["path"] || n["scene"] || n["duration"] || n["seed"] || n["set"]) fail(n, "`generate` takes no path, scene, duration, seed or set", form);
+        if (!n["name"]) fail(n, "a generated dataset needs a `name`", form);
+        d.name = name(n["name"], "name");
+        for (const std::string& a : strings(n["generate"], "generate")) d.generate.push_back(substitute_spec_dir(with_env(n["generate"], a)));
+        if (d.generate.empty()) fail(n["generate"], "`generate` is empty", form);
+        if (std::none_of(d.generate.begin(), d.generate.end(), [](const std::string& a) { return a.find("{out}") != std::string::npos; }))
+          fail(n["generate"], "`generate` has no {out}", "the dataset folder as {out} among the generator's arguments");
+        return d;
+      }
+      if (n["path"].IsDefined() == n["scene"].IsDefined()) fail(n, "a dataset needs exactly one of `path`, `scene` and `generate`", form);
       if (n["path"]) d.path = existing_path(n["path"], "path");
       if (n["scene"]) d.scene = existing_path(n["scene"], "scene");
       if (n["path"] && (n["duration"] || n["seed"] || n["set"])) fail(n, "duration, seed and set apply to a `scene` only", form);
@@ -321,6 +338,7 @@ std::vector<SweepCell> expand_sweep_cells(const SweepSpec& spec, const std::stri
       const std::string path = d.simulated() ? (fs::path(data_dir) / d.name).string() : d.path;
       // What the dataset is (not where): a regenerated scene with other settings is another cell.
       std::string identity = d.simulated() ? "scene\n" + d.scene + "\n" + d.duration_s + "\n" + d.seed : "path\n" + d.path;
+      for (const std::string& g : d.generate) identity += "\ngenerate " + g;
       for (const std::string& s : d.set) identity += "\n" + s;
       std::vector<size_t> index(a.grid.size(), 0);
       while (true) {

@@ -9,8 +9,11 @@
 
 namespace evio::apps {
 
-// One dataset of the sweep: a recording evio reads (`path`) or a simulator scene (`scene`) that the
-// sweep generates once into OUT/data/<name>/ with `evio simulate`.
+// One dataset of the sweep: a recording evio reads (`path`), a simulator scene (`scene`) that the
+// sweep generates once into OUT/data/<name>/ with `evio simulate`, or the output of an external
+// generator command (`generate`, e.g. the crosscheck simulator) run once with `{out}` replaced by
+// OUT/data/<name>. A generator that exits with code 77 (the simulator is not there) skips the
+// dataset and its cells, with the last line of its stderr as the reason.
 struct SweepDataset {
   std::string name;             // unique in the spec; default: the file name without extension
   std::string path;             // the recording (resolved against the spec's folder); empty for a scene
@@ -18,8 +21,12 @@ struct SweepDataset {
   std::string duration_s;       // simulate --duration, s (YAML scalar text; empty: the scene's)
   std::string seed;             // simulate --seed (empty: the scene's)
   std::vector<std::string> set; // simulate --set key=value, in order
-  bool simulated() const { return !scene.empty(); }
+  std::vector<std::string> generate;  // generator argv ({spec_dir} resolved; {out} left for the folder)
+  bool simulated() const { return !scene.empty() || !generate.empty(); }
 };
+
+// Exit code of a dataset generator that cannot run here (its simulator or data is missing).
+constexpr int kSweepGeneratorSkip = 77;
 
 // One algorithm entry: `evio <algorithm>` on some datasets, over the product of a parameter grid.
 struct SweepAlgorithm {

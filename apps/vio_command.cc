@@ -107,7 +107,11 @@ const Table<C>& vio_config_table() {
     reports.integer("tracking_lost_min_tracks", &C::tracking_lost_min_tracks, 0, 100000)
         .duration_ms("tracking_lost_min_duration_ms", &C::tracking_lost_min_duration_ns, Range::kPositive)
         .integer("event_rate_drop_windows", &C::event_rate_drop_windows, 1, 100000)
-        .duration_ms("imu_only_min_duration_ms", &C::imu_only_min_duration_ns, Range::kPositive);
+        .duration_ms("imu_only_min_duration_ms", &C::imu_only_min_duration_ns, Range::kPositive)
+        .number("health_visual_chi2_max", &C::health_visual_chi2_max, Range::kPositive, "chi2 per residual dimension")
+        .number("health_imu_chi2_max", &C::health_imu_chi2_max, Range::kPositive, "chi2 per residual dimension")
+        .integer("health_min_landmarks", &C::health_min_landmarks, 0, 100000)
+        .number("health_gyro_bias_sigmas_max", &C::health_gyro_bias_sigmas_max, Range::kPositive, "sigmas of the gyro-bias prior");
 
     Table<C> top("VIO settings");
     top.choice("inputs", &C::inputs,
@@ -489,7 +493,21 @@ int run_vio_estimation(const VioArgs& args, std::ostream& out, evaluation::GyroI
     j << (i ? ", " : "") << "{\"t_begin\": " << format_seconds(l.t_begin_ns) << ", \"t_end\": " << format_seconds(l.t_end_ns)
       << ", \"reason\": \"" << l.what << "\"}";
   }
-  j << "],\n  \"imu_only_segments\": [";
+  j << "],\n  \"health\": {\"keyframes\": [";
+  for (size_t i = 0; i < st.health.size(); ++i) {
+    const auto& h = st.health[i];
+    j << (i ? ",\n    " : "\n    ") << "{\"t\": " << format_seconds(h.t_ns) << ", \"visual_chi2_per_dof\": " << num(h.visual_chi2_per_dof)
+      << ", \"imu_chi2_per_dof\": " << num(h.imu_chi2_per_dof) << ", \"observations\": " << h.observations
+      << ", \"landmarks\": " << h.landmarks << ", \"gyro_bias_sigmas\": " << num(h.gyro_bias_sigmas) << "}";
+  }
+  j << "], \"unreliable_segments\": [";
+  for (size_t i = 0; i < r.unreliable.size(); ++i) {
+    const pipeline::VioSegment& u = r.unreliable[i];
+    j << (i ? ", " : "") << "{\"t_begin\": " << format_seconds(u.t_begin_ns) << ", \"t_end\": " << format_seconds(u.t_end_ns)
+      << ", \"reason\": \"" << u.what << "\"}";
+  }
+  j << "]}";
+  j << ",\n  \"imu_only_segments\": [";
   double imu_only_s = 0;
   for (size_t i = 0; i < r.imu_only.size(); ++i) {
     const pipeline::VioSegment& l = r.imu_only[i];
@@ -506,7 +524,8 @@ int run_vio_estimation(const VioArgs& args, std::ostream& out, evaluation::GyroI
       << ", \"frames_dropped_sparse\": " << fs_.frames_dropped_sparse << ", \"tracks_detected\": " << ts.detected
       << ", \"tracked\": " << ts.tracked << ", \"lost_klt\": " << ts.lost_klt << ", \"lost_forward_backward\": " << ts.lost_fb
       << ", \"rejected_ransac\": " << ts.rejected_ransac << ", \"template_fallbacks\": " << ts.template_fallbacks
-      << ", \"rejected_anchor\": " << ts.rejected_anchor << ", \"template_rotation_refreshes\": " << ts.template_rotation_refreshes;
+      << ", \"rejected_anchor\": " << ts.rejected_anchor << ", \"template_rotation_refreshes\": " << ts.template_rotation_refreshes
+      << ", \"reacquired\": " << ts.reacquired;
   } else {
     j << "\"corner_events\": " << vs.corner_events << ", \"corner_tracks_started\": " << vs.corner_tracker.tracks_started;
   }

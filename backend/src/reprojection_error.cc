@@ -76,6 +76,34 @@ RotationOnlyError::RotationOnlyError(const Eigen::Vector3d& bearing_i, const Eig
   scale_ = focal_px / sigma_px;
 }
 
+StaticCentreError::StaticCentreError(const calib::SE3& T_c_b, double sigma_m)
+    : c_b_(-(T_c_b.rotation.conjugate() * T_c_b.translation)), inv_sigma_(1.0 / sigma_m) {}
+
+bool StaticCentreError::Evaluate(double const* const* parameters, double* residuals, double** jacobians) const {
+  const Eigen::Matrix3d R_i = Eigen::Map<const Eigen::Quaterniond>(parameters[0]).normalized().toRotationMatrix();
+  const Eigen::Matrix3d R_j = Eigen::Map<const Eigen::Quaterniond>(parameters[1]).normalized().toRotationMatrix();
+  const Eigen::Map<const Eigen::Vector3d> p_i(parameters[0] + 4), p_j(parameters[1] + 4);
+  Eigen::Map<Eigen::Vector3d> r(residuals);
+  r = inv_sigma_ * (p_j + R_j * c_b_ - p_i - R_i * c_b_);
+  if (jacobians == nullptr) return true;
+  // Tangent [dtheta (body), dp (world)]: R Exp(dtheta) c = R c - R [c]x dtheta.
+  if (jacobians[0] != nullptr) {
+    Eigen::Matrix<double, 3, 6> J;
+    J.leftCols<3>() = inv_sigma_ * R_i * calib::hat(c_b_);
+    J.rightCols<3>() = -inv_sigma_ * Eigen::Matrix3d::Identity();
+    Eigen::Map<Eigen::Matrix<double, 3, 7, Eigen::RowMajor>> out(jacobians[0]);
+    out = J * PoseManifold::minus_jacobian(parameters[0]);
+  }
+  if (jacobians[1] != nullptr) {
+    Eigen::Matrix<double, 3, 6> J;
+    J.leftCols<3>() = -inv_sigma_ * R_j * calib::hat(c_b_);
+    J.rightCols<3>() = inv_sigma_ * Eigen::Matrix3d::Identity();
+    Eigen::Map<Eigen::Matrix<double, 3, 7, Eigen::RowMajor>> out(jacobians[1]);
+    out = J * PoseManifold::minus_jacobian(parameters[1]);
+  }
+  return true;
+}
+
 bool RotationOnlyError::Evaluate(double const* const* parameters, double* residuals, double** jacobians) const {
   const Eigen::Matrix3d R_i = Eigen::Map<const Eigen::Quaterniond>(parameters[0]).normalized().toRotationMatrix();
   const Eigen::Matrix3d R_j = Eigen::Map<const Eigen::Quaterniond>(parameters[1]).normalized().toRotationMatrix();

@@ -29,6 +29,7 @@ struct SlidingWindowEstimator::Keyframe {
   std::unordered_map<int64_t, std::unique_ptr<TimeOffsetReprojectionError>> reproj_td;
   bool rotation_only = false;                                                // no parallax to the previous keyframe
   std::unordered_map<int64_t, std::unique_ptr<RotationOnlyError>> rot;      // track -> residual to the previous keyframe
+  std::unique_ptr<StaticCentreError> static_centre;  // rotation-only: the camera centre stays (to the previous keyframe)
 };
 
 struct SlidingWindowEstimator::Landmark {
@@ -74,6 +75,9 @@ bool SlidingWindowOptions::Validate(std::string* why) const {
     return fail("model_selection_accel_sigma_mps2 must be finite and >= 0 m/s^2");
   if (!(model_selection_velocity_sigma_mps >= 0) || !std::isfinite(model_selection_velocity_sigma_mps))
     return fail("model_selection_velocity_sigma_mps must be finite and >= 0 m/s");
+  if (keyframe_min_tracks < 0) return fail("keyframe_min_tracks must be >= 0");
+  if (!(keyframe_max_interval_without_tracks_s > 0) || !std::isfinite(keyframe_max_interval_without_tracks_s))
+    return fail("keyframe_max_interval_without_tracks_s must be finite and > 0 s");
   if (!(model_selection_velocity_drift_mps2 >= 0) || !std::isfinite(model_selection_velocity_drift_mps2))
     return fail("model_selection_velocity_drift_mps2 must be finite and >= 0 m/s^2");
   if (!(rotation_only_parallax_px >= 0) || !(rotation_only_translation_px >= 0))
@@ -397,7 +401,13 @@ bool SlidingWindowEstimator::choose_rotation_only(const Keyframe& prev, const Fe
 
 bool SlidingWindowEstimator::is_keyframe(const FeatureObservations& frame, const VioState& predicted) const {
   const Keyframe& last = *window_.back();
-  if (static_cast<double>(frame.t_ns - last.t_ns) * 1e-9 >= options_.keyframe_max_interval_s) return true;
+  const double interval = static_cast<double>(frame.t_ns - last.t_ns) * 1e-9;
+  // A frame with (almost) no tracks adds only an IMU node: rarely, so that an event-rate drop does
+  // not fill the window with them and push out the keyframes whose landmarks the tracks come back to.
+  if (static_cast<int>(frame.observations.size()) < options_.keyframe_min_tracks) {
+    return interval >= options_.keyframe_max_interval_without_tracks_s;
+  }
+  if (interval >= options_.keyframe_max_interval_s) return true;
   size_t common = 0;
   const double parallax = parallax_px(frame, predicted, &common);
   if (!last.obs.empty() && static_cast<double>(common) < options_.keyframe_min_tracked_ratio * static_cast<double>(last.obs.size())) {
@@ -466,6 +476,12 @@ void SlidingWindowEstimator::triangulate(int64_t track, Landmark* lm) {
       ++stats_.outliers_removed;
     }
   }
+}
+
+double SlidingWindowEstimator::gyro_bias_prior_sigma() const {
+  return initial_sigmas_.bias_gyro_radps > 0 ? initial_sigmas_.bias_gyro_radps
+                                             : std::sqrt(std::pow(options_.init_bias_gyro_turn_on_radps, 2) +
+                                                         std::pow(noise_.gyroscope_random_walk, 2) * options_.init_bias_horizon_s);
 }
 
 double SlidingWindowEstimator::sigma_of(const FeatureObservation& o) const {
@@ -544,6 +560,11 @@ bool SlidingWindowEstimator::add_frame(const FeatureObservations& frame) {
     kf->pre = std::make_unique<ImuPreintegration>(
         ImuPreintegration::between(imu_, prev.t_ns, kf->t_ns, ps.bias_gyro, ps.bias_accel, noise_));
     kf->rotation_only = choose_rotation_only(prev, frame, predicted, *kf->pre);
+    if (kf->rotation_only && options_.rotation_only_static_centre) {
+      // The model says the centre does not move: by at most the velocity sigma over the interval.
+      const double dt = 1e-9 * static_cast<double>(kf->t_ns - prev.t_ns);
+      kf->static_centre = std::make_unique<StaticCentreError>(camera_.T_c_b, std::max(1e-3, options_.model_selection_velocity_sigma_mps * dt));
+    }
     if (kf->rotation_only) {
       for (const FeatureObservation& o : frame.observations) {
         const auto it = prev.obs.find(o.track_id);
@@ -585,10 +606,7 @@ bool SlidingWindowEstimator::add_frame(const FeatureObservations& frame) {
     Eigen::MatrixXd S_sb = Eigen::MatrixXd::Zero(9, 9);
     S_sb.diagonal() << Eigen::Vector3d::Constant(
         1.0 / (initial_sigmas_.velocity_mps > 0 ? initial_sigmas_.velocity_mps : options_.init_sigma_velocity_mps)),
-        Eigen::Vector3d::Constant(1.0 / (initial_sigmas_.bias_gyro_radps > 0
-                                             ? initial_sigmas_.bias_gyro_radps
-                                             : std::sqrt(std::pow(options_.init_bias_gyro_turn_on_radps, 2) +
-                                                         std::pow(noise_.gyroscope_random_walk, 2) * options_.init_bias_horizon_s))),
+        Eigen::Vector3d::Constant(1.0 / gyro_bias_prior_sigma()),
         Eigen::Vector3d::Constant(1.0 / std::sqrt(std::pow(options_.init_bias_accel_turn_on_mps2, 2) +
                                                   std::pow(noise_.accelerometer_random_walk, 2) * options_.init_bias_horizon_s));
     if (options_.estimate_time_offset) {
@@ -613,6 +631,9 @@ bool SlidingWindowEstimator::add_frame(const FeatureObservations& frame) {
   stats_.solve_time_s.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
   stats_.time_offset_s = time_offset_[0];
   latest_ = state_of(*window_.back());
+  if (!stats_.health.empty() && initial_) {
+    stats_.health.back().gyro_bias_sigmas = (latest_.bias_gyro - initial_->bias_gyro).cwiseAbs().maxCoeff() / gyro_bias_prior_sigma();
+  }
   {
     const Keyframe& k = *window_.back();
     const Eigen::Matrix3d R_c_w = camera_.T_c_b.rotation.toRotationMatrix() * quat_of(k.pose).toRotationMatrix().transpose();
@@ -706,11 +727,12 @@ void SlidingWindowEstimator::solve() {
     problem.AddParameterBlock(in_buf(k->pose.data()), 7, &manifold);
     problem.AddParameterBlock(in_buf(k->sb.data()), 9);
   }
+  std::vector<ceres::ResidualBlockId> imu_blocks, visual_blocks;  // for the health check after the solve
   for (size_t i = 1; i < window_.size(); ++i) {
     Keyframe& a = *window_[i - 1];
     Keyframe& b = *window_[i];
-    problem.AddResidualBlock(b.imu_error.get(), nullptr,
-                             {in_buf(a.pose.data()), in_buf(a.sb.data()), in_buf(b.pose.data()), in_buf(b.sb.data())});
+    imu_blocks.push_back(problem.AddResidualBlock(b.imu_error.get(), nullptr,
+                                                  {in_buf(a.pose.data()), in_buf(a.sb.data()), in_buf(b.pose.data()), in_buf(b.sb.data())}));
   }
   std::vector<double*> outside;  // prior blocks not in the window (not expected)
   if (prior_) {
@@ -730,6 +752,7 @@ void SlidingWindowEstimator::solve() {
       if (lit != landmarks_.end() && lit->second.triangulated) continue;
       problem.AddResidualBlock(cost.get(), loss.get(), in_buf(a.pose.data()), in_buf(b.pose.data()));
     }
+    if (b.static_centre) problem.AddResidualBlock(b.static_centre.get(), nullptr, in_buf(a.pose.data()), in_buf(b.pose.data()));
   }
   for (auto& [track, lm] : landmarks_) {
     if (!at.count(lm.p.data())) continue;  // not used
@@ -737,13 +760,13 @@ void SlidingWindowEstimator::solve() {
       if (options_.estimate_time_offset) {
         const auto it = k->reproj_td.find(track);
         if (it == k->reproj_td.end()) continue;
-        problem.AddResidualBlock(it->second.get(), loss.get(), in_buf(k->pose.data()), in_buf(lm.p.data()),
-                                 in_buf(time_offset_.data()));
+        visual_blocks.push_back(problem.AddResidualBlock(it->second.get(), loss.get(), in_buf(k->pose.data()), in_buf(lm.p.data()),
+                                                         in_buf(time_offset_.data())));
         continue;
       }
       const auto it = k->reproj.find(track);
       if (it == k->reproj.end()) continue;
-      problem.AddResidualBlock(it->second.get(), loss.get(), in_buf(k->pose.data()), in_buf(lm.p.data()));
+      visual_blocks.push_back(problem.AddResidualBlock(it->second.get(), loss.get(), in_buf(k->pose.data()), in_buf(lm.p.data())));
     }
   }
   stats_.solve_landmarks.push_back(static_cast<int>(used_tracks.size()));
@@ -770,6 +793,24 @@ void SlidingWindowEstimator::solve() {
   if (options_.max_solver_time_s > 0) so.max_solver_time_in_seconds = options_.max_solver_time_s;
   ceres::Solver::Summary summary;
   ceres::Solve(so, &problem, &summary);
+  // Health: the whitened residuals' chi2 per degree of freedom after the solve (about 1 when the
+  // measurements agree with the estimate and with their noise models), without the robust loss.
+  const auto chi2_per_dof = [&problem](const std::vector<ceres::ResidualBlockId>& ids, int dof_per_block) {
+    if (ids.empty()) return 0.0;
+    ceres::Problem::EvaluateOptions eo;
+    eo.residual_blocks = ids;
+    eo.apply_loss_function = false;
+    double cost = 0;
+    problem.Evaluate(eo, &cost, nullptr, nullptr, nullptr);
+    return 2.0 * cost / static_cast<double>(ids.size() * static_cast<size_t>(dof_per_block));
+  };
+  SlidingWindowStats::Health h;
+  h.t_ns = window_.back()->t_ns;
+  h.visual_chi2_per_dof = chi2_per_dof(visual_blocks, 2);
+  h.imu_chi2_per_dof = chi2_per_dof(imu_blocks, 15);
+  h.observations = static_cast<int>(visual_blocks.size());
+  h.landmarks = static_cast<int>(used_tracks.size());
+  stats_.health.push_back(h);
   for (const auto& [p, size] : live) std::copy(at[p], at[p] + size, p);
   latest_cov_.reset();
   if (options_.compute_covariance) {
@@ -854,6 +895,7 @@ void SlidingWindowEstimator::marginalize_oldest() {
     if (lit != landmarks_.end() && lit->second.triangulated) continue;
     ids.push_back(problem.AddResidualBlock(cost.get(), loss.get(), k0.pose.data(), k1.pose.data()));
   }
+  if (k1.static_centre) ids.push_back(problem.AddResidualBlock(k1.static_centre.get(), nullptr, k0.pose.data(), k1.pose.data()));
   // Landmarks observed in k0 to marginalise with all their window observations: the finished
   // tracks, and by tracked_landmark_marginalisation the still-tracked ones.
   const TrackedLandmarkMarginalisation mode = options_.tracked_landmark_marginalisation;
@@ -948,6 +990,7 @@ void SlidingWindowEstimator::marginalize_oldest() {
   // than two observations remain.
   stats_.observations_dropped += static_cast<int64_t>(k0.obs.size());
   k1.rot.clear();  // they linked k1 to k0, which is gone
+  k1.static_centre.reset();
   window_.pop_front();
   for (auto it = landmarks_.begin(); it != landmarks_.end();) {
     int n = 0;

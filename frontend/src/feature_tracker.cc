@@ -3,7 +3,9 @@
 #include <algorithm>
 #include <cmath>
 #include <functional>
+#include <map>
 #include <memory>
+#include <set>
 #include <random>
 #include <sstream>
 #include <stdexcept>
@@ -277,6 +279,8 @@ bool FeatureTrackerOptions::Validate(std::string* why) const {
   if (anchor_frames < 0) return fail("anchor_frames must be >= 0");
   if (!(anchor_ransac_threshold_px > 0) || !std::isfinite(anchor_ransac_threshold_px))
     return fail("anchor_ransac_threshold_px must be positive and finite");
+  if (!(reacquire_max_age_s >= 0) || !std::isfinite(reacquire_max_age_s)) return fail("reacquire_max_age_s must be finite and >= 0");
+  if (!(reacquire_max_px > 0) || !std::isfinite(reacquire_max_px)) return fail("reacquire_max_px must be positive and finite");
   return true;
 }
 
@@ -406,8 +410,68 @@ void FeatureTracker::verify_against_anchor(std::vector<Track>* tracks, const Eig
   *tracks = std::move(kept);
 }
 
+std::vector<int64_t> FeatureTracker::lost_track_ids() const {
+  std::vector<int64_t> ids;
+  ids.reserve(lost_.size());
+  for (const auto& [id, l] : lost_) ids.push_back(id);
+  return ids;
+}
+
+void FeatureTracker::reacquire(int64_t t_ns, const std::vector<cv::Mat>& pyramid, int levels,
+                               const std::vector<TrackPrediction>& predictions) {
+  const cv::Size win(options_.klt_window_px, options_.klt_window_px);
+  const cv::TermCriteria term(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, options_.klt_max_iterations, options_.klt_epsilon_px);
+  std::set<int64_t> live;
+  for (const Track& t : tracks_) live.insert(t.id);
+  // Candidates grouped by their template's frame (one KLT call per reference pyramid).
+  std::map<int64_t, std::vector<std::pair<int64_t, cv::Point2f>>> by_ref;
+  for (const TrackPrediction& p : predictions) {
+    const auto it = lost_.find(p.track_id);
+    if (it == lost_.end() || live.count(p.track_id) || !p.px.allFinite()) continue;
+    const cv::Point2f q(static_cast<float>(p.px.x()), static_cast<float>(p.px.y()));
+    if (!inside(q)) continue;
+    by_ref[it->second.ref_frame].emplace_back(p.track_id, q);
+  }
+  const double fb2 = options_.forward_backward_max_px * options_.forward_backward_max_px;
+  const double max2 = options_.reacquire_max_px * options_.reacquire_max_px;
+  for (auto& [ref, cands] : by_ref) {
+    const RefFrame* rf = nullptr;
+    for (const RefFrame& r : ref_frames_)
+      if (r.frame == ref) rf = &r;
+    if (!rf) continue;
+    if (options_.template_max_rotation_deg > 0 &&
+        (!rf->rotation_known || Eigen::AngleAxisd(rf->R_cur_ref).angle() > 2 * options_.template_max_rotation_deg * M_PI / 180.0)) {
+      continue;
+    }
+    std::vector<cv::Point2f> q0, q1, qb;
+    for (const auto& [id, q] : cands) {
+      q0.push_back(lost_.at(id).ref_px);
+      q1.push_back(q);
+    }
+    const std::vector<cv::Point2f> predicted = q1;
+    std::vector<uchar> sf, sb;
+    cv::calcOpticalFlowPyrLK(rf->pyramid, pyramid, q0, q1, sf, cv::noArray(), win, levels, term, cv::OPTFLOW_USE_INITIAL_FLOW);
+    qb = q0;
+    cv::calcOpticalFlowPyrLK(pyramid, rf->pyramid, q1, qb, sb, cv::noArray(), win, levels, term, cv::OPTFLOW_USE_INITIAL_FLOW);
+    for (size_t k = 0; k < cands.size(); ++k) {
+      const cv::Point2f d = q1[k] - predicted[k], e = qb[k] - q0[k];
+      if (!sf[k] || !sb[k] || !inside(q1[k]) || e.dot(e) > fb2 || d.dot(d) > max2) continue;
+      Track t;
+      t.id = cands[k].first;
+      t.px = q1[k];
+      t.ref_frame = ref;
+      t.ref_px = q0[k];
+      tracks_.push_back(t);
+      lost_.erase(t.id);
+      ++stats_.reacquired;
+    }
+  }
+  (void)t_ns;
+}
+
 FeatureObservations FeatureTracker::track(int64_t t_ns, const cv::Mat& frame,
-                                          const Eigen::Matrix3d* R_cur_prev) {
+                                          const Eigen::Matrix3d* R_cur_prev,
+                                          const std::vector<TrackPrediction>* predictions) {
   if (frame.empty() || frame.type() != CV_8UC1 || frame.cols != K_.width ||
       frame.rows != K_.height) {
     std::ostringstream os;
@@ -550,14 +614,21 @@ FeatureObservations FeatureTracker::track(int64_t t_ns, const cv::Mat& frame,
     }
     std::vector<size_t> kept;
     kept.reserve(n);
+    // A lost track keeps its template for re-acquisition (the reference it was last aligned
+    // against: its own patch, not a position that failed).
+    const auto remember = [&](const Track& t) {
+      if (options_.reacquire_max_age_s > 0 && options_.template_max_age_frames > 1) lost_[t.id] = {t.ref_frame, t.ref_px, t_ns};
+    };
     for (size_t i = 0; i < n; ++i) {
       if (!st_f[i] || !inside(p1[i])) {
         ++stats_.lost_klt;
+        remember(tracks_[i]);
         continue;
       }
       const double dx = back[i].x - ref_px[i].x, dy = back[i].y - ref_px[i].y;
       if (!st_b[i] || !(dx * dx + dy * dy <= fb2)) {
         ++stats_.lost_fb;
+        remember(tracks_[i]);
         continue;
       }
       kept.push_back(i);
@@ -583,6 +654,7 @@ FeatureObservations FeatureTracker::track(int64_t t_ns, const cv::Mat& frame,
     for (size_t k = 0; k < kept.size(); ++k) {
       if (!inlier[k]) {
         ++stats_.rejected_ransac;
+        remember(tracks_[kept[k]]);
         continue;
       }
       Track t = tracks_[kept[k]];
@@ -601,16 +673,22 @@ FeatureObservations FeatureTracker::track(int64_t t_ns, const cv::Mat& frame,
     tracks_.clear();
   }
 
+  // Lost templates expire after reacquire_max_age_s; the rest are looked for at their predictions.
+  for (auto it = lost_.begin(); it != lost_.end();) {
+    it = 1e-9 * static_cast<double>(t_ns - it->second.lost_t_ns) > options_.reacquire_max_age_s ? lost_.erase(it) : std::next(it);
+  }
+  if (predictions && !predictions->empty() && !lost_.empty() && !prev_pyramid_.empty()) reacquire(t_ns, pyramid, levels, *predictions);
   if (stats_.frames == 0 ||
       static_cast<int>(tracks_.size()) < options_.min_tracks_before_detection) {
     detect(frame);
   }
   if (options_.template_max_age_frames > 1) {
-    // Keep the pyramids still referenced (this frame's is referenced by new and refreshed tracks).
+    // Keep the pyramids still referenced (this frame's is referenced by new and refreshed tracks),
+    // also by the templates of lost tracks.
     std::vector<RefFrame> keep;
     for (RefFrame& rf : ref_frames_) {
-      const bool used = std::any_of(tracks_.begin(), tracks_.end(),
-                                    [&](const Track& t) { return t.ref_frame == rf.frame; });
+      const bool used = std::any_of(tracks_.begin(), tracks_.end(), [&](const Track& t) { return t.ref_frame == rf.frame; }) ||
+                        std::any_of(lost_.begin(), lost_.end(), [&](const auto& l) { return l.second.ref_frame == rf.frame; });
       if (used) keep.push_back(std::move(rf));
     }
     keep.push_back({frame_id_, pyramid, Eigen::Matrix3d::Identity(), true});

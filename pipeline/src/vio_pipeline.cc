@@ -78,6 +78,9 @@ bool VioPipelineOptions::Validate(std::string* why) const {
   if (tracking_lost_min_duration_ns <= 0) return fail("tracking_lost_min_duration_ns must be > 0");
   if (event_rate_drop_windows < 1) return fail("event_rate_drop_windows must be >= 1");
   if (imu_only_min_duration_ns <= 0) return fail("imu_only_min_duration_ns must be > 0");
+  if (!(health_visual_chi2_max > 0) || !(health_imu_chi2_max > 0) || !(health_gyro_bias_sigmas_max > 0))
+    return fail("health_visual_chi2_max, health_imu_chi2_max and health_gyro_bias_sigmas_max must be > 0");
+  if (health_min_landmarks < 0) return fail("health_min_landmarks must be >= 0");
   return true;
 }
 
@@ -485,6 +488,36 @@ struct VioPipeline::Impl {
     }
   }
 
+  // The runs of keyframes that failed a health check, per reason, into result.unreliable (time
+  // order of their starts), with a warning each.
+  void health_segments() {
+    const auto& hs = est->stats().health;
+    const std::vector<std::pair<std::string, std::function<bool(const backend::SlidingWindowStats::Health&)>>> checks = {
+        {"visual residuals", [&](const auto& h) { return h.visual_chi2_per_dof > opt.health_visual_chi2_max; }},
+        {"inertial residuals", [&](const auto& h) { return h.imu_chi2_per_dof > opt.health_imu_chi2_max; }},
+        {"few landmarks", [&](const auto& h) { return h.landmarks < opt.health_min_landmarks; }},
+        {"gyro bias off its prior", [&](const auto& h) { return h.gyro_bias_sigmas > opt.health_gyro_bias_sigmas_max; }},
+    };
+    for (const auto& [what, bad] : checks) {
+      int64_t begin = -1, last = -1;
+      for (const auto& h : hs) {
+        if (bad(h)) {
+          if (begin < 0) begin = h.t_ns;
+          last = h.t_ns;
+        } else if (begin >= 0) {
+          result.unreliable.push_back({begin, h.t_ns, what});
+          begin = -1;
+        }
+      }
+      if (begin >= 0) result.unreliable.push_back({begin, last, what});
+    }
+    std::sort(result.unreliable.begin(), result.unreliable.end(),
+              [](const VioSegment& a, const VioSegment& b) { return a.t_begin_ns < b.t_begin_ns; });
+    for (const VioSegment& u : result.unreliable) {
+      log_warning("estimate unreliable (" + u.what + ") from " + format_seconds(u.t_begin_ns) + " to " + format_seconds(u.t_end_ns) + " s");
+    }
+  }
+
   // An IMU-only span from the last frame with observations to t (IMU clock), when it lasted at least
   // imu_only_min_duration_ns: the estimate there comes from the IMU alone.
   void close_imu_only_span(int64_t t) {
@@ -527,9 +560,54 @@ struct VioPipeline::Impl {
     const bool have_prior = prev_frame_t >= 0 && rotation_prior(prev_frame_t, ef.t_ns, &R_cur_prev);
     prev_frame_t = ef.t_ns;
     if (on_tracking_image) on_tracking_image(ef.t_ns + shift, ef.image);
-    FeatureObservations f = frame_tracker->track(ef.t_ns + shift, ef.image, have_prior ? &R_cur_prev : nullptr);
+    const std::vector<frontend::TrackPrediction> predictions = lost_track_predictions(ef.t_ns + shift);
+    FeatureObservations f =
+        frame_tracker->track(ef.t_ns + shift, ef.image, have_prior ? &R_cur_prev : nullptr, predictions.empty() ? nullptr : &predictions);
     if (est) feed_back_motion(f);
     emit_event_frame(std::move(f));
+  }
+
+  // The latest state propagated with the IMU to t (IMU clock); false without IMU over the interval.
+  bool propagated_state(int64_t t, VioState* out) const {
+    if (!est) return false;
+    VioState st = est->latest_state();
+    if (t > st.t_ns) {
+      try {
+        const auto pre = backend::ImuPreintegration::between(imu, st.t_ns, t, st.bias_gyro, st.bias_accel, noise);
+        const double dt = pre.dt_s();
+        const Eigen::Matrix3d R = st.T_w_b.rotation.toRotationMatrix();
+        st.T_w_b.translation += st.v_w * dt + 0.5 * opt.window.gravity_w * dt * dt + R * pre.delta_p();
+        st.v_w += opt.window.gravity_w * dt + R * pre.delta_v();
+        st.T_w_b.rotation = Eigen::Quaterniond(R * pre.delta_R()).normalized();
+        st.t_ns = t;
+      } catch (const std::invalid_argument&) {
+        return false;
+      }
+    }
+    *out = st;
+    return true;
+  }
+
+  // Where the frame tracker's lost tracks with a landmark in the window should be at t (IMU
+  // clock): each landmark projected with the IMU-propagated pose into the ideal pinhole.
+  std::vector<frontend::TrackPrediction> lost_track_predictions(int64_t t) const {
+    std::vector<frontend::TrackPrediction> out;
+    if (!est || !frame_tracker || frame_tracker->options().reacquire_max_age_s <= 0) return out;
+    const std::vector<int64_t> lost = frame_tracker->lost_track_ids();
+    if (lost.empty()) return out;
+    VioState st;
+    if (!propagated_state(t, &st)) return out;
+    const calib::SE3 T_c_w = cal.T_c_b * st.T_w_b.inverse();
+    const calib::CameraIntrinsics K = ideal_pinhole();
+    const auto landmarks = est->landmarks();
+    for (const int64_t id : lost) {
+      const auto it = landmarks.find(id);
+      if (it == landmarks.end()) continue;
+      const Eigen::Vector3d p = T_c_w.rotation * it->second + T_c_w.translation;
+      if (!(p.z() > 1e-3)) continue;
+      out.push_back({id, Eigen::Vector2d(K.fx * p.x() / p.z() + K.cx, K.fy * p.y() / p.z() + K.cy)});
+    }
+    return out;
   }
 
   // Camera rotation from camera-clock t0 to t1 from the gyro (estimated bias once initialised):
@@ -943,6 +1021,7 @@ VioResult VioPipeline::finish() {
   if (p.use_aps) st.aps_tracker = p.aps_tracker->stats();
   if (p.est) {
     st.window = p.est->stats();
+    p.health_segments();
     const std::vector<VioState> window = p.est->keyframe_states();
     for (const VioState& k : window) p.final_keyframes[k.t_ns] = k;
     for (size_t i = 0; i + 1 < window.size(); ++i)

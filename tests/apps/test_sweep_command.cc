@@ -385,6 +385,43 @@ TEST(SweepRun, JobsTwoRecordsEveryCellOnceWithItsOutcomeAndMetrics) {
   EXPECT_EQ(read_sweep_records(a.out + "/results.jsonl").size(), 9u);
 }
 
+// Datasets made by an external generator (the crosscheck simulator's form): generated once into
+// DIR/data/<name> with {out} replaced, their cells read that folder; a generator that exits 77
+// (its simulator is not there) skips its dataset and cells with its message, and the rest runs.
+TEST(SweepRun, GeneratedDatasetsRunOnceAndAMissingGeneratorSkipsItsCells) {
+  evio_test::TempDir tmp;
+  const std::string gen = tmp.write("gen.sh", "#!/bin/sh\nmkdir -p \"$1\" && echo \"$2\" >> \"$(dirname \"$1\")/generated.txt\"\n");
+  const std::string absent = tmp.write("absent.sh", "#!/bin/sh\necho 'simulator not found at /nowhere' >&2\nexit 77\n");
+  fs::permissions(gen, fs::perms::owner_all);
+  fs::permissions(absent, fs::perms::owner_all);
+  const SweepArgs a = fake_sweep(tmp,
+                                 "datasets:\n  - {name: made, generate: [\"{spec_dir}/gen.sh\", \"{out}\", x]}\n"
+                                 "  - {name: missing, generate: [\"{spec_dir}/absent.sh\", \"{out}\"]}\n"
+                                 "algorithms:\n  - {algorithm: flow, grid: {err: [1, 2]}}\n");
+  std::string error;
+  ASSERT_EQ(run_quietly(a, &error), 0) << error;
+  const std::vector<SweepRecord> recs = read_sweep_records(a.out + "/results.jsonl");
+  ASSERT_EQ(recs.size(), 2u);
+  for (const SweepRecord& r : recs) {
+    EXPECT_EQ(r.dataset, "made");
+    EXPECT_EQ(r.dataset_path, a.out + "/data/made");
+  }
+  EXPECT_EQ(evio_test::read_text(a.out + "/data/generated.txt"), "x\n");  // once for both cells
+  EXPECT_NE(evio_test::read_text(a.out + "/data/made.command").find("gen.sh " + a.out + "/data/made x"), std::string::npos);
+  EXPECT_FALSE(fs::exists(a.out + "/data/missing"));
+  // A rerun with --resume generates nothing again (the folder and its command are there).
+  SweepArgs resume = a;
+  resume.resume = true;
+  ASSERT_EQ(run_quietly(resume, &error), 0) << error;
+  EXPECT_EQ(evio_test::read_text(a.out + "/data/generated.txt"), "x\n");
+  // A spec error: a generator without {out}.
+  SweepArgs bad = a;
+  bad.spec = tmp.write("bad.yaml", "datasets:\n  - {name: m, generate: [gen.sh, x]}\nalgorithms:\n  - {algorithm: flow}\n");
+  bad.out = tmp.file("bad");
+  EXPECT_EQ(run_quietly(bad, &error), 1);
+  EXPECT_NE(error.find("bad.yaml:2: `generate` has no {out}"), std::string::npos) << error;
+}
+
 TEST(SweepRun, TimedOutCellIsRecordedWithItsSignalAndRerunByResume) {
   evio_test::TempDir tmp;
   SweepArgs a = fake_sweep(tmp, "datasets: [rec]\nalgorithms:\n  - {algorithm: flow, grid: {err: [1]}}\n"

@@ -170,6 +170,42 @@ TEST(RotationOnlyError, GradientCheckerAndZeroAtTheTrueRotation) {
   EXPECT_LT(worst, 1e-5);
 }
 
+// The camera centre staying put: zero for two poses that turn about the camera centre, the centre's
+// displacement over sigma otherwise; Jacobians against numeric differentiation.
+TEST(StaticCentreError, GradientCheckerAndZeroForARotationAboutTheCameraCentre) {
+  std::mt19937 rng(6);
+  std::normal_distribution<double> n(0.0, 1.0);
+  const PoseManifold pm;
+  const std::vector<const ceres::Manifold*> manifolds = {&pm, &pm};
+  const calib::SE3 T_c_b(calib::so3_exp_quat(Eigen::Vector3d(-0.1, 0.2, 0.05)), Eigen::Vector3d(0.02, -0.01, 0.03));
+  const Eigen::Vector3d c_b = -(T_c_b.rotation.conjugate() * T_c_b.translation);
+  double worst = 0;
+  for (int trial = 0; trial < 50; ++trial) {
+    auto pi = random_pose(rng);
+    const Eigen::Quaterniond qi(pi[3], pi[0], pi[1], pi[2]);
+    const Eigen::Quaterniond qj = qi * calib::so3_exp_quat(Eigen::Vector3d(n(rng), n(rng), n(rng)) * 0.3);
+    // The body turns about the camera centre: p_j + R_j c = p_i + R_i c.
+    const Eigen::Vector3d p_j = Eigen::Vector3d(pi[4], pi[5], pi[6]) + qi * c_b - qj * c_b;
+    std::array<double, 7> pj = {qj.x(), qj.y(), qj.z(), qj.w(), p_j.x(), p_j.y(), p_j.z()};
+    const StaticCentreError err(T_c_b, 0.004);
+    double r[3];
+    const double* params[2] = {pi.data(), pj.data()};
+    ASSERT_TRUE(err.Evaluate(params, r, nullptr));
+    EXPECT_LT(Eigen::Map<Eigen::Vector3d>(r).norm(), 1e-9);
+    pj[4] += 0.002;  // 2 mm along x: 0.5 sigma
+    ASSERT_TRUE(err.Evaluate(params, r, nullptr));
+    EXPECT_NEAR(r[0], 0.5, 1e-9);
+    ceres::NumericDiffOptions nd;
+    const ceres::GradientChecker checker(&err, &manifolds, nd);
+    ceres::GradientChecker::ProbeResults res;
+    checker.Probe(params, 1e-5, &res);
+    ASSERT_TRUE(res.return_value);
+    worst = std::max(worst, worst_error(res));
+  }
+  std::printf("StaticCentreError: worst Jacobian error %.2e\n", worst);
+  EXPECT_LT(worst, 1e-5);
+}
+
 TEST(LinearPrior, GradientCheckerWithPoseAndEuclideanBlocks) {
   std::mt19937 rng(5);
   std::normal_distribution<double> n(0.0, 1.0);

@@ -96,6 +96,11 @@ struct SlidingWindowOptions {
   double keyframe_min_parallax_px = 6.0;   // median rotation-compensated displacement, px
   double keyframe_min_tracked_ratio = 0.6; // share of the last keyframe's tracks still seen
   double keyframe_max_interval_s = 0.2;    // s
+  // Frames with fewer observations than keyframe_min_tracks (count, >= 0) become keyframes only
+  // every keyframe_max_interval_without_tracks_s (s, > 0): through an event-rate drop the window
+  // keeps the keyframes before it, whose landmarks the re-acquired tracks observe again.
+  int keyframe_min_tracks = 5;
+  double keyframe_max_interval_without_tracks_s = 1.0;
   double min_triangulation_angle_deg = 1.0;  // between the most separated rays, deg
   // After a solve, larger errors are outliers, px, for observations of sigma pixel_sigma; the
   // threshold scales with an observation's own sigma (a fixed number of sigmas: events next to APS
@@ -116,6 +121,11 @@ struct SlidingWindowOptions {
   TrackedLandmarkMarginalisation tracked_landmark_marginalisation = TrackedLandmarkMarginalisation::kSplit;
   // Rotation-only model, chosen per keyframe by GRIC with hysteresis (see the header comment).
   bool rotation_only_model = true;         // false: every keyframe uses the 6-DoF model
+  // In a rotation-only keyframe the camera centre also stays where it was at the previous keyframe
+  // (StaticCentreError, sigma model_selection_velocity_sigma_mps x the interval, at least 1 mm):
+  // what the model says, so that the IMU alone does not carry the position away in a hover or a
+  // pan where no landmark can be triangulated.
+  bool rotation_only_static_centre = true;
   // GRIC_R must be below GRIC_S and GRIC_G by at least this much (GRIC units: -2 log likelihood,
   // i.e. chi2 units of the whitened residuals), >= 0. 10 is e^5 ~ 150 times more likely.
   double rotation_only_gric_margin = 10.0;
@@ -229,6 +239,16 @@ struct SlidingWindowStats {
   };
   std::vector<MotionModelTest> motion_model_tests;
   std::vector<double> solve_time_s;   // per keyframe (solve + marginalisation)
+  // Per solve: how well the window's measurements agree with the estimate.
+  struct Health {
+    int64_t t_ns = 0;                 // the newest keyframe
+    double visual_chi2_per_dof = 0;   // reprojection errors (whitened by their sigma), per residual dimension
+    double imu_chi2_per_dof = 0;      // IMU preintegration errors (whitened), per residual dimension
+    int observations = 0;             // reprojection errors in the solve
+    int landmarks = 0;                // landmarks in the solve
+    double gyro_bias_sigmas = 0;      // |b_g - initial b_g| over the first keyframe's prior sigma (largest axis)
+  };
+  std::vector<Health> health;
   double time_offset_s = 0;           // estimate_time_offset: td after the last solve (s)
   std::vector<int> solve_landmarks;   // landmarks in each solve
 };
@@ -293,6 +313,8 @@ class SlidingWindowEstimator {
   bool is_keyframe(const FeatureObservations& frame, const VioState& predicted) const;
   // The observation's noise: its sigma_px, or options_.pixel_sigma when it gives none.
   double sigma_of(const FeatureObservation& o) const;
+  // The first keyframe's gyro-bias prior sigma per axis (rad/s): the initialiser's, else the options'.
+  double gyro_bias_prior_sigma() const;
   void triangulate(int64_t track, Landmark* lm);
   void solve();
   void remove_outliers();

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
 #include <string>
 #include <utility>
 #include <vector>
@@ -112,6 +113,14 @@ struct FeatureTrackerOptions {
   // are dropped as KLT losses (px).
   int border_px = 4;
   uint64_t seed = 1;  // RANSAC seed (each frame's RANSAC seed is derived from it and the frame id)
+  // Re-acquisition: a lost track's template (its reference patch) is kept this long (s, >= 0; 0:
+  // off); track() looks for it again where its caller predicts it (e.g. its landmark projected with
+  // the IMU-propagated pose after an event-rate drop), and on success the track continues under
+  // its id. The KLT result must pass the forward-backward check and lie within reacquire_max_px
+  // of the prediction (px, > 0), and the template must not have turned by more than
+  // 2 x template_max_rotation_deg (when that is set).
+  double reacquire_max_age_s = 3.0;
+  double reacquire_max_px = 6.0;
 
   bool Validate(std::string* why) const;
 };
@@ -125,7 +134,14 @@ struct FeatureTrackerStats {
   int64_t rejected_ransac = 0;  // RANSAC outliers
   int64_t rejected_anchor = 0;     // long-baseline RANSAC outliers (anchor_frames)
   int64_t template_fallbacks = 0;
-  int64_t template_rotation_refreshes = 0;  // templates dropped for template_max_rotation_deg  // template failures retried from the previous frame (template_fallback)
+  int64_t template_rotation_refreshes = 0;  // templates dropped for template_max_rotation_deg
+  int64_t reacquired = 0;       // lost tracks found again at their predicted position (reacquire_*)
+};
+
+// A lost track's predicted position in the frame given to FeatureTracker::track (px, ideal pinhole).
+struct TrackPrediction {
+  int64_t track_id = 0;
+  Eigen::Vector2d px = Eigen::Vector2d::Zero();
 };
 
 class FeatureTracker {
@@ -141,8 +157,13 @@ class FeatureTracker {
   // predict KLT positions and by the 2-point RANSAC. Returns the observations of this frame (every
   // surviving track, in track order, then every new one; bearing = normalised K^-1 [u v 1]).
   // frame_id counts the frames given to track() from 0.
+  // predictions (optional): where lost tracks (lost_track_ids) should be in this frame; each one
+  // whose template is still kept is looked for there (reacquire_*).
   FeatureObservations track(int64_t t_ns, const cv::Mat& frame,
-                            const Eigen::Matrix3d* R_cur_prev = nullptr);
+                            const Eigen::Matrix3d* R_cur_prev = nullptr,
+                            const std::vector<TrackPrediction>* predictions = nullptr);
+  // Ids of the lost tracks whose templates are kept for re-acquisition (sorted).
+  std::vector<int64_t> lost_track_ids() const;
 
   // Pixels that carry image content (CV_8UC1 of the camera's size, non-zero = valid; empty: all):
   // no feature is detected, and no track continues, where its KLT window would reach an invalid
@@ -188,6 +209,15 @@ class FeatureTracker {
     bool rotation_known;
   };
   std::vector<RefFrame> ref_frames_;
+  // Lost tracks kept for re-acquisition: their reference template and when they were lost.
+  struct LostTrack {
+    int64_t ref_frame;
+    cv::Point2f ref_px;
+    int64_t lost_t_ns;
+  };
+  std::map<int64_t, LostTrack> lost_;  // by track id
+  // Finds lost tracks again at their predictions (appends to tracks_); `pyramid`: this frame's.
+  void reacquire(int64_t t_ns, const std::vector<cv::Mat>& pyramid, int levels, const std::vector<TrackPrediction>& predictions);
   int64_t next_id_ = 0;
   int64_t frame_id_ = 0;
   int64_t anchor_frame_ = -1;                                   // -1: no anchor

@@ -241,6 +241,17 @@ struct VioPipelineOptions {
   // An interval of at least this long without a frame that gave the estimator
   // tracking_lost_min_tracks observations is an IMU-only span (VioResult::imu_only), ns, > 0.
   int64_t imu_only_min_duration_ns = 100'000'000;
+  // Health: a keyframe's estimate is reported unreliable (VioResult::unreliable) when, after its
+  // solve, the whitened reprojection errors (chi2 per residual dimension; about 1 when the tracks
+  // agree with the estimate at their pixel sigma) exceed health_visual_chi2_max, or the IMU errors
+  // health_imu_chi2_max (the two disagree); when fewer than health_min_landmarks landmarks are in
+  // the solve (the parallax has collapsed: nothing constrains the translation but the IMU); or when
+  // the gyro-bias estimate has left its prior by more than health_gyro_bias_sigmas_max sigmas (the
+  // tracks pull the orientation away from the gyro).
+  double health_visual_chi2_max = 3.0;     // > 0
+  double health_imu_chi2_max = 3.0;        // > 0
+  int health_min_landmarks = 10;           // count, >= 0 (0: not checked)
+  double health_gyro_bias_sigmas_max = 3.0;  // sigmas of the gyro-bias prior, > 0
 
   bool Validate(std::string* why) const;
 };
@@ -289,6 +300,9 @@ struct VioResult {
   // Spans (after the initialisation) where the estimate came from the IMU alone: no frame with at
   // least tracking_lost_min_tracks observations for imu_only_min_duration_ns or longer.
   std::vector<VioSegment> imu_only;
+  // Runs of keyframes whose estimate failed a health check (options health_*), one reason each:
+  // "visual residuals", "inertial residuals", "few landmarks", "gyro bias off its prior".
+  std::vector<VioSegment> unreliable;
   VioStats stats;
 };
 
