@@ -43,8 +43,9 @@
 //     requested length, not by the distance actually travelled between i and j (as rpg).
 // - mean_position_error_percent = 100 mean(ATE trans) / path length of the matched ground truth;
 //   final_yaw_error_deg = yaw(R_est_aligned R_gt^T) at the last pair (world-frame yaw error,
-//   rpg's abs_e_ypr); yaw_drift_deg_per_m = |final yaw error| / path length. Both are 0 (not
-//   NaN) when the matched ground truth does not move.
+//   rpg's abs_e_ypr); yaw_drift_deg_per_m = |final yaw error| / path length. Both are NaN (null
+//   in JSON, n/a in tables) when the matched ground truth travels less than 1 um: a percentage of
+//   no distance is not a figure (pure rotation; judge those by ate.rot_deg and the RRE).
 // - Stats: rmse, mean, median (mean of the two middle values for an even count), population std
 //   (divides by n, as numpy.std), min, max.
 // Times stay int64 ns; every time difference is taken in int64 before converting to seconds.
@@ -66,6 +67,7 @@ namespace evio::evaluation {
 namespace {
 
 constexpr double kRadToDeg = 180.0 / M_PI;
+constexpr double kMinPathLength_m = 1e-6;  // below this the ground truth "does not move"
 
 int64_t seconds_to_ns(double s) { return static_cast<int64_t>(std::llround(s * 1e9)); }
 
@@ -542,11 +544,11 @@ EvaluationResult evaluate(const Trajectory& groundtruth, const Trajectory& estim
   }
   r.ate.trans_m = compute_stats(r.ate.trans_errors_m);
   r.ate.rot_deg = compute_stats(r.ate.rot_errors_deg);
-  if (r.groundtruth_length_m > 0) r.mean_position_error_percent = 100.0 * r.ate.trans_m.mean / r.groundtruth_length_m;
+  if (r.groundtruth_length_m > kMinPathLength_m) r.mean_position_error_percent = 100.0 * r.ate.trans_m.mean / r.groundtruth_length_m;
   {
     const Eigen::Matrix3d E = r.aligned_estimate[n - 1].rotation_matrix() * P.groundtruth[n - 1].rotation_matrix().transpose();
     r.final_yaw_error_deg = yaw_of(E) * kRadToDeg;
-    if (r.groundtruth_length_m > 0) r.yaw_drift_deg_per_m = std::abs(r.final_yaw_error_deg) / r.groundtruth_length_m;
+    if (r.groundtruth_length_m > kMinPathLength_m) r.yaw_drift_deg_per_m = std::abs(r.final_yaw_error_deg) / r.groundtruth_length_m;
   }
 
   // Relative errors.

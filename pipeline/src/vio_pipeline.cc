@@ -199,6 +199,7 @@ struct VioPipeline::Impl {
   std::optional<frontend::FrameMotion> latest_motion;  // use_depth without frame_velocity_at_reference
   int64_t next_obs = 0;       // camera clock, next corner observation frame
   bool have_events = false;
+  int64_t last_stall_init_ns = std::numeric_limits<int64_t>::min() / 2;  // IMU clock, try_init_on_stall
   int64_t frame_id = 0;
 
   // APS frames.
@@ -380,10 +381,33 @@ struct VioPipeline::Impl {
     }
   }
 
+  // The time (IMU clock) up to which both the events and the IMU have been processed while the
+  // newest pending frame lags behind them by an event-rate drop; -1 when frames are not stalled.
+  int64_t stalled_frames_until() const {
+    if (pending.empty() || imu.empty() || !have_events) return -1;
+    const int64_t seen = std::min(imu.back().t_ns - opt.imu_lookahead_ns, result.stats.t_last_event_ns + shift);
+    return seen - pending.back().t_ns > opt.event_rate_drop_windows * opt.frames.max_window_ns ? seen : -1;
+  }
+
+  // Not initialised with frames waiting and the frames stalled: the IMU and the events seen may
+  // complete the initialisation window. Attempted at most once per max_window_ns of data.
+  void try_init_on_stall() {
+    if (est || pending.empty()) return;
+    const int64_t until = stalled_frames_until();
+    if (until < 0 || until - last_stall_init_ns < opt.frames.max_window_ns) return;
+    last_stall_init_ns = until;
+    try_init(false);
+  }
+
   void try_init(bool final_attempt) {
     if (pending.empty()) return;
     const int64_t t0 = pending.front().t_ns;
-    if (pending.back().t_ns - t0 < opt.init_window_ns && !final_attempt) return;
+    // The window is complete once the frames reach init_window_ns past the first frame, or the IMU
+    // does while the frames have stalled (an event-rate drop: a hover from rest gives too few
+    // events for frames until the estimate allows sparse ones, and the still start needs the IMU
+    // only).
+    const int64_t newest = std::max(pending.back().t_ns, stalled_frames_until());
+    if (newest - t0 < opt.init_window_ns && !final_attempt) return;
     std::optional<VioState> s;
     std::string why;
     backend::InitialSigmas sigmas;  // from the static initialiser when the body was still
@@ -547,14 +571,7 @@ struct VioPipeline::Impl {
     // sparse_max_window_ns: a longer gap has had no events to build a frame from.
     const int64_t longest = est && opt.frames.sparse_max_window_ns > 0 ? std::max(max_window, opt.frames.sparse_max_window_ns) : max_window;
     if (prev_frame_t >= 0 && ef.t_ns - prev_frame_t > std::max<int64_t>(opt.event_rate_drop_windows * max_window, longest + max_window)) {
-      result.tracking_lost.push_back({prev_frame_t + shift, ef.t_ns + shift, "no event frames (event-rate drop)"});
-      in_gap = true;
-      for (int64_t t = prev_frame_t + max_window; t < ef.t_ns; t += max_window) {
-        FeatureObservations empty;
-        empty.t_ns = t + shift;
-        emit_event_frame(std::move(empty));
-      }
-      in_gap = false;
+      emit_gap_frames(ef.t_ns);
     }
     Eigen::Matrix3d R_cur_prev;
     const bool have_prior = prev_frame_t >= 0 && rotation_prior(prev_frame_t, ef.t_ns, &R_cur_prev);
@@ -608,6 +625,20 @@ struct VioPipeline::Impl {
       out.push_back({id, Eigen::Vector2d(K.fx * p.x() / p.z() + K.cx, K.fy * p.y() / p.z() + K.cy)});
     }
     return out;
+  }
+
+  // An event-rate drop from the last event frame to t_cam (camera clock): empty frames every
+  // max_window_ns keep the IMU propagation going (an IMU-only span), reported as tracking lost.
+  void emit_gap_frames(int64_t t_cam) {
+    const int64_t max_window = opt.frames.max_window_ns;
+    result.tracking_lost.push_back({prev_frame_t + shift, t_cam + shift, "no event frames (event-rate drop)"});
+    in_gap = true;
+    for (int64_t t = prev_frame_t + max_window; t < t_cam; t += max_window) {
+      FeatureObservations empty;
+      empty.t_ns = t + shift;
+      emit_event_frame(std::move(empty));
+    }
+    in_gap = false;
   }
 
   // Camera rotation from camera-clock t0 to t1 from the gyro (estimated bias once initialised):
@@ -937,6 +968,7 @@ void VioPipeline::add_imu(const ImuSample& sample) {
   if (p.frame_builder) p.frame_builder->add_imu(sample);
   p.drain_frames(false);
   p.drain(false);
+  p.try_init_on_stall();
 }
 
 void VioPipeline::add_frame(const Frame& frame) {
@@ -963,10 +995,11 @@ void VioPipeline::add_events(EventSpan events) {
   }
   if (p.waiting.empty() && p.imu_covers(events.back().t_ns)) {
     p.process(events);
-    return;
+  } else {
+    p.waiting.emplace_back(events.begin(), events.end());
+    p.drain(false);
   }
-  p.waiting.emplace_back(events.begin(), events.end());
-  p.drain(false);
+  p.try_init_on_stall();
 }
 
 VioResult VioPipeline::finish() {
@@ -980,6 +1013,13 @@ VioResult VioPipeline::finish() {
     p.built.clear();
     p.frame_builder->flush(&p.built);
     for (const auto& ef : p.built) p.track_event_frame(ef);
+    // No frame since long before the end (too few events): the state propagates with the IMU to the
+    // end of the recording, and the span is IMU-only.
+    const int64_t t_end_cam = p.imu.empty() ? p.result.stats.t_last_event_ns : p.imu.back().t_ns - p.shift;
+    if (p.est && p.prev_frame_t >= 0 && t_end_cam - p.prev_frame_t > 2 * options_.frames.max_window_ns) {
+      p.emit_gap_frames(t_end_cam + 1);
+      p.prev_frame_t = t_end_cam;
+    }
   } else if (p.recon && p.recon_frame_start >= 0 && p.recon_frame_events >= options_.frames.min_events) {
     p.close_recon_frame(p.result.stats.t_last_event_ns);
   }

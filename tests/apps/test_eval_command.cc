@@ -138,10 +138,11 @@ TEST(EvalCommand, SummaryOverRunsOfOneLabel) {
   const std::string json = summary_json(rows);
   EXPECT_NE(json.find("{\"label\": \"ours\", \"metrics\": {\"ate_trans_rmse_m\": {\"runs\": 3,"), std::string::npos)
       << json;
-  // LaTeX: one row per label, the mean of each metric, '_' escaped.
+  // LaTeX: one row per label, the mean of each metric, '_' escaped; "--" for a metric no run
+  // reports (yaw drift: NaN, these results have no path length).
   const std::string tex = summary_latex(rows);
-  EXPECT_NE(tex.find("\nours & 0.233 & 0.000 & 2.000 & 4.000 & 0.000 \\\\\n"), std::string::npos) << tex;
-  EXPECT_NE(tex.find("\ntheirs\\_v2 & 1.000 & 0.000 & 5.000 & 10.000 & 0.000 \\\\\n"), std::string::npos) << tex;
+  EXPECT_NE(tex.find("\nours & 0.233 & 0.000 & 2.000 & 4.000 & -- \\\\\n"), std::string::npos) << tex;
+  EXPECT_NE(tex.find("\ntheirs\\_v2 & 1.000 & 0.000 & 5.000 & 10.000 & -- \\\\\n"), std::string::npos) << tex;
 }
 
 TEST(EvalCommand, LabelsGroupRunsAndMustMatchTheEstimates) {

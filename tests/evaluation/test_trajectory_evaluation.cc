@@ -183,14 +183,17 @@ TEST(Evaluation, DegenerateInputs) {
   std::vector<evio::StampedPose> one = {{0, SE3()}};
   ev::EvaluationOptions o;
   EXPECT_THROW(ev::evaluate(evio::Trajectory(one), evio::Trajectory(one), o), std::invalid_argument);
-  // Stationary: zero-length RPE skipped, no NaN.
+  // Stationary: zero-length RPE skipped; a percentage of no distance is NaN (null in JSON), the
+  // absolute errors are finite.
   std::vector<evio::StampedPose> still;
   for (int i = 0; i < 10; ++i) still.push_back({i * 1000000LL, SE3()});
   o.alignment.method = ev::Alignment::kNone;
   const auto r = ev::evaluate(evio::Trajectory(still), evio::Trajectory(still), o);
   EXPECT_TRUE(r.rpe.empty());
-  EXPECT_EQ(r.mean_position_error_percent, 0.0);
-  EXPECT_EQ(r.yaw_drift_deg_per_m, 0.0);
+  EXPECT_TRUE(std::isnan(r.mean_position_error_percent));
+  EXPECT_TRUE(std::isnan(r.yaw_drift_deg_per_m));
+  EXPECT_EQ(r.ate.trans_m.rmse, 0.0);
+  EXPECT_EQ(r.final_yaw_error_deg, 0.0);
   // Rotating in place (all positions equal): se3 falls back to the first pair's poses, so a
   // known rotation of the estimate's world is undone and the rotation errors vanish.
   std::vector<evio::StampedPose> spin_gt, spin_est;

@@ -7,6 +7,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
@@ -123,9 +124,10 @@ struct EvaluationResult {
   AbsoluteError ate;
   // Mean translation error (after alignment) as % of the distance travelled (matched ground
   // truth path length), the figure event-VIO papers report.
-  double mean_position_error_percent = 0;
+  // NaN when the matched ground truth travels less than 1 um (pure rotation).
+  double mean_position_error_percent = std::numeric_limits<double>::quiet_NaN();
   double final_yaw_error_deg = 0;             // signed yaw error at the last pair, deg
-  double yaw_drift_deg_per_m = 0;             // final |yaw error| / path length, deg/m
+  double yaw_drift_deg_per_m = std::numeric_limits<double>::quiet_NaN();  // final |yaw error| / path length, deg/m; NaN as above
   std::vector<RelativeError> rpe;
   AssociatedPoses pairs;                      // the matched pairs
   std::vector<calib::SE3> aligned_estimate;   // estimate poses of the pairs after alignment
