@@ -116,7 +116,7 @@ std::vector<EstimateEvaluation> evaluate_all(const EvalArgs& args) {
       evaluation::RelativeRotationOptions ro;
       ro.interval_s = args.rre_interval_s;
       e.rre = evaluation::relative_rotation_error(gt, est, ro);
-      if (gyro) e.rre_gyro = evaluation::relative_rotation_error_at(gt, *gyro, e.rre->start_ns, args.rre_interval_s);
+      if (gyro) e.rre_gyro = evaluation::relative_rotation_error_at(gt, *gyro, e.rre->start_ns, e.rre->end_ns, args.rre_interval_s);
     }
     for (size_t k = 1; k < e.result.aligned_estimate.size(); ++k) {
       e.estimate_length_m +=

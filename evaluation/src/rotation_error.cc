@@ -24,24 +24,41 @@ bool RelativeRotationOptions::Validate(std::string* why) const {
     if (why) *why = "rre stride must be >= 1";
     return false;
   }
+  if (!(end_tolerance >= 0 && end_tolerance < 1)) {
+    if (why) *why = "rre end_tolerance must be in [0, 1)";
+    return false;
+  }
   return true;
 }
 
+namespace {
+
+// Appends the interval [t0, t1] with the estimate's rotations q0, q1 there (skipped when the
+// ground truth does not cover it).
+void add_interval(const Trajectory& groundtruth, int64_t t0, int64_t t1, const calib::Quat& q0, const calib::Quat& q1,
+                  RelativeRotationError* r) {
+  const auto g0 = groundtruth.interpolate(t0), g1 = groundtruth.interpolate(t1);
+  if (!g0 || !g1) return;
+  const calib::Quat q_gt = g0->rotation.conjugate() * g1->rotation;
+  const calib::Quat q_est = q0.conjugate() * q1;
+  r->start_ns.push_back(t0);
+  r->end_ns.push_back(t1);
+  r->errors_deg.push_back(angle_of(q_gt.conjugate() * q_est) * kRadToDeg);
+}
+
+}  // namespace
+
 RelativeRotationError relative_rotation_error_at(const Trajectory& groundtruth, const Trajectory& estimate,
-                                                 const std::vector<int64_t>& start_ns, double interval_s) {
+                                                 const std::vector<int64_t>& start_ns, const std::vector<int64_t>& end_ns,
+                                                 double interval_s) {
   if (!(interval_s > 0) || !std::isfinite(interval_s)) throw std::invalid_argument("rre interval_s must be finite and > 0");
+  if (start_ns.size() != end_ns.size()) throw std::invalid_argument("rre: as many interval ends as starts are needed");
   RelativeRotationError r;
   r.interval_s = interval_s;
-  const int64_t dt = static_cast<int64_t>(std::llround(interval_s * 1e9));
-  for (const int64_t t0 : start_ns) {
-    const int64_t t1 = t0 + dt;
-    const auto g0 = groundtruth.interpolate(t0), g1 = groundtruth.interpolate(t1);
-    const auto e0 = estimate.interpolate(t0), e1 = estimate.interpolate(t1);
-    if (!g0 || !g1 || !e0 || !e1) continue;
-    const calib::Quat q_gt = g0->rotation.conjugate() * g1->rotation;
-    const calib::Quat q_est = e0->rotation.conjugate() * e1->rotation;
-    r.start_ns.push_back(t0);
-    r.errors_deg.push_back(angle_of(q_gt.conjugate() * q_est) * kRadToDeg);
+  for (size_t k = 0; k < start_ns.size(); ++k) {
+    const auto e0 = estimate.interpolate(start_ns[k]), e1 = estimate.interpolate(end_ns[k]);
+    if (!e0 || !e1) continue;
+    add_interval(groundtruth, start_ns[k], end_ns[k], e0->rotation, e1->rotation, &r);
   }
   r.deg = compute_stats(r.errors_deg);
   return r;
@@ -51,9 +68,25 @@ RelativeRotationError relative_rotation_error(const Trajectory& groundtruth, con
                                               const RelativeRotationOptions& options) {
   std::string why;
   if (!options.Validate(&why)) throw std::invalid_argument(why);
-  std::vector<int64_t> starts;
-  for (size_t i = 0; i < estimate.size(); i += options.stride) starts.push_back(estimate[i].t_ns);
-  return relative_rotation_error_at(groundtruth, estimate, starts, options.interval_s);
+  RelativeRotationError r;
+  r.interval_s = options.interval_s;
+  const int64_t dt = static_cast<int64_t>(std::llround(options.interval_s * 1e9));
+  const int64_t tol = static_cast<int64_t>(std::llround(options.end_tolerance * options.interval_s * 1e9));
+  const auto& p = estimate.poses();
+  size_t j = 0;  // the first pose at or after t0 + dt (advances with t0)
+  for (size_t i = 0; i < p.size(); i += options.stride) {
+    const int64_t want = p[i].t_ns + dt;
+    while (j < p.size() && p[j].t_ns < want) ++j;
+    if (j == p.size()) break;  // the estimate ends before t0 + dt
+    // The nearer of the poses either side of t0 + dt.
+    size_t best = j;
+    if (j > i + 1 && want - p[j - 1].t_ns < p[j].t_ns - want) best = j - 1;
+    const int64_t off = p[best].t_ns > want ? p[best].t_ns - want : want - p[best].t_ns;
+    if (off > tol) continue;
+    add_interval(groundtruth, p[i].t_ns, p[best].t_ns, p[i].T_w_b.rotation, p[best].T_w_b.rotation, &r);
+  }
+  r.deg = compute_stats(r.errors_deg);
+  return r;
 }
 
 GyroIntegrator::GyroIntegrator(int64_t period_ns) : period_ns_(period_ns) {

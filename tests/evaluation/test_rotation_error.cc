@@ -49,11 +49,49 @@ TEST(RelativeRotationError, ZeroForTheSameTrajectoryAndTheRateErrorTimesTheInter
 TEST(RelativeRotationError, StartsOutsideEitherTrajectoryAreSkipped) {
   const auto gt = spin(Eigen::Vector3d(0, 0, 1), 2);
   const std::vector<int64_t> starts = {kT0 - 1, kT0, kT0 + 999'999'999, kT0 + 1'000'000'000, kT0 + 1'000'000'001};
-  const auto r = ev::relative_rotation_error_at(gt, gt, starts, 1.0);
+  std::vector<int64_t> ends;
+  for (int64_t t : starts) ends.push_back(t + 1'000'000'000);
+  const auto r = ev::relative_rotation_error_at(gt, gt, starts, ends, 1.0);
   // The trajectory spans [kT0, kT0 + 2 s]: starts before it, or ending after it, are skipped.
   ASSERT_EQ(r.start_ns.size(), 3u);
   EXPECT_EQ(r.start_ns.front(), kT0);
   EXPECT_EQ(r.start_ns.back(), kT0 + 1'000'000'000);
+  EXPECT_EQ(r.end_ns.back(), kT0 + 2'000'000'000);
+  ends.pop_back();
+  EXPECT_THROW(ev::relative_rotation_error_at(gt, gt, starts, ends, 1.0), std::invalid_argument);
+}
+
+// An estimate with a gap in its output (no poses for 0.4 s, as over a span without frames) while
+// the rate changes: the intervals run between its own poses, so the gap adds nothing (a slerp
+// across it would be off by about 1 deg here); an interval whose end falls in the gap further than
+// the tolerance from t0 + dt is skipped.
+TEST(RelativeRotationError, IntervalsRunBetweenTheEstimatesPosesNotAcrossItsGaps) {
+  std::vector<evio::StampedPose> g, e;
+  for (int k = 0; k <= 1000; ++k) {  // 200 Hz, 5 s, yaw rate 1.5 sin(3 t) rad/s
+    const double t = 0.005 * k;
+    const double yaw = 0.5 * (1 - std::cos(3 * t));
+    const evio::StampedPose p{kT0 + 5'000'000LL * k, SE3(evio::calib::so3_exp_quat(Eigen::Vector3d(0, 0, yaw)), Eigen::Vector3d::Zero())};
+    g.push_back(p);
+    if (k % 10 == 0 && !(k > 400 && k < 490)) e.push_back(p);  // 20 Hz with a gap (2.0, 2.45) s
+  }
+  const evio::Trajectory gt(g), est(e);
+  ev::RelativeRotationOptions o;
+  o.stride = 1;
+  const auto r = ev::relative_rotation_error(gt, est, o);
+  EXPECT_LT(r.deg.max, 1e-9);
+  ASSERT_EQ(r.start_ns.size(), r.end_ns.size());
+  // Starts at t0 = 0, 0.05, ..., 4.0 s (ends up to 5 s) less those whose t0 + 1 s lies in the gap
+  // further than 0.1 s from the poses at 2.0 and 2.45 s: t0 = 1.15, 1.2, 1.25 and 1.3 s.
+  size_t starts = 0;
+  for (const auto& p : e) starts += p.t_ns <= kT0 + 4'000'000'000LL;
+  EXPECT_EQ(r.start_ns.size(), starts - 4);
+  for (size_t k = 0; k < r.end_ns.size(); ++k) {
+    EXPECT_LE(std::llabs(r.end_ns[k] - r.start_ns[k] - 1'000'000'000LL), 100'000'000LL);
+  }
+  // Interpolating the estimate across the gap instead (as for a dense trajectory) is off by more.
+  const auto across = ev::relative_rotation_error_at(gt, est, {kT0 + 1'500'000'000LL}, {kT0 + 2'200'000'000LL}, 0.7);
+  ASSERT_EQ(across.deg.count, 1u);
+  EXPECT_GT(across.deg.max, 0.5);
 }
 
 TEST(GyroIntegrator, IntegratesAConstantRateExactlyAndBiasShowsInTheRre) {
