@@ -28,6 +28,7 @@ const Table<frontend::EventFrameOptions>& event_frame_table() {
           .duration_ms("max_imu_gap_ms", &O::max_imu_gap_ns, Range::kPositive)
           .number("event_lag_px", &O::event_lag_px, Range::kNonNegative, "px")
           .boolean("keep_accumulator", &O::keep_accumulator)
+          .number("time_surface_tau_fraction", &O::time_surface_tau_fraction, Range::kNonNegative, "fraction of the frame's span; 0: counts")
           .validate();
   return t;
 }

@@ -60,6 +60,8 @@ bool EventFrameOptions::Validate(std::string* why) const {
   if (!(overlap >= 0.0 && overlap <= 0.9)) return fail("overlap must be in [0, 0.9]");
   if (use_depth && !motion_compensation) return fail("use_depth needs motion_compensation");
   if (!(clip_percentile > 0.0 && clip_percentile <= 1.0)) return fail("clip_percentile must be in (0, 1]");
+  if (!(time_surface_tau_fraction >= 0.0)) return fail("time_surface_tau_fraction must be >= 0");
+  if (time_surface_tau_fraction > 0.0 && use_polarity) return fail("time_surface_tau_fraction > 0 does not go with use_polarity");
   if (!(clip_count >= 0.0) || !std::isfinite(clip_count)) return fail("clip_count must be finite and >= 0");
   if (knot_spacing_ns <= 0) return fail("knot_spacing_ns must be > 0 ns");
   if (max_imu_extrapolation_ns < 0) return fail("max_imu_extrapolation_ns must be >= 0 ns");
@@ -243,6 +245,9 @@ EventFrame EventFrameBuilder::build_frame(EventSpan events, int64_t t_ref_ns) {
   Eigen::Vector3f w_c = Eigen::Vector3f::Zero();
   if (lag) w_c = (R_c_b_ * gyro_at(t_ref_ns + time_shift_ns_)).cast<float>();
   const float lag_px = static_cast<float>(o_.event_lag_px);
+  // Time surface: exp((t_e - t_end) / tau), tau a fraction of the span (at least 1 us).
+  const bool surface = o_.time_surface_tau_fraction > 0.0;
+  const double inv_tau_per_ns = surface ? 1.0 / std::max(1e-6, o_.time_surface_tau_fraction * 1e-9 * static_cast<double>(f.t_end_ns - f.t_begin_ns)) * 1e-9 : 0.0;
   const Event* ev = events.data();
   const size_t n_events = events.size();
   constexpr size_t kAhead = 16;  // events: the bearing table is read at random pixels, fetched ahead
@@ -324,9 +329,17 @@ EventFrame EventFrameBuilder::build_frame(EventSpan events, int64_t t_ref_ns) {
     const int x0 = static_cast<int>(u), y0 = static_cast<int>(v);
     const float fu = u - static_cast<float>(x0), fv = v - static_cast<float>(y0);
     const int x1 = std::min(x0 + 1, width_ - 1), y1 = std::min(y0 + 1, height_ - 1);
-    const float wgt = o_.use_polarity ? static_cast<float>(e.polarity) : 1.0f;
     float* r0 = a + static_cast<size_t>(y0) * width_;
     float* r1 = a + static_cast<size_t>(y1) * width_;
+    if (surface) {
+      const float d = std::exp(static_cast<float>(static_cast<double>(e.t_ns - f.t_end_ns) * inv_tau_per_ns));
+      r0[x0] = std::max(r0[x0], d * (1.0f - fu) * (1.0f - fv));
+      r0[x1] = std::max(r0[x1], d * fu * (1.0f - fv));
+      r1[x0] = std::max(r1[x0], d * (1.0f - fu) * fv);
+      r1[x1] = std::max(r1[x1], d * fu * fv);
+      continue;
+    }
+    const float wgt = o_.use_polarity ? static_cast<float>(e.polarity) : 1.0f;
     r0[x0] += wgt * (1.0f - fu) * (1.0f - fv);
     r0[x1] += wgt * fu * (1.0f - fv);
     r1[x0] += wgt * (1.0f - fu) * fv;

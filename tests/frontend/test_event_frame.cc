@@ -109,6 +109,45 @@ TEST(EventFrame, FixedClipCountDoesNotDependOnTheFramesContent) {
             p.build_frame(EventSpan(a.data(), a.size()), a.back().t_ns).image.at<uint8_t>(50, 20));
 }
 
+// Time surface (time_surface_tau_fraction > 0): each pixel holds the largest exp(-(t_end - t) /
+// tau) of its events, tau = fraction x span, so a pixel's value depends on when it last fired, not
+// on how often: 1 and 8 events ending together give the same value, where counts differ 8x.
+TEST(EventFrame, TimeSurfaceKeepsTheNewestEventNotTheCount) {
+  const CameraCalibration cam = undistorted_camera(0, Eigen::Matrix3d::Identity());
+  EventFrameOptions o;
+  o.motion_compensation = false;
+  o.min_events = 1;
+  o.clip_percentile = 1.0;
+  o.time_surface_tau_fraction = 0.5;
+  EventFrameBuilder b(cam, o);
+  // Span 0..10 ms (tau 5 ms): pixel 10 fires once at 10 ms, pixel 20 eight times up to 10 ms,
+  // pixel 30 once at 0 ms, pixel 40 once at 5 ms.
+  std::vector<Event> ev = {{0, 30, 50, 1}};
+  for (int k = 0; k < 7; ++k) ev.push_back(Event{1'000'000LL * (k + 1), 20, 50, -1});
+  ev.push_back(Event{5'000'000, 40, 50, 1});
+  ev.push_back(Event{10'000'000, 20, 50, 1});
+  ev.push_back(Event{10'000'000, 10, 50, 1});
+  std::stable_sort(ev.begin(), ev.end(), [](const Event& a, const Event& c) { return a.t_ns < c.t_ns; });
+  const EventFrame f = b.build_frame(EventSpan(ev.data(), ev.size()), ev.back().t_ns);
+  // (within 1e-4: the bilinear weights of a pixel centre through the bearing table)
+  EXPECT_NEAR(f.accumulator.at<float>(50, 10), 1.0f, 1e-4);
+  EXPECT_NEAR(f.accumulator.at<float>(50, 20), 1.0f, 1e-4);
+  EXPECT_NEAR(f.accumulator.at<float>(50, 30), std::exp(-2.0), 1e-4);
+  EXPECT_NEAR(f.accumulator.at<float>(50, 40), std::exp(-1.0), 1e-4);
+  EXPECT_EQ(f.image.at<uint8_t>(50, 10), 255);
+  EXPECT_EQ(f.image.at<uint8_t>(50, 20), 255);
+  EXPECT_NEAR(f.image.at<uint8_t>(50, 30), 255 * std::exp(-2.0), 1);
+  // Counts: the pixel that fired 8 times is 8x the one that fired once.
+  o.time_surface_tau_fraction = 0;
+  EventFrameBuilder c(cam, o);
+  const EventFrame g = c.build_frame(EventSpan(ev.data(), ev.size()), ev.back().t_ns);
+  EXPECT_NEAR(g.accumulator.at<float>(50, 20), 8 * g.accumulator.at<float>(50, 10), 1e-3);
+  o.use_polarity = true;
+  o.time_surface_tau_fraction = 0.5;
+  std::string why;
+  EXPECT_FALSE(o.Validate(&why));
+}
+
 TEST(EventFrame, RotationWarpMatchesClosedForm) {
   const int64_t shift = 3'000'000;
   const Eigen::Matrix3d R_c_b = camera_from_body_rotation();

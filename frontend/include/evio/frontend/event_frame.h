@@ -96,6 +96,13 @@ struct EventFrameOptions {
   double event_lag_px = 0.0;
   // Keep the CV_32F accumulator (before normalisation) in EventFrame::accumulator.
   bool keep_accumulator = true;
+  // Motion-compensated time surface instead of event counts (> 0; default 0: counts). Each pixel
+  // holds the largest exp(-(t_end - t_e) / tau) of the warped events that land on it (bilinear
+  // weights), tau = this fraction of the frame's span t_end - t_begin: an edge that fired at all
+  // is bright however many events it gave, so the image depends less on how the motion's direction
+  // meets the gradients than counts (proportional to |grad L . flow|) do. Then normalised as the
+  // counts are. Not with use_polarity.
+  double time_surface_tau_fraction = 0.0;
 
   bool Validate(std::string* why) const;
 };
