@@ -34,6 +34,7 @@ const Table<backend::SlidingWindowOptions>& sliding_window_table() {
                    {"split", TrackedLandmarkMarginalisation::kSplit}})
           .boolean("rotation_only_model", &O::rotation_only_model)
           .boolean("rotation_only_static_centre", &O::rotation_only_static_centre)
+          .boolean("rotation_only_imu_centre", &O::rotation_only_imu_centre)
           .number("rotation_only_gric_margin", &O::rotation_only_gric_margin, Range::kAny, "GRIC units")
           .integer("rotation_only_min_keyframes", &O::rotation_only_min_keyframes, 1, 1000)
           .seconds_as_ms("rotation_only_min_duration_ms", &O::rotation_only_min_duration_s, Range::kNonNegative)

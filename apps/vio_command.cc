@@ -485,7 +485,7 @@ int run_vio_estimation(const VioArgs& args, std::ostream& out, evaluation::GyroI
       << ", \"gric_static\": " << num(m.gric_static) << ", \"gric_rotation\": " << num(m.gric_rotation)
       << ", \"gric_general\": " << num(m.gric_general) << ", \"imu_chi2\": " << num(m.imu_chi2) << ", \"imu_dof\": " << m.imu_dof << ", \"landmarks\": " << m.landmarks << ", \"best\": \""
       << backend::two_view_model_name(m.best) << "\", \"imu_veto\": " << (m.imu_veto ? "true" : "false")
-      << ", \"rotation_only\": " << (m.rotation_only ? "true" : "false") << "}";
+      << ", \"centre\": \"" << (m.centre_imu ? "imu" : "camera") << "\", \"rotation_only\": " << (m.rotation_only ? "true" : "false") << "}";
   }
   j << "],\n  \"tracking_lost_segments\": [";
   for (size_t i = 0; i < r.tracking_lost.size(); ++i) {

@@ -77,7 +77,9 @@ RotationOnlyError::RotationOnlyError(const Eigen::Vector3d& bearing_i, const Eig
 }
 
 StaticCentreError::StaticCentreError(const calib::SE3& T_c_b, double sigma_m)
-    : c_b_(-(T_c_b.rotation.conjugate() * T_c_b.translation)), inv_sigma_(1.0 / sigma_m) {}
+    : StaticCentreError(Eigen::Vector3d(-(T_c_b.rotation.conjugate() * T_c_b.translation)), sigma_m) {}
+
+StaticCentreError::StaticCentreError(const Eigen::Vector3d& c_b, double sigma_m) : c_b_(c_b), inv_sigma_(1.0 / sigma_m) {}
 
 bool StaticCentreError::Evaluate(double const* const* parameters, double* residuals, double** jacobians) const {
   const Eigen::Matrix3d R_i = Eigen::Map<const Eigen::Quaterniond>(parameters[0]).normalized().toRotationMatrix();

@@ -226,6 +226,8 @@ bool SlidingWindowEstimator::choose_rotation_only(const Keyframe& prev, const Fe
                                                   const VioState& predicted, const ImuPreintegration& pre) {
   SlidingWindowStats::MotionModelTest test;
   test.t_ns = frame.t_ns;
+  // The static centre of a rotation in place: the camera centre, or the IMU origin (see the IMU test).
+  Eigen::Vector3d centre_b = -(camera_.T_c_b.rotation.conjugate() * camera_.T_c_b.translation);
   const bool enabled = options_.rotation_only_model && options_.rotation_only_parallax_px != 0;
   std::vector<Eigen::Vector3d> b0, b1;
   const auto shared = [&](const Keyframe& k) {
@@ -294,10 +296,17 @@ bool SlidingWindowEstimator::choose_rotation_only(const Keyframe& prev, const Fe
       const Eigen::Vector3d p_b_c = -(camera_.T_c_b.rotation.conjugate() * camera_.T_c_b.translation);  // camera centre in b
       const Eigen::Vector3d w0 = ImuPreintegration::interpolate(imu_, ref->t_ns).gyro - ps.bias_gyro;
       const Eigen::Vector3d w1 = ImuPreintegration::interpolate(imu_, frame.t_ns).gyro - ps.bias_gyro;
-      const Eigen::Vector3d dv_c = R0 * ref_interval.delta_v() + options_.gravity_w * dt + R1 * w1.cross(p_b_c) - R0 * w0.cross(p_b_c);
       const Eigen::Matrix3d cov = R0 * ref_interval.covariance().block<3, 3>(3, 3) * R0.transpose() +
                                   std::pow(options_.model_selection_accel_sigma_mps2 * dt, 2) * Eigen::Matrix3d::Identity();
-      chi2 = dv_c.dot(cov.ldlt().solve(dv_c));
+      const Eigen::LDLT<Eigen::Matrix3d> cov_ldlt = cov.ldlt();
+      // The velocity change of the body point c over the interval (zero for a static centre).
+      const auto accel_chi2 = [&](const Eigen::Vector3d& c) {
+        const Eigen::Vector3d dv = R0 * ref_interval.delta_v() + options_.gravity_w * dt + R1 * w1.cross(c) - R0 * w0.cross(c);
+        return dv.dot(cov_ldlt.solve(dv));
+      };
+      chi2 = accel_chi2(p_b_c);
+      const bool imu_candidate = options_.rotation_only_imu_centre && p_b_c.norm() > 0;
+      double chi2_imu_origin = imu_candidate ? accel_chi2(Eigen::Vector3d::Zero()) : 0;
       dof = 3;
       // The predicted displacement of the camera centre, when landmarks make the velocity observable.
       int triangulated = 0;
@@ -311,13 +320,23 @@ bool SlidingWindowEstimator::choose_rotation_only(const Keyframe& prev, const Fe
                                         options_.model_selection_velocity_drift_mps2 * 1e-9 *
                                             static_cast<double>(std::max<int64_t>(0, ref->t_ns - velocity_anchor_t_ns_)));
       if (options_.model_selection_velocity_sigma_mps > 0 && velocity_anchor_sigma_mps_ > 0) {
-        const Eigen::Vector3d dp_c = predicted.T_w_b.translation + R1 * p_b_c - (pos_of(ref->pose) + R0 * p_b_c);
         const Eigen::Matrix3d cov_p =
             R0 * ref_interval.covariance().block<3, 3>(6, 6) * R0.transpose() +
             (std::pow(sigma_v * dt, 2) +
              std::pow(0.5 * options_.model_selection_velocity_drift_mps2 * dt * dt, 2)) * Eigen::Matrix3d::Identity();
-        chi2 += dp_c.dot(cov_p.ldlt().solve(dp_c));
+        const Eigen::LDLT<Eigen::Matrix3d> cov_p_ldlt = cov_p.ldlt();
+        const auto move_chi2 = [&](const Eigen::Vector3d& c) {
+          const Eigen::Vector3d dp = predicted.T_w_b.translation + R1 * c - (pos_of(ref->pose) + R0 * c);
+          return dp.dot(cov_p_ldlt.solve(dp));
+        };
+        chi2 += move_chi2(p_b_c);
+        if (imu_candidate) chi2_imu_origin += move_chi2(Eigen::Vector3d::Zero());
         dof += 3;
+      }
+      if (imu_candidate && chi2_imu_origin < chi2) {
+        chi2 = chi2_imu_origin;
+        centre_b = Eigen::Vector3d::Zero();
+        test.centre_imu = true;
       }
     }
     const TwoViewGric g = two_view_gric(b0, b1, R_prior, T_c1_c0.translation, focal_px_, options_.pixel_sigma, dof, chi2);
@@ -395,6 +414,7 @@ bool SlidingWindowEstimator::choose_rotation_only(const Keyframe& prev, const Fe
   }
   test.run = rotation_only_run_;
   test.rotation_only = rotation_only_active_ && small_motion;
+  rotation_centre_b_ = centre_b;
   stats_.motion_model_tests.push_back(test);
   return test.rotation_only;
 }
@@ -563,7 +583,7 @@ bool SlidingWindowEstimator::add_frame(const FeatureObservations& frame) {
     if (kf->rotation_only && options_.rotation_only_static_centre) {
       // The model says the centre does not move: by at most the velocity sigma over the interval.
       const double dt = 1e-9 * static_cast<double>(kf->t_ns - prev.t_ns);
-      kf->static_centre = std::make_unique<StaticCentreError>(camera_.T_c_b, std::max(1e-3, options_.model_selection_velocity_sigma_mps * dt));
+      kf->static_centre = std::make_unique<StaticCentreError>(rotation_centre_b_, std::max(1e-3, options_.model_selection_velocity_sigma_mps * dt));
     }
     if (kf->rotation_only) {
       for (const FeatureObservation& o : frame.observations) {

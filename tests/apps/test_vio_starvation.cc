@@ -19,11 +19,10 @@
 #include "evio_test/text_file.h"
 #include "simulated_scene.h"
 #include "vio_command.h"
+#include "vio_run.h"
 
 namespace evio::apps {
 namespace {
-
-const std::string kSimulatorConfig = std::string(EVIO_SOURCE_DIR) + "/datasets/vio/simulator.yaml";
 
 struct Span {
   double begin = 0, end = 0;
@@ -57,17 +56,9 @@ double longest_event_gap_s(const std::string& events_txt, size_t min_events) {
   return 0.05 * static_cast<double>(best);
 }
 
+// Runs evio vio (vio_run.h); returns its stats.json.
 std::string run(const std::string& dataset, const std::string& out, const std::string& config) {
-  VioArgs va;
-  va.config = config;
-  va.dataset = dataset;
-  va.out = out;
-  va.gt = dataset + "/groundtruth.txt";
-  va.progress = false;
-  std::ostringstream o;
-  EXPECT_EQ(run_vio(va, o), 0) << dataset;
-  std::printf("%s", o.str().c_str());
-  return evio_test::read_text(out + "/stats.json");
+  return evio_test::read_text(vio_on(dataset, out, config).out + "/stats.json");
 }
 
 double number(const std::string& json, const std::string& key) { return evio_test::json_number(json, key); }
@@ -139,12 +130,10 @@ TEST(VioStarvation, SlowHoverStaysPut) {
 // floor and the box in front without texture: about 0.75 s with noise events only) and of a hover
 // (3 cm/s, 4 deg/s), with the library defaults.
 TEST(VioStarvation, CrosscheckBlankWallsAndHover) {
-  const std::string script = std::string(EVIO_SOURCE_DIR) + "/scripts/crosscheck_generate.sh";
   evio_test::TempDir dir;
   const auto generate = [&](const std::string& name, const std::string& args) {
     const std::string out = dir.file(name);
-    const int rc = std::system(("EVIO_CROSSCHECK_CACHE= " + script + " " + out + " " + args + " --duration 4 > " + out + ".log 2>&1").c_str());
-    return std::pair<int, std::string>(WIFEXITED(rc) ? WEXITSTATUS(rc) : -1, out);
+    return std::pair<int, std::string>(crosscheck_generate(out, args, 4.0), out);
   };
   const std::string room =
       "'room={\"lo\": [-3.0, -2.5, 0.0], \"hi\": [3.0, 2.5, 3.0], \"faces\": {\"x-\": \"leuvenA.jpg\", \"x+\": \"blank.png\", "

@@ -75,17 +75,20 @@ class RotationOnlyError final : public ceres::SizedCostFunction<2, 7, 7> {
   double scale_;
 };
 
-// A rotation in place between two keyframes (the rotation-only model): the camera centre does not
-// move, r = (p_j + R_j c - p_i - R_i c) / sigma_m with c the camera centre in the body frame (T_c_b),
+// A rotation in place between two keyframes (the rotation-only model): its centre does not move,
+// r = (p_j + R_j c - p_i - R_i c) / sigma_m with c the centre in the body frame (the camera centre
+// of T_c_b, or a given point such as the IMU origin),
 // so the IMU alone does not carry the position away while no landmark can be triangulated.
 // Parameters: the two poses [qx qy qz qw px py pz] (PoseManifold). 3 residuals.
 class StaticCentreError final : public ceres::SizedCostFunction<3, 7, 7> {
  public:
   StaticCentreError(const calib::SE3& T_c_b, double sigma_m);
+  // Any body-frame point c instead of the camera centre (e.g. the IMU origin, c = 0).
+  StaticCentreError(const Eigen::Vector3d& c_b, double sigma_m);
   bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override;
 
  private:
-  Eigen::Vector3d c_b_;  // camera centre in the body frame
+  Eigen::Vector3d c_b_;  // the static point in the body frame (the camera centre by default)
   double inv_sigma_;
 };
 

@@ -126,6 +126,12 @@ struct SlidingWindowOptions {
   // what the model says, so that the IMU alone does not carry the position away in a hover or a
   // pan where no landmark can be triangulated.
   bool rotation_only_static_centre = true;
+  // The centre of a rotation in place may be the camera's optical centre (a tripod turning the
+  // camera) or the IMU's origin (a rig turning about its IMU, the camera on a lever arm): the IMU
+  // test of the model takes the candidate the IMU agrees with better, and the static centre holds
+  // that point. false: the camera centre only. Over a distant scene a lever arm of a few cm is not
+  // seen in the image, but the IMU sees its centripetal acceleration and vetoed the model.
+  bool rotation_only_imu_centre = true;
   // GRIC_R must be below GRIC_S and GRIC_G by at least this much (GRIC units: -2 log likelihood,
   // i.e. chi2 units of the whitened residuals), >= 0. 10 is e^5 ~ 150 times more likely.
   double rotation_only_gric_margin = 10.0;
@@ -229,11 +235,12 @@ struct SlidingWindowStats {
     int tracks = 0;                 // shared tracks with the reference keyframe (n of the GRIC)
     double baseline_s = 0;          // time from the reference keyframe (s)
     double gric_static = 0, gric_rotation = 0, gric_general = 0;  // GRIC units (-2 log likelihood)
-    double imu_chi2 = 0;            // chi2 of "the camera centre does not accelerate (3 dof) / move (3 more)"
+    double imu_chi2 = 0;            // chi2 of "the centre does not accelerate (3 dof) / move (3 more)" (centre_imu)
     int imu_dof = 0;                // its degrees of freedom (0: the IMU datum was not used)
     int landmarks = 0;              // triangulated landmarks in the window at the test
     TwoViewModel best = TwoViewModel::kNone;  // lowest GRIC (kNone: too few tracks, not tested); kGeneral when vetoed
     bool imu_veto = false;          // R had the lowest GRIC but the IMU rejected a static centre
+    bool centre_imu = false;        // the IMU's origin, not the camera centre, was the likelier static centre
     int run = 0;                    // consecutive keyframes R has won by the margin
     bool rotation_only = false;     // the decision after hysteresis
   };
@@ -345,6 +352,7 @@ class SlidingWindowEstimator {
   std::optional<std::pair<VioState, VioState>> last_prediction_;  // (anchor keyframe, predicted)
   std::optional<Eigen::Matrix<double, 6, 6>> latest_cov_;
   bool rotation_only_active_ = false;  // hysteresis state of the rotation-only model
+  Eigen::Vector3d rotation_centre_b_ = Eigen::Vector3d::Zero();  // the latest test's static centre (body frame)
   double last_median_depth_m_ = 0;     // median camera depth of the triangulated landmarks at the last solve that had any (m)
   // The velocity is known (model selection's displacement datum) to velocity_anchor_sigma_mps_ at
   // velocity_anchor_t_ns_: the initialisation, or the last solve with enough triangulated landmarks.
