@@ -10,7 +10,8 @@
 # are fetched once into $EVIO_CROSSCHECK_IMAGES (default ${XDG_CACHE_HOME:-~/.cache}/evio/crosscheck_images),
 # together with the synthetic textures evio's variants name: blank.png (uniform grey, for a pass
 # over a wall without texture). Needs /usr/bin/python3 with numpy, scipy and OpenCV (Debian's
-# python3-numpy, python3-scipy, python3-opencv; scripts/setup_deps.sh --tests installs them).
+# python3-numpy, python3-scipy, python3-opencv: `scripts/setup_deps.sh python3-scipy python3-opencv`;
+# without them this script exits 77 and the tests that use it skip).
 # With $EVIO_CROSSCHECK_CACHE set, each sequence is generated once into that folder, under a key
 # of the simulator file's checksum and the arguments, and OUT is a symbolic link to it (sweeps into
 # new folders then reuse the sequences); `--key PRESET SEED [options]` prints the key.

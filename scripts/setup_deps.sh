@@ -21,7 +21,6 @@ test_packages=(
   chromium                                       # the sweep report in a browser: cli.*report_browser
   parallel rsync openssh-client openssh-server   # evio sweep --engine parallel [--hosts]: cli.sweep_parallel_ssh
   slurm-wlm munge                                # evio sweep --engine slurm: cli.sweep_slurm (scripts/test_slurm.sh)
-  python3-scipy python3-opencv                   # the crosscheck simulator (scripts/crosscheck_generate.sh): VioStarvation.Crosscheck*
 )
 if [ "${1:-}" = --tests ]; then
   packages+=("${test_packages[@]}")
