@@ -43,6 +43,15 @@ using namespace yaml_config;  // NOLINT
 
 std::string num(double v) { return json_number(v, 10); }  // null when not finite
 
+// A JSON list body of spans: {"t_begin": s, "t_end": s, "reason": "..."}, comma-separated.
+void write_segments(std::ostream& j, const std::vector<pipeline::VioSegment>& segments) {
+  for (size_t i = 0; i < segments.size(); ++i) {
+    const pipeline::VioSegment& l = segments[i];
+    j << (i ? ", " : "") << "{\"t_begin\": " << format_seconds(l.t_begin_ns) << ", \"t_end\": " << format_seconds(l.t_end_ns)
+      << ", \"reason\": \"" << l.what << "\"}";
+  }
+}
+
 std::string fmt_g(double v) {
   char b[40];
   std::snprintf(b, sizeof(b), "%.4f", v);
@@ -488,11 +497,7 @@ int run_vio_estimation(const VioArgs& args, std::ostream& out, evaluation::GyroI
       << ", \"centre\": \"" << (m.centre_imu ? "imu" : "camera") << "\", \"rotation_only\": " << (m.rotation_only ? "true" : "false") << "}";
   }
   j << "],\n  \"tracking_lost_segments\": [";
-  for (size_t i = 0; i < r.tracking_lost.size(); ++i) {
-    const pipeline::VioSegment& l = r.tracking_lost[i];
-    j << (i ? ", " : "") << "{\"t_begin\": " << format_seconds(l.t_begin_ns) << ", \"t_end\": " << format_seconds(l.t_end_ns)
-      << ", \"reason\": \"" << l.what << "\"}";
-  }
+  write_segments(j, r.tracking_lost);
   j << "],\n  \"health\": {\"keyframes\": [";
   for (size_t i = 0; i < st.health.size(); ++i) {
     const auto& h = st.health[i];
@@ -501,20 +506,12 @@ int run_vio_estimation(const VioArgs& args, std::ostream& out, evaluation::GyroI
       << ", \"landmarks\": " << h.landmarks << ", \"gyro_bias_sigmas\": " << num(h.gyro_bias_sigmas) << "}";
   }
   j << "], \"unreliable_segments\": [";
-  for (size_t i = 0; i < r.unreliable.size(); ++i) {
-    const pipeline::VioSegment& u = r.unreliable[i];
-    j << (i ? ", " : "") << "{\"t_begin\": " << format_seconds(u.t_begin_ns) << ", \"t_end\": " << format_seconds(u.t_end_ns)
-      << ", \"reason\": \"" << u.what << "\"}";
-  }
+  write_segments(j, r.unreliable);
   j << "]}";
   j << ",\n  \"imu_only_segments\": [";
+  write_segments(j, r.imu_only);
   double imu_only_s = 0;
-  for (size_t i = 0; i < r.imu_only.size(); ++i) {
-    const pipeline::VioSegment& l = r.imu_only[i];
-    imu_only_s += 1e-9 * static_cast<double>(l.t_end_ns - l.t_begin_ns);
-    j << (i ? ", " : "") << "{\"t_begin\": " << format_seconds(l.t_begin_ns) << ", \"t_end\": " << format_seconds(l.t_end_ns)
-      << ", \"reason\": \"" << l.what << "\"}";
-  }
+  for (const pipeline::VioSegment& l : r.imu_only) imu_only_s += 1e-9 * static_cast<double>(l.t_end_ns - l.t_begin_ns);
   j << "],\n  \"imu_only_s\": " << num(imu_only_s);
   j << ",\n  \"frontend_stats\": {";
   if (use_frames) {

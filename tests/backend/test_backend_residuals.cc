@@ -4,6 +4,7 @@
 // kept variables.
 #include <array>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <memory>
 #include <random>
@@ -38,6 +39,17 @@ double worst_error(const ceres::GradientChecker::ProbeResults& r) {
   return worst;
 }
 
+// The worst Jacobian error (worst_error) of `cost` at `params`, relative step `step`; infinity
+// when the checker could not evaluate it.
+double probe_worst(const ceres::CostFunction& cost, const std::vector<const ceres::Manifold*>& manifolds,
+                   const double* const* params, double step = 1e-5) {
+  ceres::NumericDiffOptions nd;
+  const ceres::GradientChecker checker(&cost, &manifolds, nd);
+  ceres::GradientChecker::ProbeResults res;
+  checker.Probe(params, step, &res);
+  return res.return_value ? worst_error(res) : std::numeric_limits<double>::infinity();
+}
+
 // A random body pose, a landmark 2-6 m in front of the camera and its bearing with ~2 px noise.
 struct RandomObservation {
   std::array<double, 7> pose;
@@ -70,12 +82,7 @@ TEST(ReprojectionError, GradientCheckerAtRandomPosesAndPoints) {
     const RandomObservation o = random_observation(rng, T_c_b);
     const ReprojectionError err(o.bearing, T_c_b, 200.0, 0.5);
     const double* params[2] = {o.pose.data(), o.landmark.data()};
-    ceres::NumericDiffOptions nd;
-    const ceres::GradientChecker checker(&err, &manifolds, nd);
-    ceres::GradientChecker::ProbeResults res;
-    checker.Probe(params, 1e-5, &res);
-    ASSERT_TRUE(res.return_value);
-    worst = std::max(worst, worst_error(res));
+    worst = std::max(worst, probe_worst(err, manifolds, params));
   }
   std::printf("ReprojectionError: worst Jacobian error %.2e\n", worst);
   EXPECT_LT(worst, 1e-5);
@@ -117,12 +124,7 @@ TEST(TimeOffsetReprojectionError, GradientCheckerAndShiftAlongTheImageVelocity) 
     const Eigen::Vector2d v(0.5 * n(rng), 0.5 * n(rng));
     const TimeOffsetReprojectionError err(bearing, v, T_c_b, 200.0, 0.5);
     const double* params[3] = {o.pose.data(), o.landmark.data(), td.data()};
-    ceres::NumericDiffOptions nd;
-    const ceres::GradientChecker checker(&err, &manifolds, nd);
-    ceres::GradientChecker::ProbeResults res;
-    checker.Probe(params, 1e-5, &res);
-    ASSERT_TRUE(res.return_value);
-    worst = std::max(worst, worst_error(res));
+    worst = std::max(worst, probe_worst(err, manifolds, params));
     // td = 0: the plain residual; otherwise it differs by (f / sigma) td v.
     const ReprojectionError plain(bearing, T_c_b, 200.0, 0.5);
     double r_plain[2], r_td[2];
@@ -159,12 +161,7 @@ TEST(RotationOnlyError, GradientCheckerAndZeroAtTheTrueRotation) {
     ASSERT_TRUE(exact.Evaluate(params, r, nullptr));
     EXPECT_LT(std::hypot(r[0], r[1]), 1e-8);
     const RotationOnlyError err((b_i + Eigen::Vector3d(0.01 * n(rng), 0.01 * n(rng), 0)).normalized(), b_j, T_c_b, 200.0, 0.5);
-    ceres::NumericDiffOptions nd;
-    const ceres::GradientChecker checker(&err, &manifolds, nd);
-    ceres::GradientChecker::ProbeResults res;
-    checker.Probe(params, 1e-5, &res);
-    ASSERT_TRUE(res.return_value);
-    worst = std::max(worst, worst_error(res));
+    worst = std::max(worst, probe_worst(err, manifolds, params));
   }
   std::printf("RotationOnlyError: worst Jacobian error %.2e\n", worst);
   EXPECT_LT(worst, 1e-5);
@@ -195,12 +192,7 @@ TEST(StaticCentreError, GradientCheckerAndZeroForARotationAboutTheCameraCentre) 
     pj[4] += 0.002;  // 2 mm along x: 0.5 sigma
     ASSERT_TRUE(err.Evaluate(params, r, nullptr));
     EXPECT_NEAR(r[0], 0.5, 1e-9);
-    ceres::NumericDiffOptions nd;
-    const ceres::GradientChecker checker(&err, &manifolds, nd);
-    ceres::GradientChecker::ProbeResults res;
-    checker.Probe(params, 1e-5, &res);
-    ASSERT_TRUE(res.return_value);
-    worst = std::max(worst, worst_error(res));
+    worst = std::max(worst, probe_worst(err, manifolds, params));
   }
   std::printf("StaticCentreError: worst Jacobian error %.2e\n", worst);
   EXPECT_LT(worst, 1e-5);
@@ -228,13 +220,8 @@ TEST(StaticCentreError, ABodyPointAsTheCentre) {
     ASSERT_TRUE(camera.Evaluate(params, r, nullptr));
     const Eigen::Vector3d c_b = -(T_c_b.rotation.conjugate() * T_c_b.translation);
     EXPECT_NEAR(Eigen::Map<Eigen::Vector3d>(r).norm(), (qj * c_b - qi * c_b).norm() / 0.004, 1e-9);
-    ceres::NumericDiffOptions nd;
     const StaticCentreError point(Eigen::Vector3d(0.1, -0.2, 0.05), 0.004);
-    const ceres::GradientChecker checker(&point, &manifolds, nd);
-    ceres::GradientChecker::ProbeResults res;
-    checker.Probe(params, 1e-5, &res);
-    ASSERT_TRUE(res.return_value);
-    worst = std::max(worst, worst_error(res));
+    worst = std::max(worst, probe_worst(point, manifolds, params));
   }
   EXPECT_LT(worst, 1e-5);
 }
@@ -256,13 +243,8 @@ TEST(LinearPrior, GradientCheckerWithPoseAndEuclideanBlocks) {
   const PoseManifold pm;
   const ceres::EuclideanManifold<9> e9;
   const std::vector<const ceres::Manifold*> manifolds = {&pm, &e9};
-  ceres::NumericDiffOptions nd;
-  const ceres::GradientChecker checker(&prior, &manifolds, nd);
-  ceres::GradientChecker::ProbeResults res;
   const double* params[2] = {pose.data(), sb.data()};
-  checker.Probe(params, 1e-6, &res);
-  ASSERT_TRUE(res.return_value);
-  EXPECT_LT(worst_error(res), 1e-6);
+  EXPECT_LT(probe_worst(prior, manifolds, params, 1e-6), 1e-6);
   // At the linearisation point the residual is r0.
   Eigen::VectorXd r(12);
   const double* at0[2] = {pose0.data(), sb0.data()};

@@ -84,6 +84,17 @@ inline bool operator!=(VioInputs i, std::string_view name) { return !(i == name)
 // Track ids of APS-frame tracks are offset by this, so they never meet event-track ids.
 constexpr int64_t kApsTrackIdOffset = int64_t{1} << 40;
 
+// The event trackers' template settings (see VioPipelineOptions::tracker): each feature aligned
+// against its patch of up to 10 frames ago, not used once turned by more than 4 deg, and the
+// previous frame's alignment when the template loses it.
+inline frontend::FeatureTrackerOptions template_tracker_options() {
+  frontend::FeatureTrackerOptions t;
+  t.template_max_age_frames = 10;
+  t.template_fallback = true;
+  t.template_max_rotation_deg = 4.0;
+  return t;
+}
+
 struct VioPipelineOptions {
   VioInputs inputs = VioInputs::kEvents;
   VioFrontEnd frontend = VioFrontEnd::kFrames;  // the event front-end (inputs events and events+aps)
@@ -132,11 +143,8 @@ struct VioPipelineOptions {
   // -> 0.37% worse); without the rotation limit 0.487% (room 0.52%); events+aps 0.146 -> 0.138%
   // (3 seeds). Needs window.rotation_only_min_duration_s (see SlidingWindowOptions).
   frontend::FeatureTrackerOptions tracker = [] {
-    frontend::FeatureTrackerOptions t;
+    frontend::FeatureTrackerOptions t = template_tracker_options();
     t.klt_window_px = 27;
-    t.template_max_age_frames = 10;
-    t.template_fallback = true;
-    t.template_max_rotation_deg = 4.0;
     return t;
   }();                                                           // grid, FAST, KLT (px), RANSAC (px)
 
@@ -159,11 +167,8 @@ struct VioPipelineOptions {
   // detector would otherwise take for texture.
   double reconstruction_blur_px = 1.0;
   frontend::FeatureTrackerOptions reconstruction_tracker = [] {
-    frontend::FeatureTrackerOptions t;
+    frontend::FeatureTrackerOptions t = template_tracker_options();
     t.fast_threshold = 10;
-    t.template_max_age_frames = 10;
-    t.template_fallback = true;
-    t.template_max_rotation_deg = 4.0;
     return t;
   }();
 
