@@ -96,7 +96,7 @@ TEST(VioStarvation, TwoSecondGapIsImuOnlyThenTheTracksComeBack) {
   EXPECT_LT(number(stats, "t"), 2.5) << "initialised once, before the gap: " << stats;
   const double mpe = number(evio_test::read_text(gap + "/vio/eval.json"), "mean_position_error_percent");
   std::printf("2 s gap: IMU-only %.2f s, mean position error %.3f%%\n", longest, mpe);
-  EXPECT_LT(mpe, 1.0);
+  EXPECT_LT(mpe, 0.5);  // measured 0.357% (0.400% before the stall-aware initialisation)
 }
 
 // evio's simulator: the quadrotor_flight room seen from a hover (still for 1.2 s, then swaying by
@@ -156,7 +156,7 @@ TEST(VioStarvation, CrosscheckBlankWallsAndHover) {
   run(hover, hover + "/vio", "");
   const double ate = number(evio_test::read_text(hover + "/vio/eval.json"), "rmse");
   std::printf("crosscheck hover: ATE rmse %.4f m\n", ate);
-  EXPECT_LT(ate, 0.03);
+  EXPECT_LT(ate, 0.01);  // measured 7.1 mm
 }
 
 }  // namespace
