@@ -19,7 +19,7 @@
 #include "evio/sensors/time.h"
 #include "evio/sensors/trajectory.h"
 #include "cmax_input.h"
-#include "json_util.h"
+#include "evio/calib/json.h"
 #include "output_files.h"
 #include "option_tables.h"
 #include "progress.h"
@@ -62,9 +62,7 @@ const Table<C>& flow_config_table() {
   return table;
 }
 
-std::string num(double v) { return json_number(v, 9); }
-std::string str(const std::string& s) { return "\"" + json_escape(s) + "\""; }
-std::string vec3(const Eigen::Vector3d& v) { return "[" + num(v.x()) + ", " + num(v.y()) + ", " + num(v.z()) + "]"; }
+std::string vec3(const Eigen::Vector3d& v) { return "[" + json_number(v.x(), 9) + ", " + json_number(v.y(), 9) + ", " + json_number(v.z(), 9) + "]"; }
 
 struct WindowRecord {
   int64_t t0 = 0, t1 = 0;
@@ -298,27 +296,27 @@ int run_flow(const FlowArgs& args, std::ostream& out) {
       }
       f.close();
       std::ostringstream j;
-      j << ",\n  \"reference_convention\": " << str(convention);
+      j << ",\n  \"reference_convention\": " << json_string(convention);
       if (gt) {
         const evaluation::AngularVelocityErrors e = evaluation::angular_velocity_errors(est, ref);
-        j << ",\n  \"groundtruth\": {\"source\": " << str(gt_source) << ", \"windows\": " << e.count
-          << ", \"rms_error_degps\": " << num(e.rms_degps) << ", \"rms_error_axis_degps\": " << vec3(e.rms_axis_degps)
-          << ", \"median_error_degps\": " << num(e.median_degps) << ", \"max_error_degps\": " << num(e.max_degps)
-          << ", \"groundtruth_rms_degps\": " << num(e.reference_rms_degps) << ", \"relative_rms_error\": " << num(e.relative_rms) << "}";
+        j << ",\n  \"groundtruth\": {\"source\": " << json_string(gt_source) << ", \"windows\": " << e.count
+          << ", \"rms_error_degps\": " << json_number(e.rms_degps, 9) << ", \"rms_error_axis_degps\": " << vec3(e.rms_axis_degps)
+          << ", \"median_error_degps\": " << json_number(e.median_degps, 9) << ", \"max_error_degps\": " << json_number(e.max_degps, 9)
+          << ", \"groundtruth_rms_degps\": " << json_number(e.reference_rms_degps, 9) << ", \"relative_rms_error\": " << json_number(e.relative_rms, 9) << "}";
         eval_text << "ground truth  " << e.count << " windows (" << gt_source << "): angular velocity error RMS "
-                  << num(e.rms_degps) << " deg/s (per axis " << num(e.rms_axis_degps.x()) << ", " << num(e.rms_axis_degps.y()) << ", "
-                  << num(e.rms_axis_degps.z()) << "), median " << num(e.median_degps) << ", max " << num(e.max_degps)
-                  << "; " << num(100 * e.relative_rms) << "% of the true rate's RMS " << num(e.reference_rms_degps) << " deg/s\n";
+                  << json_number(e.rms_degps, 9) << " deg/s (per axis " << json_number(e.rms_axis_degps.x(), 9) << ", " << json_number(e.rms_axis_degps.y(), 9) << ", "
+                  << json_number(e.rms_axis_degps.z(), 9) << "), median " << json_number(e.median_degps, 9) << ", max " << json_number(e.max_degps, 9)
+                  << "; " << json_number(100 * e.relative_rms, 9) << "% of the true rate's RMS " << json_number(e.reference_rms_degps, 9) << " deg/s\n";
       }
       if (imu.size() >= 2) {
         const evaluation::AngularVelocityErrors e = evaluation::angular_velocity_errors(est, gyr);
         j << ",\n  \"gyro\": {\"samples\": " << imu.size() << ", \"windows\": " << e.count
-          << ", \"events_vs_gyro_rms_degps\": " << num(e.rms_degps) << ", \"events_vs_gyro_median_degps\": " << num(e.median_degps);
-        eval_text << "gyro          " << e.count << " windows: events vs gyro RMS " << num(e.rms_degps) << " deg/s";
+          << ", \"events_vs_gyro_rms_degps\": " << json_number(e.rms_degps, 9) << ", \"events_vs_gyro_median_degps\": " << json_number(e.median_degps, 9);
+        eval_text << "gyro          " << e.count << " windows: events vs gyro RMS " << json_number(e.rms_degps, 9) << " deg/s";
         if (gt) {
           const evaluation::AngularVelocityErrors eg = evaluation::angular_velocity_errors(gyr, ref);
-          j << ", \"gyro_vs_groundtruth_rms_degps\": " << num(eg.rms_degps);
-          eval_text << ", gyro vs ground truth RMS " << num(eg.rms_degps) << " deg/s";
+          j << ", \"gyro_vs_groundtruth_rms_degps\": " << json_number(eg.rms_degps, 9);
+          eval_text << ", gyro vs ground truth RMS " << json_number(eg.rms_degps, 9) << " deg/s";
         }
         j << "}";
         eval_text << "\n";
@@ -346,72 +344,72 @@ int run_flow(const FlowArgs& args, std::ostream& out) {
     std::ostringstream j, t;
     if (!selecting) {
       t << mapping::warp_model_name(model) << " (fixed: --model or cmax.model)";
-      j << "{\"selection\": \"fixed\", \"chosen\": " << str(mapping::warp_model_name(model));
+      j << "{\"selection\": \"fixed\", \"chosen\": " << json_string(mapping::warp_model_name(model));
     } else {
       j << "{\"selection\": \"auto\", \"rule\": \"the simplest candidate unless a richer one's relative objective gain "
            "exceeds gain_per_parameter per extra parameter (as evio segment per cluster)\", \"objective\": "
-        << str(objective) << ", \"gain_per_parameter\": " << num(cfg.model_gain_per_parameter)
+        << json_string(objective) << ", \"gain_per_parameter\": " << json_number(cfg.model_gain_per_parameter, 9)
         << ", \"windows\": " << st.windows << ", \"dropped_uncalibrated\": [";
-      for (size_t i = 0; i < dropped.size(); ++i) j << (i ? ", " : "") << str(dropped[i]);
+      for (size_t i = 0; i < dropped.size(); ++i) j << (i ? ", " : "") << json_string(dropped[i]);
       j << "], \"candidates\": [";
       t << "auto over " << st.windows << " windows:";
       for (size_t i = 0; i < candidates.size(); ++i) {
         const double n = static_cast<double>(st.chosen[i]);
         const double share = st.windows > 0 ? n / windows_d(st.windows) : 0.0;
-        j << (i ? ", " : "") << "{\"model\": " << str(mapping::warp_model_name(candidates[i])) << ", \"parameters\": "
-          << mapping::warp_dof(candidates[i]) << ", \"windows_chosen\": " << st.chosen[i] << ", \"share_chosen\": " << num(share)
-          << ", \"mean_gain\": " << num(st.windows > 0 ? gain_sum[i] / windows_d(st.windows) : 0.0)
-          << ", \"mean_score\": " << num(st.windows > 0 ? score_sum[i] / windows_d(st.windows) : 0.0) << "}";
-        t << (i ? "," : "") << " " << mapping::warp_model_name(candidates[i]) << " " << num(100.0 * share) << "%";
+        j << (i ? ", " : "") << "{\"model\": " << json_string(mapping::warp_model_name(candidates[i])) << ", \"parameters\": "
+          << mapping::warp_dof(candidates[i]) << ", \"windows_chosen\": " << st.chosen[i] << ", \"share_chosen\": " << json_number(share, 9)
+          << ", \"mean_gain\": " << json_number(st.windows > 0 ? gain_sum[i] / windows_d(st.windows) : 0.0, 9)
+          << ", \"mean_score\": " << json_number(st.windows > 0 ? score_sum[i] / windows_d(st.windows) : 0.0, 9) << "}";
+        t << (i ? "," : "") << " " << mapping::warp_model_name(candidates[i]) << " " << json_number(100.0 * share, 9) << "%";
       }
       size_t top = 0;
       for (size_t i = 1; i < candidates.size(); ++i)
         if (st.chosen[i] > st.chosen[top]) top = i;
-      j << "], \"chosen\": " << str(st.windows > 0 ? mapping::warp_model_name(candidates[top]) : "none")
+      j << "], \"chosen\": " << json_string(st.windows > 0 ? mapping::warp_model_name(candidates[top]) : "none")
         << ", \"per_window\": \"model_selection.csv\"";
       t << " (" << (st.windows > 0 ? mapping::warp_model_name(candidates[top]) : "none") << " most often)";
     }
     model_text = t.str();
-    j << ", \"summary\": " << str(model_text) << "}";
+    j << ", \"summary\": " << json_string(model_text) << "}";
     model_json = j.str();
   }
   {
     TextOut f((fs::path(args.out) / "stats.json").string());
     std::ostringstream j;
-    j << "{\n  \"dataset\": " << str(args.dataset) << ",\n  \"model\": " << model_json << ",\n  \"parameters\": [";
+    j << "{\n  \"dataset\": " << json_string(args.dataset) << ",\n  \"model\": " << model_json << ",\n  \"parameters\": [";
     const auto names = mapping::warp_parameter_names(model);
-    for (size_t i = 0; i < names.size(); ++i) j << (i ? ", " : "") << str(names[i]);
-    j << "],\n  \"objective\": " << str(objective) << ",\n  \"sensor\": [" << sensor.width << ", " << sensor.height
-      << "],\n  \"undistortion\": {\"option\": " << str(pipeline::cmax_undistortion_name(cfg.window.undistortion))
-      << ", \"used\": " << str(pipeline::cmax_undistortion_name(pipe.undistortion())) << ", \"reason\": "
-      << str(pipe.undistortion_reason()) << "},\n  \"window\": {\"events_per_window\": " << (cfg.window.window_ns > 0 ? 0 : cfg.window.window_events)
-      << ", \"duration_ms\": " << num(static_cast<double>(cfg.window.window_ns) * 1e-6)
-      << ", \"max_duration_ms\": " << num(static_cast<double>(cfg.window.max_window_ns) * 1e-6) << ", \"min_events\": " << cfg.window.min_window_events
+    for (size_t i = 0; i < names.size(); ++i) j << (i ? ", " : "") << json_string(names[i]);
+    j << "],\n  \"objective\": " << json_string(objective) << ",\n  \"sensor\": [" << sensor.width << ", " << sensor.height
+      << "],\n  \"undistortion\": {\"option\": " << json_string(pipeline::cmax_undistortion_name(cfg.window.undistortion))
+      << ", \"used\": " << json_string(pipeline::cmax_undistortion_name(pipe.undistortion())) << ", \"reason\": "
+      << json_string(pipe.undistortion_reason()) << "},\n  \"window\": {\"events_per_window\": " << (cfg.window.window_ns > 0 ? 0 : cfg.window.window_events)
+      << ", \"duration_ms\": " << json_number(static_cast<double>(cfg.window.window_ns) * 1e-6, 9)
+      << ", \"max_duration_ms\": " << json_number(static_cast<double>(cfg.window.max_window_ns) * 1e-6, 9) << ", \"min_events\": " << cfg.window.min_window_events
       << ", \"warm_start\": " << (cfg.warm_start ? "true" : "false") << "},\n  \"pyramid_levels\": " << cfg.cmax.pyramid_levels
       << ",\n  \"warm_pyramid_levels\": " << (cfg.warm_pyramid_levels > 0 ? cfg.warm_pyramid_levels : cfg.cmax.pyramid_levels)
       << ",\n  \"events\": " << events << ",\n  \"events_used\": " << st.events_used
-      << ",\n  \"events_dropped\": " << st.events_dropped << ",\n  \"duration_s\": " << num(duration_s)
+      << ",\n  \"events_dropped\": " << st.events_dropped << ",\n  \"duration_s\": " << json_number(duration_s, 9)
       << ",\n  \"windows\": " << st.windows << ",\n  \"windows_skipped\": " << st.windows_skipped
       << ",\n  \"warm_starts\": " << st.warm_starts << ",\n  \"resets\": " << st.resets
-      << ",\n  \"iterations\": " << st.iterations << ",\n  \"iterations_per_window\": " << num(st.windows > 0 ? static_cast<double>(st.iterations) / windows : 0.0)
+      << ",\n  \"iterations\": " << st.iterations << ",\n  \"iterations_per_window\": " << json_number(st.windows > 0 ? static_cast<double>(st.iterations) / windows : 0.0, 9)
       << ",\n  \"evaluations\": " << st.evaluations
-      << ",\n  \"time_per_window_ms\": {\"mean\": " << num(mean_ms) << ", \"median\": " << num(median(times))
-      << ", \"max\": " << num(max_ms) << "},\n  \"time_per_event_us\": " << num(us_per_event)
-      << ",\n  \"processing_time_s\": " << num(process_s) << ",\n  \"processing_time_per_event_us\": " << num(us_per_event_all)
-      << ",\n  \"events_per_s\": " << num(process_s > 0 ? static_cast<double>(events) / process_s : 0.0)
+      << ",\n  \"time_per_window_ms\": {\"mean\": " << json_number(mean_ms, 9) << ", \"median\": " << json_number(median(times), 9)
+      << ", \"max\": " << json_number(max_ms, 9) << "},\n  \"time_per_event_us\": " << json_number(us_per_event, 9)
+      << ",\n  \"processing_time_s\": " << json_number(process_s, 9) << ",\n  \"processing_time_per_event_us\": " << json_number(us_per_event_all, 9)
+      << ",\n  \"events_per_s\": " << json_number(process_s > 0 ? static_cast<double>(events) / process_s : 0.0, 9)
       << ",\n  \"pngs\": " << pngs << eval_json << "\n}\n";
     std::fputs(j.str().c_str(), f.get());
     f.close();
   }
 
-  out << "events        " << events << " over " << num(duration_s) << " s, " << st.windows << " windows ("
+  out << "events        " << events << " over " << json_number(duration_s, 9) << " s, " << st.windows << " windows ("
       << st.windows_skipped << " skipped with fewer than " << cfg.window.min_window_events << " events)\n";
   out << "model         " << model_text << ", objective " << objective << ", pyramid "
       << cfg.cmax.pyramid_levels << " levels (warm starts: " << (cfg.warm_pyramid_levels > 0 ? cfg.warm_pyramid_levels : cfg.cmax.pyramid_levels)
       << "), " << st.warm_starts << " warm starts, " << st.resets << " resets\n";
   out << "undistortion  " << pipeline::cmax_undistortion_name(pipe.undistortion()) << ": " << pipe.undistortion_reason() << "\n";
-  out << "speed         " << num(mean_ms) << " ms per window (median " << num(median(times)) << ", max " << num(max_ms)
-      << "), " << num(us_per_event) << " us per event, " << num(st.windows > 0 ? static_cast<double>(st.iterations) / windows : 0.0)
+  out << "speed         " << json_number(mean_ms, 9) << " ms per window (median " << json_number(median(times), 9) << ", max " << json_number(max_ms, 9)
+      << "), " << json_number(us_per_event, 9) << " us per event, " << json_number(st.windows > 0 ? static_cast<double>(st.iterations) / windows : 0.0, 9)
       << " iterations per window (one core; reading excluded)\n";
   out << eval_text.str();
   out << "wrote " << args.out << "/motion.csv" << (eval_json.empty() ? "" : ", motion_eval.csv")

@@ -20,7 +20,7 @@
 #include "evio/sensors/image_io.h"
 #include "evio/sensors/time.h"
 #include "cmax_input.h"
-#include "json_util.h"
+#include "evio/calib/json.h"
 #include "option_tables.h"
 #include "output_files.h"
 
@@ -79,8 +79,6 @@ const Table<C>& segment_config_table() {
   return table;
 }
 
-std::string num(double v) { return json_number(v, 9); }
-std::string str(const std::string& s) { return "\"" + json_escape(s) + "\""; }
 
 // The true per-event labels (the simulator's event_labels.txt: one integer per line, in the
 // order of the dataset's events), read in step with the events.
@@ -307,29 +305,29 @@ int run_segment(const SegmentArgs& args, std::ostream& out) {
       flush_until(w.input_end, &w);
       window_ms.push_back(w.time_ms);
       std::ostringstream j;
-      j << (windows ? "," : "") << "\n    {\"index\": " << w.index << ", \"t_start_s\": " << num(w.t_start_ns * 1e-9)
-        << ", \"t_end_s\": " << num(w.t_end_ns * 1e-9) << ", \"events\": " << w.events << ", \"time_ms\": " << num(w.time_ms)
+      j << (windows ? "," : "") << "\n    {\"index\": " << w.index << ", \"t_start_s\": " << json_number(w.t_start_ns * 1e-9, 9)
+        << ", \"t_end_s\": " << json_number(w.t_end_ns * 1e-9, 9) << ", \"events\": " << w.events << ", \"time_ms\": " << json_number(w.time_ms, 9)
         << ", \"alternations\": " << w.alternations << ", \"evaluations\": " << w.evaluations << ",\n     \"clusters\": [";
       for (size_t c = 0; c < w.clusters.size(); ++c) {
         const mapping::SegmentCluster& k = w.clusters[c];
         ids_used.insert(k.id);
         const std::vector<std::string> names = mapping::warp_parameter_names(k.model);
-        j << (c ? "," : "") << "\n       {\"id\": " << k.id << ", \"model\": " << str(mapping::warp_model_name(k.model))
+        j << (c ? "," : "") << "\n       {\"id\": " << k.id << ", \"model\": " << json_string(mapping::warp_model_name(k.model))
           << ", \"params\": {";
-        for (size_t i = 0; i < names.size(); ++i) j << (i ? ", " : "") << str(names[i]) << ": " << num(k.params[static_cast<Eigen::Index>(i)]);
-        j << "}, \"events\": " << num(k.events) << ", \"objective\": " << num(k.objective)
-          << ", \"objective_best_other\": " << num(k.objective_other) << ", \"gain\": " << num(k.gain)
-          << ", \"centroid_px\": [" << num(k.centroid.x()) << ", " << num(k.centroid.y()) << "], \"models_tried\": [";
+        for (size_t i = 0; i < names.size(); ++i) j << (i ? ", " : "") << json_string(names[i]) << ": " << json_number(k.params[static_cast<Eigen::Index>(i)], 9);
+        j << "}, \"events\": " << json_number(k.events, 9) << ", \"objective\": " << json_number(k.objective, 9)
+          << ", \"objective_best_other\": " << json_number(k.objective_other, 9) << ", \"gain\": " << json_number(k.gain, 9)
+          << ", \"centroid_px\": [" << json_number(k.centroid.x(), 9) << ", " << json_number(k.centroid.y(), 9) << "], \"models_tried\": [";
         for (size_t m = 0; m < k.models.size(); ++m)
-          j << (m ? ", " : "") << "{\"model\": " << str(mapping::warp_model_name(k.models[m].model))
-            << ", \"objective\": " << num(k.models[m].objective) << ", \"gain_over_simplest\": " << num(k.models[m].gain)
+          j << (m ? ", " : "") << "{\"model\": " << json_string(mapping::warp_model_name(k.models[m].model))
+            << ", \"objective\": " << json_number(k.models[m].objective, 9) << ", \"gain_over_simplest\": " << json_number(k.models[m].gain, 9)
             << ", \"chosen\": " << (k.models[m].chosen ? "true" : "false") << "}";
         j << "]}";
       }
       j << "],\n     \"count_steps\": [";
       for (size_t s = 0; s < w.count_steps.size(); ++s) {
         const mapping::CountStep& st = w.count_steps[s];
-        j << (s ? ", " : "") << "{\"clusters\": " << st.clusters << ", \"smallest_gain\": " << num(st.smallest_gain)
+        j << (s ? ", " : "") << "{\"clusters\": " << st.clusters << ", \"smallest_gain\": " << json_number(st.smallest_gain, 9)
           << ", \"removed\": " << (st.removed ? "true" : "false") << "}";
       }
       j << "]}";
@@ -372,27 +370,27 @@ int run_segment(const SegmentArgs& args, std::ostream& out) {
     const double accuracy = scored > 0 ? static_cast<double>(in_windows.correct) / static_cast<double>(scored) : NAN;
     TextOut f((fs::path(args.out) / "eval.json").string());
     std::ostringstream j;
-    j << "{\n  \"labels\": " << str(truth->path())
+    j << "{\n  \"labels\": " << json_string(truth->path())
       << ",\n  \"protocol\": \"per window, each cluster mapped to the true label most of its events carry; accuracy over "
          "events with a true object label (not noise); events labelled -1 or in no segmented window count as wrong\""
       << ",\n  \"events_scored\": " << scored << ",\n  \"events_correct\": " << in_windows.correct
-      << ",\n  \"accuracy\": " << num(accuracy) << ",\n  \"label_error\": " << num(1.0 - accuracy)
+      << ",\n  \"accuracy\": " << json_number(accuracy, 9) << ",\n  \"label_error\": " << json_number(1.0 - accuracy, 9)
       << ",\n  \"events_in_windows_scored\": " << in_windows.scored
-      << ",\n  \"accuracy_in_windows\": " << num(in_windows.scored ? in_windows.accuracy() : NAN)
+      << ",\n  \"accuracy_in_windows\": " << json_number(in_windows.scored ? in_windows.accuracy() : NAN, 9)
       << ",\n  \"per_label\": {";
     bool first = true;
     for (const auto& [l, c] : in_windows.scored_per_label) {
       const auto it = in_windows.correct_per_label.find(l);
       const int64_t ok = it == in_windows.correct_per_label.end() ? 0 : it->second;
       j << (first ? "" : ", ") << "\"" << l << "\": {\"events_in_windows\": " << c
-        << ", \"accuracy_in_windows\": " << num(static_cast<double>(ok) / static_cast<double>(c)) << "}";
+        << ", \"accuracy_in_windows\": " << json_number(static_cast<double>(ok) / static_cast<double>(c), 9) << "}";
       first = false;
     }
     j << "}\n}\n";
     std::fputs(j.str().c_str(), f.get());
     f.close();
-    out << "evio segment: labels against " << truth->path() << ": accuracy " << num(accuracy) << " over " << scored
-        << " events (" << num(in_windows.scored ? in_windows.accuracy() : NAN) << " inside segmented windows); wrote eval.json\n";
+    out << "evio segment: labels against " << truth->path() << ": accuracy " << json_number(accuracy, 9) << " over " << scored
+        << " events (" << json_number(in_windows.scored ? in_windows.accuracy() : NAN, 9) << " inside segmented windows); wrote eval.json\n";
   } else if (!gt_note.empty()) {
     out << "evio segment: event_labels.txt " << gt_note << "\n";
   }
@@ -418,38 +416,38 @@ int run_segment(const SegmentArgs& args, std::ostream& out) {
     summary << (so.clusters > 0 ? "fixed " : "auto ") << modal << " clusters in " << modal_n << " of " << st.windows << " windows;";
     for (const auto& [m, n] : model_clusters) summary << " " << m << " " << n;
     summary << " clusters";
-    j << "{\n  \"model\": {\"summary\": " << str(summary.str()) << ", \"count\": {\"selection\": "
-      << str(so.clusters > 0 ? "fixed" : "auto") << ", \"clusters\": " << so.clusters << ", \"max_clusters\": " << so.max_clusters
-      << ", \"min_cluster_gain\": " << num(so.min_cluster_gain) << ", \"modal\": " << modal << ", \"windows_per_count\": {";
+    j << "{\n  \"model\": {\"summary\": " << json_string(summary.str()) << ", \"count\": {\"selection\": "
+      << json_string(so.clusters > 0 ? "fixed" : "auto") << ", \"clusters\": " << so.clusters << ", \"max_clusters\": " << so.max_clusters
+      << ", \"min_cluster_gain\": " << json_number(so.min_cluster_gain, 9) << ", \"modal\": " << modal << ", \"windows_per_count\": {";
     bool first = true;
     for (const auto& [c, n] : count_windows) j << (first ? "" : ", ") << "\"" << c << "\": " << n, first = false;
-    j << "}, \"accepted_smallest_gain_mean\": " << num(mean(kept_gains)) << ", \"removed\": " << removed_gains.size()
-      << ", \"removed_gain_mean\": " << num(mean(removed_gains)) << "}, \"warp\": {\"candidates\": [";
-    for (size_t i = 0; i < so.models.size(); ++i) j << (i ? ", " : "") << str(mapping::warp_model_name(so.models[i]));
-    j << "], \"gain_per_parameter\": " << num(so.model_gain_per_parameter) << ", \"clusters_per_model\": {";
+    j << "}, \"accepted_smallest_gain_mean\": " << json_number(mean(kept_gains), 9) << ", \"removed\": " << removed_gains.size()
+      << ", \"removed_gain_mean\": " << json_number(mean(removed_gains), 9) << "}, \"warp\": {\"candidates\": [";
+    for (size_t i = 0; i < so.models.size(); ++i) j << (i ? ", " : "") << json_string(mapping::warp_model_name(so.models[i]));
+    j << "], \"gain_per_parameter\": " << json_number(so.model_gain_per_parameter, 9) << ", \"clusters_per_model\": {";
     first = true;
-    for (const auto& [m, n] : model_clusters) j << (first ? "" : ", ") << str(m) << ": " << n, first = false;
+    for (const auto& [m, n] : model_clusters) j << (first ? "" : ", ") << json_string(m) << ": " << n, first = false;
     j << "}}, \"per_window\": \"segments.json\"}";
     j << ",\n  \"events\": " << events << ",\n  \"events_segmented\": " << ws.events_used
       << ",\n  \"events_labelled\": " << st.events_labelled << ",\n  \"events_noise\": " << st.events_noise
       << ",\n  \"events_in_no_window\": " << unsegmented << ",\n  \"events_dropped\": " << ws.events_dropped
       << ",\n  \"windows\": " << st.windows << ",\n  \"windows_skipped\": " << ws.windows_skipped
-      << ",\n  \"labels_used\": " << ids_used.size() << ",\n  \"time_s\": " << num(process_s)
-      << ",\n  \"time_per_window_ms\": {\"mean\": " << num(st.windows ? st.time_ms / static_cast<double>(st.windows) : 0.0)
-      << ", \"median\": " << num(median_ms) << ", \"max\": " << num(st.max_window_ms) << "}"
-      << ",\n  \"time_per_event_us\": " << num(ws.events_used ? st.time_ms * 1e3 / static_cast<double>(ws.events_used) : 0.0)
+      << ",\n  \"labels_used\": " << ids_used.size() << ",\n  \"time_s\": " << json_number(process_s, 9)
+      << ",\n  \"time_per_window_ms\": {\"mean\": " << json_number(st.windows ? st.time_ms / static_cast<double>(st.windows) : 0.0, 9)
+      << ", \"median\": " << json_number(median_ms, 9) << ", \"max\": " << json_number(st.max_window_ms, 9) << "}"
+      << ",\n  \"time_per_event_us\": " << json_number(ws.events_used ? st.time_ms * 1e3 / static_cast<double>(ws.events_used) : 0.0, 9)
       << ",\n  \"alternations\": " << st.alternations << ",\n  \"evaluations\": " << st.evaluations
-      << ",\n  \"undistortion\": " << str(pipeline::cmax_undistortion_name(pipe.windows().undistortion()))
-      << ",\n  \"undistortion_reason\": " << str(pipe.windows().undistortion_reason())
+      << ",\n  \"undistortion\": " << json_string(pipeline::cmax_undistortion_name(pipe.windows().undistortion()))
+      << ",\n  \"undistortion_reason\": " << json_string(pipe.windows().undistortion_reason())
       << ",\n  \"dithered\": " << (pipe.windows().dithered() ? "true" : "false")
-      << ",\n  \"objective\": " << str(mapping::cmax_objective_name(pipe.objective()))
+      << ",\n  \"objective\": " << json_string(mapping::cmax_objective_name(pipe.objective()))
       << ",\n  \"pngs\": " << pngs << "\n}\n";
     std::fputs(j.str().c_str(), f.get());
     f.close();
   }
   out << "evio segment: " << events << " events, " << st.windows << " windows (" << ws.windows_skipped
-      << " skipped), " << ids_used.size() << " labels; " << num(median_ms) << " ms per window (median), "
-      << num(ws.events_used ? st.time_ms * 1e3 / static_cast<double>(ws.events_used) : 0.0) << " us per event\n"
+      << " skipped), " << ids_used.size() << " labels; " << json_number(median_ms, 9) << " ms per window (median), "
+      << json_number(ws.events_used ? st.time_ms * 1e3 / static_cast<double>(ws.events_used) : 0.0, 9) << " us per event\n"
       << "undistortion: " << pipeline::cmax_undistortion_name(pipe.windows().undistortion()) << " ("
       << pipe.windows().undistortion_reason() << ")\n"
       << "wrote " << args.out << "/labels.txt, segments.json, stats.json, segment_config.yaml"

@@ -20,7 +20,7 @@
 
 #include "evio/calib/error.h"
 #include "evio/calib/log.h"
-#include "json_util.h"
+#include "evio/calib/json.h"
 
 namespace evio::apps {
 namespace fs = std::filesystem;

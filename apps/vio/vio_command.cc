@@ -29,7 +29,7 @@
 #include "evio/sensors/ecd.h"
 #include "evio/sensors/image_io.h"
 #include "evio/sensors/time.h"
-#include "json_util.h"
+#include "evio/calib/json.h"
 #include "evio/sensors/dataset_calibration.h"
 #include "progress.h"
 #include "evio/simulator/scene_config.h"
@@ -40,8 +40,6 @@ namespace evio::apps {
 namespace {
 namespace fs = std::filesystem;
 using namespace yaml_config;  // NOLINT
-
-std::string num(double v) { return json_number(v, 10); }  // null when not finite
 
 // A JSON list body of spans: {"t_begin": s, "t_end": s, "reason": "..."}, comma-separated.
 void write_segments(std::ostream& j, const std::vector<pipeline::VioSegment>& segments) {
@@ -379,7 +377,7 @@ int run_vio_estimation(const VioArgs& args, std::ostream& out, evaluation::GyroI
     events += static_cast<int64_t>(span.size());
     const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
     const double seq = static_cast<double>(t_last - t_first) * 1e-9;
-    progress.update(reader->progress(), events, "real-time factor " + num(seq > 0 ? elapsed / seq : 0.0));
+    progress.update(reader->progress(), events, "real-time factor " + json_number(seq > 0 ? elapsed / seq : 0.0, 10));
   }
   add_imu_until(std::numeric_limits<int64_t>::max());
   const pipeline::VioResult r = vio.finish();
@@ -429,7 +427,7 @@ int run_vio_estimation(const VioArgs& args, std::ostream& out, evaluation::GyroI
     double rot_s = 0, all_s = 0;
     mj << "{\"motion\": {\"selection\": " << (cfg.window.rotation_only_model ? "\"auto\"" : "\"fixed\"")
        << ", \"rule\": \"GRIC per keyframe with hysteresis and the IMU and parallax conditions (backend/sliding_window_estimator.h)\""
-       << ", \"gric_margin\": " << num(cfg.window.rotation_only_gric_margin) << ", \"min_keyframes\": "
+       << ", \"gric_margin\": " << json_number(cfg.window.rotation_only_gric_margin, 10) << ", \"min_keyframes\": "
        << cfg.window.rotation_only_min_keyframes << ", \"keyframes\": " << st.keyframes
        << ", \"rotation_only_keyframes\": " << st.rotation_only_keyframes << ", \"segments\": [";
     for (size_t i = 0; i < r.motion_models.size(); ++i) {
@@ -448,23 +446,23 @@ int run_vio_estimation(const VioArgs& args, std::ostream& out, evaluation::GyroI
       if (m.what == "rotation_only") rot_s += d;
       mj << (i ? ", " : "") << "{\"model\": \"" << m.what << "\", \"t_start_s\": " << format_seconds(m.t_begin_ns)
          << ", \"t_end_s\": " << format_seconds(m.t_end_ns) << ", \"keyframes\": " << keyframes
-         << ", \"gric_margin_mean\": " << num(tested ? margin / tested : NAN) << "}";
+         << ", \"gric_margin_mean\": " << json_number(tested ? margin / tested : NAN, 10) << "}";
     }
     const double share = all_s > 0 ? rot_s / all_s : 0.0;
-    mj << "], \"rotation_only_s\": " << num(rot_s) << ", \"rotation_only_share\": " << num(share) << "}";
-    summary << "rotation_only " << num(100.0 * share) << "% of the time (" << st.rotation_only_keyframes << " of " << st.keyframes
+    mj << "], \"rotation_only_s\": " << json_number(rot_s, 10) << ", \"rotation_only_share\": " << json_number(share, 10) << "}";
+    summary << "rotation_only " << json_number(100.0 * share, 10) << "% of the time (" << st.rotation_only_keyframes << " of " << st.keyframes
             << " keyframes)";
     if (use_frames) {
       const frontend::EventFrameOptions& fo = cfg.frames;
       const int64_t frames = vs.event_frames.frames_emitted;
       const bool adaptive = fo.min_window_ns > 0;
       mj << ", \"frames\": {\"events_per_frame\": " << fo.events_per_frame << ", \"adaptive\": " << (adaptive ? "true" : "false")
-         << ", \"min_window_ms\": " << num(fo.min_window_ns * 1e-6) << ", \"max_window_ms\": " << num(fo.max_window_ns * 1e-6)
+         << ", \"min_window_ms\": " << json_number(fo.min_window_ns * 1e-6, 10) << ", \"max_window_ms\": " << json_number(fo.max_window_ns * 1e-6, 10)
          << ", \"frames\": " << frames << ", \"mean_events_per_frame\": "
-         << num(frames > 0 ? static_cast<double>(vs.events) / static_cast<double>(frames) : NAN)
-         << ", \"mean_frame_interval_ms\": " << num(frames > 0 ? 1e3 * duration_s / static_cast<double>(frames) : NAN) << "}";
+         << json_number(frames > 0 ? static_cast<double>(vs.events) / static_cast<double>(frames) : NAN, 10)
+         << ", \"mean_frame_interval_ms\": " << json_number(frames > 0 ? 1e3 * duration_s / static_cast<double>(frames) : NAN, 10) << "}";
       summary << "; frames " << (adaptive ? "adaptive" : "fixed") << ", "
-              << num(frames > 0 ? static_cast<double>(vs.events) / static_cast<double>(frames) : NAN) << " events per frame";
+              << json_number(frames > 0 ? static_cast<double>(vs.events) / static_cast<double>(frames) : NAN, 10) << " events per frame";
     }
     mj << ", \"summary\": \"" << json_escape(summary.str()) << "\"}";
   }
@@ -474,9 +472,9 @@ int run_vio_estimation(const VioArgs& args, std::ostream& out, evaluation::GyroI
     << "\",\n  \"frontend\": \"" << pipeline::to_string(cfg.frontend)
     << "\",\n  \"events\": " << vs.events << ",\n  \"corners\": " << vs.corner_events << ",\n  \"frames\": " << st.frames
     << ",\n  \"keyframes\": " << st.keyframes << ",\n  \"landmarks\": " << pts.size()
-    << ",\n  \"processing_time_s\": " << num(processing_s) << ",\n  \"sequence_duration_s\": " << num(duration_s)
-    << ",\n  \"real_time_factor\": " << num(duration_s > 0 ? processing_s / duration_s : 0.0)
-    << ",\n  \"solve_ms_median\": " << num(1e3 * med) << ",\n  \"initialisation\": {\"method\": \"" << init_method
+    << ",\n  \"processing_time_s\": " << json_number(processing_s, 10) << ",\n  \"sequence_duration_s\": " << json_number(duration_s, 10)
+    << ",\n  \"real_time_factor\": " << json_number(duration_s > 0 ? processing_s / duration_s : 0.0, 10)
+    << ",\n  \"solve_ms_median\": " << json_number(1e3 * med, 10) << ",\n  \"initialisation\": {\"method\": \"" << init_method
     << "\", \"t\": " << format_seconds(r.init_t_ns) << "},\n  \"imu_noise_from\": \"" << json_escape(noise_source)
     << "\",\n  \"motion_model_segments\": [";
   for (size_t i = 0; i < r.motion_models.size(); ++i) {
@@ -490,9 +488,9 @@ int run_vio_estimation(const VioArgs& args, std::ostream& out, evaluation::GyroI
   for (size_t i = 0; i < st.motion_model_tests.size(); ++i) {
     const auto& m = st.motion_model_tests[i];
     j << (i ? ",\n    " : "\n    ") << "{\"t\": " << format_seconds(m.t_ns) << ", \"tracks\": " << m.tracks
-      << ", \"baseline_s\": " << num(m.baseline_s)
-      << ", \"gric_static\": " << num(m.gric_static) << ", \"gric_rotation\": " << num(m.gric_rotation)
-      << ", \"gric_general\": " << num(m.gric_general) << ", \"imu_chi2\": " << num(m.imu_chi2) << ", \"imu_dof\": " << m.imu_dof << ", \"landmarks\": " << m.landmarks << ", \"best\": \""
+      << ", \"baseline_s\": " << json_number(m.baseline_s, 10)
+      << ", \"gric_static\": " << json_number(m.gric_static, 10) << ", \"gric_rotation\": " << json_number(m.gric_rotation, 10)
+      << ", \"gric_general\": " << json_number(m.gric_general, 10) << ", \"imu_chi2\": " << json_number(m.imu_chi2, 10) << ", \"imu_dof\": " << m.imu_dof << ", \"landmarks\": " << m.landmarks << ", \"best\": \""
       << backend::two_view_model_name(m.best) << "\", \"imu_veto\": " << (m.imu_veto ? "true" : "false")
       << ", \"centre\": \"" << (m.centre_imu ? "imu" : "camera") << "\", \"rotation_only\": " << (m.rotation_only ? "true" : "false") << "}";
   }
@@ -501,9 +499,9 @@ int run_vio_estimation(const VioArgs& args, std::ostream& out, evaluation::GyroI
   j << "],\n  \"health\": {\"keyframes\": [";
   for (size_t i = 0; i < st.health.size(); ++i) {
     const auto& h = st.health[i];
-    j << (i ? ",\n    " : "\n    ") << "{\"t\": " << format_seconds(h.t_ns) << ", \"visual_chi2_per_dof\": " << num(h.visual_chi2_per_dof)
-      << ", \"imu_chi2_per_dof\": " << num(h.imu_chi2_per_dof) << ", \"observations\": " << h.observations
-      << ", \"landmarks\": " << h.landmarks << ", \"gyro_bias_sigmas\": " << num(h.gyro_bias_sigmas) << "}";
+    j << (i ? ",\n    " : "\n    ") << "{\"t\": " << format_seconds(h.t_ns) << ", \"visual_chi2_per_dof\": " << json_number(h.visual_chi2_per_dof, 10)
+      << ", \"imu_chi2_per_dof\": " << json_number(h.imu_chi2_per_dof, 10) << ", \"observations\": " << h.observations
+      << ", \"landmarks\": " << h.landmarks << ", \"gyro_bias_sigmas\": " << json_number(h.gyro_bias_sigmas, 10) << "}";
   }
   j << "], \"unreliable_segments\": [";
   write_segments(j, r.unreliable);
@@ -512,7 +510,7 @@ int run_vio_estimation(const VioArgs& args, std::ostream& out, evaluation::GyroI
   write_segments(j, r.imu_only);
   double imu_only_s = 0;
   for (const pipeline::VioSegment& l : r.imu_only) imu_only_s += 1e-9 * static_cast<double>(l.t_end_ns - l.t_begin_ns);
-  j << "],\n  \"imu_only_s\": " << num(imu_only_s);
+  j << "],\n  \"imu_only_s\": " << json_number(imu_only_s, 10);
   j << ",\n  \"frontend_stats\": {";
   if (use_frames) {
     const auto& ts = vs.tracker;
@@ -534,16 +532,16 @@ int run_vio_estimation(const VioArgs& args, std::ostream& out, evaluation::GyroI
   }
   j << "}";
   if (oracle) {
-    j << ",\n  \"oracle\": {\"scene\": \"" << json_escape(args.oracle_scene) << "\", \"white_noise_px\": " << num(args.oracle_noise_px)
-      << ", \"drift_px_per_frame\": " << num(args.oracle_drift_px) << ", \"replaced\": " << oracle->stats().replaced
+    j << ",\n  \"oracle\": {\"scene\": \"" << json_escape(args.oracle_scene) << "\", \"white_noise_px\": " << json_number(args.oracle_noise_px, 10)
+      << ", \"drift_px_per_frame\": " << json_number(args.oracle_drift_px, 10) << ", \"replaced\": " << oracle->stats().replaced
       << ", \"dropped\": " << oracle->stats().dropped << ", \"keep_error\": \"" << args.oracle_error
-      << "\", \"common_mode_rms_px\": " << num(oracle->stats().common_mode_rms_px)
-      << ", \"max_error_px\": " << num(args.oracle_max_error_px) << ", \"dropped_gross\": " << oracle->stats().dropped_gross << "}";
+      << "\", \"common_mode_rms_px\": " << json_number(oracle->stats().common_mode_rms_px, 10)
+      << ", \"max_error_px\": " << json_number(args.oracle_max_error_px, 10) << ", \"dropped_gross\": " << oracle->stats().dropped_gross << "}";
   }
   j << ",\n  \"outliers_removed\": " << st.outliers_removed << ",\n  \"landmarks_marginalised\": " << st.landmarks_marginalised
     << ",\n  \"observations_dropped\": " << st.observations_dropped
     << ",\n  \"tracked_landmarks_marginalised\": " << st.tracked_landmarks_marginalised << ",\n  \"rotation_only_keyframes\": " << st.rotation_only_keyframes;
-  if (cfg.window.estimate_time_offset) j << ",\n  \"time_offset_correction_s\": " << num(st.time_offset_s);
+  if (cfg.window.estimate_time_offset) j << ",\n  \"time_offset_correction_s\": " << json_number(st.time_offset_s, 10);
   j << "\n}\n";
   j.close();
   if (!j) throw InputError((fs::path(args.out) / "stats.json").string(), 0, "write failed (disk full?)", "a writable output folder");

@@ -23,7 +23,7 @@
 #include <thread>
 
 #include "evio/calib/error.h"
-#include "json_util.h"
+#include "evio/calib/json.h"
 #include "sweep_results.h"
 
 namespace evio::apps {

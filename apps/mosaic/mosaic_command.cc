@@ -19,13 +19,11 @@
 #include "evio/calib/log.h"
 #include "evio/sensors/time.h"
 #include "evio/sensors/trajectory.h"
-#include "json_util.h"
+#include "evio/calib/json.h"
 #include "progress.h"
 
 namespace evio::apps {
 namespace {
-std::string num(double v) { return json_number(v, 9); }
-std::string json_string(const std::string& s) { return "\"" + json_escape(s) + "\""; }
 }  // namespace
 }  // namespace evio::apps
 #include "evio/simulator/scene_config.h"
@@ -262,7 +260,7 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
     mosaic.add_events(span);
     const double seq = static_cast<double>(t_last - t0) * 1e-9;
     const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
-    progress.update(reader->progress(), mosaic.events_processed(), "real-time factor " + num(seq > 0 ? wall / seq : 0.0));
+    progress.update(reader->progress(), mosaic.events_processed(), "real-time factor " + json_number(seq > 0 ? wall / seq : 0.0, 9));
   }
   if (events == 0) throw InputError(args.dataset, 0, "no events", "a recording with events");
   const pipeline::MosaicResult result = mosaic.finish();
@@ -301,39 +299,39 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
     const double mean_particles = st.weighted_batches > 0 ? static_cast<double>(st.particle_batches) / static_cast<double>(st.weighted_batches) : 0.0;
     std::ofstream f((fs::path(args.out) / "stats.json").string());
     f << "{\n  \"dataset\": " << json_string(args.dataset) << ",\n  \"model\": {\"summary\": "
-      << json_string("rotation, " + measurement + " measurement (" + why + "), " + motion + " prediction, " + num(mean_particles) +
+      << json_string("rotation, " + measurement + " measurement (" + why + "), " + motion + " prediction, " + json_number(mean_particles, 9) +
                      " particles on average")
       << ", \"measurement\": {\"option\": \"" << frontend::rotation_measurement_model_name(to.measurement_model)
       << "\", \"resolved\": \"" << measurement << "\", \"reason\": " << json_string(why) << "}, \"motion\": {\"option\": \""
       << frontend::rotation_motion_model_name(to.motion_model) << "\", \"resolved\": \"" << motion
       << "\", \"gyro_predictions\": " << st.gyro_predictions << "}, \"particles\": {\"configured\": " << to.num_particles
-      << ", \"mean\": " << num(mean_particles) << "}}"
+      << ", \"mean\": " << json_number(mean_particles, 9) << "}}"
       << ",\n  \"events\": " << events
-      << ",\n  \"processing_time_s\": " << num(processing_s) << ",\n  \"sequence_duration_s\": " << num(duration_s)
-      << ",\n  \"real_time_factor\": " << num(duration_s > 0 ? processing_s / duration_s : 0)
-      << ",\n  \"events_per_s\": " << num(processing_s > 0 ? events / processing_s : 0)
-      << ",\n  \"cpu_time_s\": " << num(cpu_s) << ",\n  \"events_per_cpu_s\": " << num(cpu_s > 0 ? events / cpu_s : 0)
+      << ",\n  \"processing_time_s\": " << json_number(processing_s, 9) << ",\n  \"sequence_duration_s\": " << json_number(duration_s, 9)
+      << ",\n  \"real_time_factor\": " << json_number(duration_s > 0 ? processing_s / duration_s : 0, 9)
+      << ",\n  \"events_per_s\": " << json_number(processing_s > 0 ? events / processing_s : 0, 9)
+      << ",\n  \"cpu_time_s\": " << json_number(cpu_s, 9) << ",\n  \"events_per_cpu_s\": " << json_number(cpu_s > 0 ? events / cpu_s : 0, 9)
       << ",\n  \"threads\": " << cfg.threads
       << ",\n  \"use_imu\": " << (args.use_imu ? "true" : "false") << ",\n  \"particles\": " << cfg.tracker.num_particles
       << ",\n  \"batch_size\": " << cfg.tracker.batch_size << ",\n  \"event_stride\": " << cfg.tracker.event_stride
       << ",\n  \"measurement_model\": \"" << frontend::rotation_measurement_model_name(cfg.tracker.measurement_model) << "\"" << ",\n  \"mosaic_size\": [" << cfg.mosaic.width << ", "
       << cfg.mosaic.height << "],\n  \"bootstrap\": {\"method\": \"" << (args.use_imu ? "gyro" : "contrast_maximisation")
-      << "\", \"duration_s\": " << num((bs.t_end_ns - t0) * 1e-9) << ", \"cmax_windows\": " << bs.cmax_windows << ", \"short_windows\": " << bs.short_windows
-      << ", \"tracker_contrast\": " << num(bs.tracker_contrast) << ", \"contrast_samples\": " << bs.contrast_samples << "}"
+      << "\", \"duration_s\": " << json_number((bs.t_end_ns - t0) * 1e-9, 9) << ", \"cmax_windows\": " << bs.cmax_windows << ", \"short_windows\": " << bs.short_windows
+      << ", \"tracker_contrast\": " << json_number(bs.tracker_contrast, 9) << ", \"contrast_samples\": " << bs.contrast_samples << "}"
       << ",\n  \"tracker\": {\"events_used\": " << st.events_used << ", \"skipped_no_previous\": " << st.skipped_no_previous
       << ", \"skipped_unknown_map\": " << st.skipped_unknown_map << ", \"skipped_stride\": " << st.skipped_stride << ", \"batches\": " << st.batches
       << ", \"resamples\": " << st.resamples << ", \"linearized_batches\": " << st.linearized_batches << ", \"gyro_predictions\": " << st.gyro_predictions
-      << ", \"mean_particles\": " << num(st.weighted_batches > 0 ? static_cast<double>(st.particle_batches) / static_cast<double>(st.weighted_batches) : 0.0)
+      << ", \"mean_particles\": " << json_number(st.weighted_batches > 0 ? static_cast<double>(st.particle_batches) / static_cast<double>(st.weighted_batches) : 0.0, 9)
       << ", \"particle_evaluations\": " << st.particle_evaluations << "}"
       << ",\n  \"mapper\": {\"events_mapped\": " << ms.events_mapped << ", \"reconstructions\": " << ms.reconstructions
-      << ", \"seen_pixels\": " << seen << ", \"seen_fraction\": " << num(ms.seen_fraction)
+      << ", \"seen_pixels\": " << seen << ", \"seen_fraction\": " << json_number(ms.seen_fraction, 9)
       << "},\n  \"poisson\": {\"weighting\": \"" << mapping::poisson_weighting_name(rec.weighting)
       << "\", \"pcg_iterations\": " << rec.weighted_stats.iterations
-      << ", \"initial_relative_residual\": " << num(rec.weighted_stats.initial_relative_residual)
-      << ", \"relative_residual\": " << num(rec.weighted_stats.relative_residual)
+      << ", \"initial_relative_residual\": " << json_number(rec.weighted_stats.initial_relative_residual, 9)
+      << ", \"relative_residual\": " << json_number(rec.weighted_stats.relative_residual, 9)
       << ", \"converged\": " << (rec.weighted_stats.converged ? "true" : "false") << "}"
       << ",\n  \"snapshots\": " << snapshots << ",\n  \"quality\": {\"windows\": " << ms.quality_windows << ", \"windows_undecided\": " << ms.quality_windows_undecided
-      << ", \"probe_contrast_min\": " << num(ms.quality_min) << ", \"probe_contrast_mean\": " << num(ms.quality_mean)
+      << ", \"probe_contrast_min\": " << json_number(ms.quality_min, 9) << ", \"probe_contrast_mean\": " << json_number(ms.quality_mean, 9)
       << ", \"events_unmapped_lost\": " << ms.events_unmapped_lost << "},\n  \"tracking_lost_segments\": [";
     for (size_t k = 0; k < result.tracking_lost.size(); ++k) {
       const pipeline::MosaicLostSegment& g = result.tracking_lost[k];
@@ -351,14 +349,14 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
         << g.global_searches << " global searches, " << g.global_jumps << " jumps"
         << (g.map_rolled_back_to_ns == INT64_MIN ? std::string() : ", map rolled back to " + format_seconds(g.map_rolled_back_to_ns) + " s")
         << ")\n";
-  out << "events        " << events << " over " << num(duration_s) << " s, bootstrap "
-      << (args.use_imu ? "gyro" : "contrast maximisation") << " " << num((bs.t_end_ns - t0) * 1e-9) << " s\n";
-  out << "speed         " << num(processing_s) << " s processing, real-time factor "
-      << num(duration_s > 0 ? processing_s / duration_s : 0) << " (one core), "
-      << num(processing_s > 0 ? events / processing_s / 1e6 : 0) << " M events/s; CPU time " << num(cpu_s) << " s, "
-      << num(cpu_s > 0 ? events / cpu_s / 1e6 : 0) << " M events per CPU second\n";
+  out << "events        " << events << " over " << json_number(duration_s, 9) << " s, bootstrap "
+      << (args.use_imu ? "gyro" : "contrast maximisation") << " " << json_number((bs.t_end_ns - t0) * 1e-9, 9) << " s\n";
+  out << "speed         " << json_number(processing_s, 9) << " s processing, real-time factor "
+      << json_number(duration_s > 0 ? processing_s / duration_s : 0, 9) << " (one core), "
+      << json_number(processing_s > 0 ? events / processing_s / 1e6 : 0, 9) << " M events/s; CPU time " << json_number(cpu_s, 9) << " s, "
+      << json_number(cpu_s > 0 ? events / cpu_s / 1e6 : 0, 9) << " M events per CPU second\n";
   out << "mosaic        " << cfg.mosaic.width << "x" << cfg.mosaic.height << ", "
-      << num(100.0 * static_cast<double>(seen) / static_cast<double>(rec.seen.size())) << "% seen\n";
+      << json_number(100.0 * static_cast<double>(seen) / static_cast<double>(rec.seen.size()), 9) << "% seen\n";
 
   if (!args.gt.empty()) {
     const Trajectory gt = read_trajectory(args.gt);
@@ -401,33 +399,33 @@ int run_mosaic(const MosaicArgs& args, std::ostream& out) {
         const mapping::ImageF ref = simulator::panorama_log_reference(*sc.panorama, R_w_m, cfg.mosaic.width, cfg.mosaic.height);
         const mapping::ImageQuality q = mapping::compare_images(rec.log_intensity, ref, &rec.seen);
         auto quality = [&](const mapping::ImageQuality& x) {
-          return "{\"psnr_db\": " + num(x.psnr_db) + ", \"ssim\": " + num(x.ssim) + ", \"rmse_log\": " + num(x.rmse) +
-                 ", \"contrast_gain\": " + num(x.scale) + ", \"pixels\": " + std::to_string(x.pixels) +
+          return "{\"psnr_db\": " + json_number(x.psnr_db, 9) + ", \"ssim\": " + json_number(x.ssim, 9) + ", \"rmse_log\": " + json_number(x.rmse, 9) +
+                 ", \"contrast_gain\": " + json_number(x.scale, 9) + ", \"pixels\": " + std::to_string(x.pixels) +
                  ", \"fit\": \"affine in log intensity over the seen pixels\"}";
         };
         quality_json = ",\n  \"mosaic_quality\": " + quality(q);
-        out << "mosaic vs true panorama: PSNR " << num(q.psnr_db) << " dB, SSIM " << num(q.ssim) << " over "
+        out << "mosaic vs true panorama: PSNR " << json_number(q.psnr_db, 9) << " dB, SSIM " << json_number(q.ssim, 9) << " over "
             << q.pixels << " seen pixels (affine log-intensity fit, " << mapping::poisson_weighting_name(rec.weighting)
             << " Poisson weighting)\n";
         if (rec.weighting == mapping::PoissonWeighting::kInformation) {
           // The unweighted solve that seeded the weighted one: before / after on the same mosaic.
           const mapping::ImageQuality u = mapping::compare_images(rec.unweighted_log_intensity, ref, &rec.seen);
           quality_json += ",\n  \"mosaic_quality_unweighted\": " + quality(u);
-          out << "  unweighted Poisson: PSNR " << num(u.psnr_db) << " dB, SSIM " << num(u.ssim) << "\n";
+          out << "  unweighted Poisson: PSNR " << json_number(u.psnr_db, 9) << " dB, SSIM " << json_number(u.ssim, 9) << "\n";
         }
       }
     }
     std::ofstream f((fs::path(args.out) / "eval.json").string());
     f << "{\n  \"groundtruth\": " << json_string(args.gt) << ",\n  \"estimate\": "
       << json_string((fs::path(args.out) / "rotation.tum").string()) << ",\n  \"alignment\": \"initial orientation\""
-      << ",\n  \"matched_poses\": " << err.size() << ",\n  \"rot_rms_deg\": " << num(rms) << ",\n  \"rot_max_deg\": " << num(mx)
+      << ",\n  \"matched_poses\": " << err.size() << ",\n  \"rot_rms_deg\": " << json_number(rms, 9) << ",\n  \"rot_max_deg\": " << json_number(mx, 9)
       << ",\n  \"bootstrap\": {\"method\": \"" << (args.use_imu ? "gyro" : "contrast_maximisation") << "\", \"poses\": " << boot_poses
-      << ", \"rot_rms_deg\": " << num(boot_rms) << ", \"rot_max_deg\": " << num(boot_max) << ", \"rot_end_deg\": " << num(boot_end) << "}"
+      << ", \"rot_rms_deg\": " << json_number(boot_rms, 9) << ", \"rot_max_deg\": " << json_number(boot_max, 9) << ", \"rot_end_deg\": " << json_number(boot_end, 9) << "}"
       << quality_json << "\n}\n";
-    out << "evaluation    rotation error rms " << num(rms) << " deg, max " << num(mx) << " deg over " << err.size()
+    out << "evaluation    rotation error rms " << json_number(rms, 9) << " deg, max " << json_number(mx, 9) << " deg over " << err.size()
         << " poses (initial orientation aligned)\n";
-    out << "bootstrap     rotation error rms " << num(boot_rms) << " deg, max " << num(boot_max) << " deg, at its end "
-        << num(boot_end) << " deg over " << boot_poses << " poses up to " << num((bs.t_end_ns - t0) * 1e-9) << " s\n";
+    out << "bootstrap     rotation error rms " << json_number(boot_rms, 9) << " deg, max " << json_number(boot_max, 9) << " deg, at its end "
+        << json_number(boot_end, 9) << " deg over " << boot_poses << " poses up to " << json_number((bs.t_end_ns - t0) * 1e-9, 9) << " s\n";
   }
   out << "wrote " << args.out << "/rotation.tum, panorama.png, panorama_seen.png, panorama_log.tiff, stats.json, mosaic_config.yaml"
       << (args.gt.empty() ? "" : ", eval.json") << "\n";

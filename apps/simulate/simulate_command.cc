@@ -4,7 +4,7 @@
 // Wall-clock figures go to simulation.json only, so every other file is byte-identical for the
 // same config and seed.
 #include "simulate_command.h"
-#include "json_util.h"
+#include "evio/calib/json.h"
 #include "progress.h"
 
 #include <algorithm>
@@ -67,7 +67,6 @@ class OutFile {
   bool ok_ = true;
 };
 
-std::string num(double v) { return json_number(v, 9); }
 
 void write_text(const std::string& path, const std::string& text) {
   OutFile f(path);
@@ -328,32 +327,32 @@ int run_simulate(const SimulateArgs& args, std::ostream& out) {
   if (c.fit_report) {
     const simulator::SplineFitReport& r = *c.fit_report;
     j << ", \"fit\": {\"samples\": " << r.samples << ", \"control_points\": " << r.control_points
-      << ", \"iterations\": " << r.iterations << ", \"position_rms_m\": " << num(r.position_rms_m)
-      << ", \"position_max_m\": " << num(r.position_max_m) << ", \"rotation_rms_deg\": " << num(r.rotation_rms_deg)
-      << ", \"rotation_max_deg\": " << num(r.rotation_max_deg) << "}";
+      << ", \"iterations\": " << r.iterations << ", \"position_rms_m\": " << json_number(r.position_rms_m, 9)
+      << ", \"position_max_m\": " << json_number(r.position_max_m, 9) << ", \"rotation_rms_deg\": " << json_number(r.rotation_rms_deg, 9)
+      << ", \"rotation_max_deg\": " << json_number(r.rotation_max_deg, 9) << "}";
   }
   j << "},\n";
   j << "  \"span_s\": [" << format_seconds(c.simulator.t_begin_ns) << ", " << format_seconds(c.simulator.t_end_ns)
     << "],\n";
-  j << "  \"duration_s\": " << num(duration_s) << ",\n";
+  j << "  \"duration_s\": " << json_number(duration_s, 9) << ",\n";
   j << "  \"events\": {\"count\": " << events << ", \"on\": " << sink.on() << ", \"off\": " << sink.off()
-    << ", \"rate_hz\": " << num(duration_s > 0 ? events / duration_s : 0.0) << "},\n";
-  j << "  \"event_rate_timeline\": {\"bin_s\": " << num(ns_to_seconds(bin_ns)) << ", \"rate_hz\": [";
-  for (size_t i = 0; i < sink.bins().size(); ++i) j << (i ? ", " : "") << num(sink.bins()[i] / ns_to_seconds(bin_ns));
+    << ", \"rate_hz\": " << json_number(duration_s > 0 ? events / duration_s : 0.0, 9) << "},\n";
+  j << "  \"event_rate_timeline\": {\"bin_s\": " << json_number(ns_to_seconds(bin_ns), 9) << ", \"rate_hz\": [";
+  for (size_t i = 0; i < sink.bins().size(); ++i) j << (i ? ", " : "") << json_number(sink.bins()[i] / ns_to_seconds(bin_ns), 9);
   j << "]},\n";
   j << "  \"steps\": " << stats.steps << ",\n";
-  j << "  \"step_s\": {\"min\": " << num(ns_to_seconds(stats.min_step_ns)) << ", \"max\": "
-    << num(ns_to_seconds(stats.max_step_ns)) << ", \"mean\": "
-    << num(stats.steps > 0 ? duration_s / static_cast<double>(stats.steps) : 0.0) << "},\n";
-  j << "  \"max_flow_pxps\": " << num(stats.max_flow_pxps) << ",\n";
+  j << "  \"step_s\": {\"min\": " << json_number(ns_to_seconds(stats.min_step_ns), 9) << ", \"max\": "
+    << json_number(ns_to_seconds(stats.max_step_ns), 9) << ", \"mean\": "
+    << json_number(stats.steps > 0 ? duration_s / static_cast<double>(stats.steps) : 0.0, 9) << "},\n";
+  j << "  \"max_flow_pxps\": " << json_number(stats.max_flow_pxps, 9) << ",\n";
   j << "  \"frames\": " << sink.frames() << ",\n";
   j << "  \"imu_samples\": " << imu_samples << ",\n";
   j << "  \"poses\": " << poses << ",\n";
   j << "  \"ground_truth_maps\": " << sink.maps() << ",\n";
-  j << "  \"wall_s\": {\"simulation\": " << num(stats.wall_s) << ", \"render\": " << num(stats.render_s)
-    << ", \"events\": " << num(stats.events_s) << ", \"total\": " << num(total_wall_s) << "},\n";
-  j << "  \"realtime_factor\": " << num(stats.wall_s > 0 ? duration_s / stats.wall_s : 0.0) << ",\n";
-  j << "  \"events_per_wall_s\": " << num(stats.wall_s > 0 ? events / stats.wall_s : 0.0) << "\n";
+  j << "  \"wall_s\": {\"simulation\": " << json_number(stats.wall_s, 9) << ", \"render\": " << json_number(stats.render_s, 9)
+    << ", \"events\": " << json_number(stats.events_s, 9) << ", \"total\": " << json_number(total_wall_s, 9) << "},\n";
+  j << "  \"realtime_factor\": " << json_number(stats.wall_s > 0 ? duration_s / stats.wall_s : 0.0, 9) << ",\n";
+  j << "  \"events_per_wall_s\": " << json_number(stats.wall_s > 0 ? events / stats.wall_s : 0.0, 9) << "\n";
   j << "}\n";
   write_text((dir / "simulation.json").string(), j.str());
 

@@ -19,7 +19,7 @@
 #include "evio/simulator/scene_config.h"
 #include "evio/simulator/simulator.h"
 #include "cmax_input.h"
-#include "json_util.h"
+#include "evio/calib/json.h"
 #include "option_tables.h"
 #include "output_files.h"
 #include "progress.h"
@@ -117,7 +117,6 @@ const Table<C>& reconstruct_config_table() {
   return table;
 }
 
-std::string num(double v) { return json_number(v, 9); }
 
 // The frame as 8-bit grey (the filters' input): mono8 as it is, colour converted, 16-bit scaled.
 cv::Mat grey8(const cv::Mat& m, const std::string& where) {
@@ -417,13 +416,13 @@ int run_reconstruct(const ReconstructArgs& args, std::ostream& out) {
     j << ",\n  \"method\": \"" << method << "\",\n  \"use_frames\": "
       << (cfg.use_frames ? "true" : "false") << ",\n  \"events\": " << events << ",\n  \"events_outside_sensor\": "
       << st.events_outside << ",\n  \"frames_fused\": " << st.frames << ",\n  \"images\": " << images
-      << ",\n  \"t_first_s\": " << num(t_first * 1e-9) << ",\n  \"t_last_s\": " << num(t_last * 1e-9)
-      << ",\n  \"filter_time_s\": " << num(filter_s) << ",\n  \"time_per_event_ns\": " << num(ns_per_event)
-      << ",\n  \"events_per_s\": " << num(filter_s > 0 ? static_cast<double>(events) / filter_s : 0.0)
-      << ",\n  \"readout_time_s\": " << num(readout_s) << ",\n  \"wall_time_s\": " << num(wall_s) << ",\n  \"rebases\": " << st.rebases;
+      << ",\n  \"t_first_s\": " << json_number(t_first * 1e-9, 9) << ",\n  \"t_last_s\": " << json_number(t_last * 1e-9, 9)
+      << ",\n  \"filter_time_s\": " << json_number(filter_s, 9) << ",\n  \"time_per_event_ns\": " << json_number(ns_per_event, 9)
+      << ",\n  \"events_per_s\": " << json_number(filter_s > 0 ? static_cast<double>(events) / filter_s : 0.0, 9)
+      << ",\n  \"readout_time_s\": " << json_number(readout_s, 9) << ",\n  \"wall_time_s\": " << json_number(wall_s, 9) << ",\n  \"rebases\": " << st.rebases;
     if (harris)
-      j << ",\n  \"corner_events\": " << harris->stats().corners << ",\n  \"harris_time_s\": " << num(harris_s)
-        << ",\n  \"harris_time_per_event_ns\": " << num(events ? harris_s * 1e9 / static_cast<double>(events) : 0.0);
+      j << ",\n  \"corner_events\": " << harris->stats().corners << ",\n  \"harris_time_s\": " << json_number(harris_s, 9)
+        << ",\n  \"harris_time_per_event_ns\": " << json_number(events ? harris_s * 1e9 / static_cast<double>(events) : 0.0, 9);
     j << ",\n  \"video\": \""
       << json_escape(video_status) << "\"\n}\n";
     std::fputs(j.str().c_str(), f.get());
@@ -443,26 +442,26 @@ int run_reconstruct(const ReconstructArgs& args, std::ostream& out) {
     j << "{\n  \"scene\": \"" << json_escape(gt_scene) << "\",\n  \"reference\": \"log(I + log_eps) of the clean view "
       << "rendered at each image's time; PSNR and SSIM after a global affine fit (mapping::compare_images)\""
       << ",\n  \"images_scored\": " << scored.size() << ",\n  \"images_unscored\": " << unscored
-      << ",\n  \"psnr_db\": " << num(psnr) << ",\n  \"ssim\": " << num(ssim) << ",\n  \"ssim_error\": " << num(1.0 - ssim)
-      << ",\n  \"psnr_db_min\": " << num(psnr_min) << ",\n  \"ssim_min\": " << num(ssim_min)
-      << ",\n  \"scoring_time_s\": " << num(gt_s) << ",\n  \"per_image\": [";
+      << ",\n  \"psnr_db\": " << json_number(psnr, 9) << ",\n  \"ssim\": " << json_number(ssim, 9) << ",\n  \"ssim_error\": " << json_number(1.0 - ssim, 9)
+      << ",\n  \"psnr_db_min\": " << json_number(psnr_min, 9) << ",\n  \"ssim_min\": " << json_number(ssim_min, 9)
+      << ",\n  \"scoring_time_s\": " << json_number(gt_s, 9) << ",\n  \"per_image\": [";
     for (size_t k = 0; k < scored.size(); ++k)
-      j << (k ? ", " : "") << "{\"t_s\": " << num(scored[k].t_s) << ", \"psnr_db\": " << num(scored[k].psnr_db)
-        << ", \"ssim\": " << num(scored[k].ssim) << "}";
+      j << (k ? ", " : "") << "{\"t_s\": " << json_number(scored[k].t_s, 9) << ", \"psnr_db\": " << json_number(scored[k].psnr_db, 9)
+        << ", \"ssim\": " << json_number(scored[k].ssim, 9) << "}";
     j << "]\n}\n";
     std::fputs(j.str().c_str(), f.get());
     f.close();
-    out << "evio reconstruct: against the true views of " << gt_scene << ": PSNR " << num(psnr) << " dB, SSIM "
-        << num(ssim) << " (mean of " << scored.size() << " images; " << unscored << " flat images not scored); wrote eval.json\n";
+    out << "evio reconstruct: against the true views of " << gt_scene << ": PSNR " << json_number(psnr, 9) << " dB, SSIM "
+        << json_number(ssim, 9) << " (mean of " << scored.size() << " images; " << unscored << " flat images not scored); wrote eval.json\n";
   }
   out << "evio reconstruct: " << mapping::reconstruction_method_name(cfg.method) << (cfg.use_frames ? " with frames" : "")
       << ", " << events << " events, " << st.frames << " frames fused, " << images << " images; filter "
-      << num(ns_per_event) << " ns per event (" << num(filter_s > 0 ? events / filter_s * 1e-6 : 0.0)
-      << " M events/s), wall " << num(wall_s) << " s\n"
+      << json_number(ns_per_event, 9) << " ns per event (" << json_number(filter_s > 0 ? events / filter_s * 1e-6 : 0.0, 9)
+      << " M events/s), wall " << json_number(wall_s, 9) << " s\n"
       << "wrote " << args.out << "/images.txt, images/, stats.json, reconstruct_config.yaml"
       << (video_status == "written" ? ", video.mp4" : "") << (harris ? ", corners.txt" : "") << "\n";
   if (harris)
-    out << "event Harris: " << harris->stats().corners << " corner events (" << num(harris_s * 1e9 / std::max<int64_t>(1, events))
+    out << "event Harris: " << harris->stats().corners << " corner events (" << json_number(harris_s * 1e9 / std::max<int64_t>(1, events), 9)
         << " ns per event)\n";
   return 0;
 }

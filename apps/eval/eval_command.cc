@@ -1,5 +1,5 @@
 #include "eval_command.h"
-#include "json_util.h"
+#include "evio/calib/json.h"
 
 #include <algorithm>
 #include <cctype>
@@ -34,14 +34,9 @@ std::string fmt(const char* f, double v) {
   return buf;
 }
 
-// Round-trip precision for machine-read outputs; JSON has no NaN/inf, those become null.
-std::string num(double v) { return std::isfinite(v) ? fmt("%.17g", v) : std::string("null"); }
-
-std::string quoted(const std::string& s) { return "\"" + json_escape(s) + "\""; }
-
 std::string stats_json(const Stats& s) {
-  return "{\"rmse\": " + num(s.rmse) + ", \"mean\": " + num(s.mean) + ", \"median\": " + num(s.median) +
-         ", \"std\": " + num(s.std) + ", \"min\": " + num(s.min) + ", \"max\": " + num(s.max) +
+  return "{\"rmse\": " + json_number(s.rmse) + ", \"mean\": " + json_number(s.mean) + ", \"median\": " + json_number(s.median) +
+         ", \"std\": " + json_number(s.std) + ", \"min\": " + json_number(s.min) + ", \"max\": " + json_number(s.max) +
          ", \"count\": " + std::to_string(s.count) + "}";
 }
 
@@ -130,30 +125,30 @@ std::vector<EstimateEvaluation> evaluate_all(const EvalArgs& args) {
 std::string results_json(const EvalArgs& args, const std::vector<EstimateEvaluation>& results) {
   const auto& o = args.options;
   std::ostringstream j;
-  j << "{\n  \"groundtruth\": " << quoted(args.groundtruth) << ",\n";
-  j << "  \"protocol\": {\"association\": {\"max_dt_s\": " << num(o.association.max_dt_s)
-    << ", \"time_offset_s\": " << num(o.association.time_offset_s)
+  j << "{\n  \"groundtruth\": " << json_string(args.groundtruth) << ",\n";
+  j << "  \"protocol\": {\"association\": {\"max_dt_s\": " << json_number(o.association.max_dt_s)
+    << ", \"time_offset_s\": " << json_number(o.association.time_offset_s)
     << ", \"interpolate_groundtruth\": " << (o.association.interpolate_groundtruth ? "true" : "false") << "}, "
-    << "\"alignment\": {\"method\": " << quoted(evaluation::alignment_name(o.alignment.method))
-    << ", \"first_s\": " << num(o.alignment.first_s) << ", \"first_poses\": " << o.alignment.first_poses << "}, "
+    << "\"alignment\": {\"method\": " << json_string(evaluation::alignment_name(o.alignment.method))
+    << ", \"first_s\": " << json_number(o.alignment.first_s) << ", \"first_poses\": " << o.alignment.first_poses << "}, "
     << "\"rpe\": {\"lengths\": [";
-  for (size_t i = 0; i < o.rpe.lengths.size(); ++i) j << (i ? ", " : "") << num(o.rpe.lengths[i]);
-  j << "], \"lengths_unit\": " << quoted(o.rpe.lengths_in_percent ? "percent of ground-truth path length" : "m")
+  for (size_t i = 0; i < o.rpe.lengths.size(); ++i) j << (i ? ", " : "") << json_number(o.rpe.lengths[i]);
+  j << "], \"lengths_unit\": " << json_string(o.rpe.lengths_in_percent ? "percent of ground-truth path length" : "m")
     << ", \"method\": \"rpg_trajectory_evaluation (Zhang and Scaramuzza, IROS 2018)\"}},\n";
   j << "  \"estimates\": [";
   for (size_t n = 0; n < results.size(); ++n) {
     const EstimateEvaluation& e = results[n];
     const auto& r = e.result;
-    j << (n ? ",\n" : "\n") << "    {\"file\": " << quoted(e.file) << ", \"label\": " << quoted(e.label)
-      << ", \"name\": " << quoted(e.name) << ", \"align\": " << quoted(evaluation::alignment_name(r.alignment.method))
+    j << (n ? ",\n" : "\n") << "    {\"file\": " << json_string(e.file) << ", \"label\": " << json_string(e.label)
+      << ", \"name\": " << json_string(e.name) << ", \"align\": " << json_string(evaluation::alignment_name(r.alignment.method))
       << ", \"matched_poses\": " << r.matched_poses << ",\n";
     j << "     \"ate\": {\"trans_m\": " << stats_json(r.ate.trans_m) << ",\n             \"rot_deg\": "
       << stats_json(r.ate.rot_deg) << "},\n";
-    j << "     \"mean_position_error_percent\": " << num(r.mean_position_error_percent) << ",\n";
+    j << "     \"mean_position_error_percent\": " << json_number(r.mean_position_error_percent) << ",\n";
     j << "     \"rpe\": [";
     for (size_t k = 0; k < r.rpe.size(); ++k) {
       const auto& q = r.rpe[k];
-      j << (k ? ",\n" : "\n") << "       {\"length_m\": " << num(q.length_m) << ", \"count\": " << q.count
+      j << (k ? ",\n" : "\n") << "       {\"length_m\": " << json_number(q.length_m) << ", \"count\": " << q.count
         << ", \"trans_percent\": " << stats_json(q.trans_percent) << ", \"yaw_deg_per_m\": " << stats_json(q.yaw_deg_per_m)
         << ", \"trans_m\": " << stats_json(q.trans_m) << ", \"rot_deg\": " << stats_json(q.rot_deg)
         << ", \"yaw_deg\": " << stats_json(q.yaw_deg) << "}";
@@ -162,17 +157,17 @@ std::string results_json(const EvalArgs& args, const std::vector<EstimateEvaluat
     const auto& a = r.alignment;
     j << "     \"alignment\": {\"rotation\": [";
     for (int row = 0; row < 3; ++row) {
-      j << (row ? ", " : "") << "[" << num(a.rotation(row, 0)) << ", " << num(a.rotation(row, 1)) << ", "
-        << num(a.rotation(row, 2)) << "]";
+      j << (row ? ", " : "") << "[" << json_number(a.rotation(row, 0)) << ", " << json_number(a.rotation(row, 1)) << ", "
+        << json_number(a.rotation(row, 2)) << "]";
     }
-    j << "], \"translation\": [" << num(a.translation.x()) << ", " << num(a.translation.y()) << ", "
-      << num(a.translation.z()) << "], \"scale\": " << num(a.scale) << ", \"pairs_used\": " << a.pairs_used << "},\n";
-    j << "     \"groundtruth_length_m\": " << num(r.groundtruth_length_m)
-      << ", \"estimate_length_m\": " << num(e.estimate_length_m)
-      << ", \"final_yaw_error_deg\": " << num(r.final_yaw_error_deg)
-      << ", \"yaw_drift_deg_per_m\": " << num(r.yaw_drift_deg_per_m) << ",\n";
+    j << "], \"translation\": [" << json_number(a.translation.x()) << ", " << json_number(a.translation.y()) << ", "
+      << json_number(a.translation.z()) << "], \"scale\": " << json_number(a.scale) << ", \"pairs_used\": " << a.pairs_used << "},\n";
+    j << "     \"groundtruth_length_m\": " << json_number(r.groundtruth_length_m)
+      << ", \"estimate_length_m\": " << json_number(e.estimate_length_m)
+      << ", \"final_yaw_error_deg\": " << json_number(r.final_yaw_error_deg)
+      << ", \"yaw_drift_deg_per_m\": " << json_number(r.yaw_drift_deg_per_m) << ",\n";
     if (e.rre) {
-      j << "     \"rre\": {\"interval_s\": " << num(e.rre->interval_s) << ", \"count\": " << e.rre->deg.count
+      j << "     \"rre\": {\"interval_s\": " << json_number(e.rre->interval_s) << ", \"count\": " << e.rre->deg.count
         << ", \"deg\": " << stats_json(e.rre->deg);
       if (e.rre_gyro) j << ", \"gyro_count\": " << e.rre_gyro->deg.count << ", \"gyro_deg\": " << stats_json(e.rre_gyro->deg);
       j << "},\n";
@@ -180,9 +175,9 @@ std::string results_json(const EvalArgs& args, const std::vector<EstimateEvaluat
     const auto& t = r.pairs.t_ns;
     j << "     \"time_span_s\": [" << (t.empty() ? "null" : format_seconds(t.front())) << ", "
       << (t.empty() ? "null" : format_seconds(t.back())) << "],\n";
-    j << "     \"outputs\": {\"aligned_estimate\": " << quoted(e.name + "_aligned.tum")
-      << ", \"matched_groundtruth\": " << quoted(e.name + "_groundtruth.tum")
-      << ", \"errors\": " << quoted(e.name + "_errors.csv") << "}}";
+    j << "     \"outputs\": {\"aligned_estimate\": " << json_string(e.name + "_aligned.tum")
+      << ", \"matched_groundtruth\": " << json_string(e.name + "_groundtruth.tum")
+      << ", \"errors\": " << json_string(e.name + "_errors.csv") << "}}";
   }
   j << "\n  ]\n}\n";
   return j.str();
@@ -204,8 +199,8 @@ std::string summary_csv(const std::vector<SummaryRow>& rows) {
       for (char c : label) q += c == '"' ? std::string("\"\"") : std::string(1, c);
       label = q + "\"";
     }
-    o += label + "," + r.metric + "," + std::to_string(r.runs) + "," + num(r.mean) + "," + num(r.median) + "," +
-         num(r.min) + "," + num(r.max) + "\n";
+    o += label + "," + r.metric + "," + std::to_string(r.runs) + "," + json_number(r.mean) + "," + json_number(r.median) + "," +
+         json_number(r.min) + "," + json_number(r.max) + "\n";
   }
   return o;
 }
@@ -216,12 +211,12 @@ std::string summary_yaml(const std::vector<SummaryRow>& rows) {
   bool first = true;
   for (const auto& r : rows) {
     if (first || r.label != current) {
-      o += "  " + quoted(r.label) + ":\n";  // a JSON string is a valid YAML double-quoted scalar
+      o += "  " + json_string(r.label) + ":\n";  // a JSON string is a valid YAML double-quoted scalar
       current = r.label;
       first = false;
     }
-    o += "    " + r.metric + ": {runs: " + std::to_string(r.runs) + ", mean: " + num(r.mean) +
-         ", median: " + num(r.median) + ", min: " + num(r.min) + ", max: " + num(r.max) + "}\n";
+    o += "    " + r.metric + ": {runs: " + std::to_string(r.runs) + ", mean: " + json_number(r.mean) +
+         ", median: " + json_number(r.median) + ", min: " + json_number(r.min) + ", max: " + json_number(r.max) + "}\n";
   }
   return o;
 }
@@ -232,14 +227,14 @@ std::string summary_json(const std::vector<SummaryRow>& rows) {
   bool first = true;
   for (const auto& r : rows) {
     if (first || r.label != current) {
-      o += std::string(first ? "\n" : "}},\n") + "  {\"label\": " + quoted(r.label) + ", \"metrics\": {";
+      o += std::string(first ? "\n" : "}},\n") + "  {\"label\": " + json_string(r.label) + ", \"metrics\": {";
       current = r.label;
       first = false;
     } else {
       o += ", ";
     }
-    o += "\"" + r.metric + "\": {\"runs\": " + std::to_string(r.runs) + ", \"mean\": " + num(r.mean) +
-         ", \"median\": " + num(r.median) + ", \"min\": " + num(r.min) + ", \"max\": " + num(r.max) + "}";
+    o += "\"" + r.metric + "\": {\"runs\": " + std::to_string(r.runs) + ", \"mean\": " + json_number(r.mean) +
+         ", \"median\": " + json_number(r.median) + ", \"min\": " + json_number(r.min) + ", \"max\": " + json_number(r.max) + "}";
   }
   if (!first) o += "}}\n";
   return o + "]}\n";
@@ -349,8 +344,8 @@ int run_eval(const EvalArgs& args, std::ostream& out) {
     for (size_t k = 0; k < r.pairs.size(); ++k) {
       aligned.push_back({r.pairs.t_ns[k], r.aligned_estimate[k]});
       matched.push_back({r.pairs.t_ns[k], r.pairs.groundtruth[k]});
-      csv += format_seconds(r.pairs.t_ns[k]) + "," + num(r.ate.trans_errors_m[k]) + "," +
-             num(r.ate.rot_errors_deg[k]) + "\n";
+      csv += format_seconds(r.pairs.t_ns[k]) + "," + json_number(r.ate.trans_errors_m[k]) + "," +
+             json_number(r.ate.rot_errors_deg[k]) + "\n";
     }
     write_tum((d / (e.name + "_aligned.tum")).string(), Trajectory(std::move(aligned)));
     write_tum((d / (e.name + "_groundtruth.tum")).string(), Trajectory(std::move(matched)));

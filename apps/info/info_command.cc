@@ -1,5 +1,5 @@
 #include "info_command.h"
-#include "json_util.h"
+#include "evio/calib/json.h"
 
 #include <cinttypes>
 #include <cstdio>

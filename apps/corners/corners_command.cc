@@ -22,7 +22,7 @@
 #include "evio/sensors/time.h"
 #include "evio/simulator/scene_config.h"
 #include "evio/simulator/simulator.h"
-#include "json_util.h"
+#include "evio/calib/json.h"
 #include "progress.h"
 #include "evio/sensors/config_table.h"
 #include "evio/sensors/dataset_calibration.h"
