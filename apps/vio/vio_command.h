@@ -60,13 +60,13 @@ struct VioArgs {
   std::string oracle_scene;
   double oracle_noise_px = 0;
   double oracle_drift_px = 0;
-  double oracle_max_error_px = 0;
-  std::string oracle_error = "none";
-  bool oracle_frame_motion = false;
+  double oracle_max_error_px = 0;       // drop observations whose own error is larger (0: keep all)
+  std::string oracle_error = "none";    // none | real | independent | common_mode (evaluation::OracleError)
+  bool oracle_frame_motion = false;     // the frames' translation compensation from the ground truth
+  bool oracle_frame_plane = false;      // with oracle_frame_motion: per-event depth from the plane through the tracks' true points
   // Diagnostics: every n-th tracking image of the frames front-end as PNG into out/tracking_images/
   // (0: none), with the frame's tracks drawn.
   int dump_tracking_images = 0;
-  bool oracle_frame_plane = false;  // with oracle_frame_motion: per-event depth from the plane through the tracks' true points  // with oracle_scene: the frames' translation compensation from the ground truth  // none | real | independent | common_mode (evaluation::OracleError)
 };
 
 int run_vio(const VioArgs& args, std::ostream& out);
