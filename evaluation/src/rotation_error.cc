@@ -1,6 +1,9 @@
 #include "evio/evaluation/rotation_error.h"
 
+#include "evio/calib/geometry.h"
+
 #include <cmath>
+#include <optional>
 #include <stdexcept>
 
 namespace evio::evaluation {
@@ -118,5 +121,23 @@ void GyroIntegrator::add(const ImuSample& s) {
 }
 
 Trajectory GyroIntegrator::trajectory() const { return Trajectory(poses_); }
+
+InitialAlignedRotationError rotation_error_initial_aligned(const Trajectory& groundtruth, const Trajectory& estimate) {
+  InitialAlignedRotationError r;
+  std::optional<calib::SE3> g0;
+  size_t first = 0;
+  for (; first < estimate.size(); ++first)
+    if ((g0 = groundtruth.interpolate(estimate[first].t_ns))) break;
+  if (!g0) return r;
+  r.R_w_m = g0->rotation.toRotationMatrix() * estimate[first].T_w_b.rotation.toRotationMatrix().transpose();
+  for (size_t k = first; k < estimate.size(); ++k) {
+    const auto g = groundtruth.interpolate(estimate[k].t_ns);
+    if (!g) continue;
+    const Eigen::Matrix3d E = g->rotation.toRotationMatrix().transpose() * r.R_w_m * estimate[k].T_w_b.rotation.toRotationMatrix();
+    r.t_ns.push_back(estimate[k].t_ns);
+    r.errors_deg.push_back(calib::so3_log(E).norm() * 180.0 / M_PI);
+  }
+  return r;
+}
 
 }  // namespace evio::evaluation

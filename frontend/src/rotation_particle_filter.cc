@@ -972,4 +972,9 @@ size_t RotationParticleFilter::adaptive_count() const {
   return static_cast<size_t>(std::ceil(std::clamp(n_kld, lo, static_cast<double>(n_max))));
 }
 
+void resolve_input_defaults(RotationParticleFilterOptions* o, bool gyro, int event_stride, int min_particles) {
+  o->event_stride = event_stride > 0 ? event_stride : (gyro ? 4 : 1);
+  o->min_particles = std::min(min_particles >= 0 ? min_particles : (gyro ? 20 : 40), o->num_particles);
+}
+
 }  // namespace evio::frontend

@@ -15,6 +15,8 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/Core>
+
 #include "evio/evaluation/trajectory_evaluation.h"
 #include "evio/sensors/measurements.h"
 #include "evio/sensors/trajectory.h"
@@ -49,6 +51,17 @@ RelativeRotationError relative_rotation_error(const Trajectory& groundtruth, con
 RelativeRotationError relative_rotation_error_at(const Trajectory& groundtruth, const Trajectory& estimate,
                                                  const std::vector<int64_t>& start_ns, const std::vector<int64_t>& end_ns,
                                                  double interval_s);
+
+// Absolute error of an orientation-only estimate (a rotational tracker's, in its own frame m)
+// after aligning the initial orientation: R_w_m maps the estimate's frame to the ground truth's
+// world at the first estimate pose the ground truth covers; each covered pose's error is the angle
+// of R_gt^T R_w_m R_est, deg. Empty (no poses) when the ground truth covers none.
+struct InitialAlignedRotationError {
+  Eigen::Matrix3d R_w_m = Eigen::Matrix3d::Identity();
+  std::vector<int64_t> t_ns;       // the matched estimate stamps
+  std::vector<double> errors_deg;  // per matched pose
+};
+InitialAlignedRotationError rotation_error_initial_aligned(const Trajectory& groundtruth, const Trajectory& estimate);
 
 // The orientation obtained by integrating the measured angular rate alone (body frame, no bias
 // removed, trapezoid on consecutive samples: R <- R Exp((w_k + w_k+1) / 2 dt)), kept every

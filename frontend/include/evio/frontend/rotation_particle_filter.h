@@ -394,4 +394,11 @@ class RotationParticleFilter {
   RotationParticleFilterStats stats_;
 };
 
+// The settings that depend on whether a gyro drives the prediction, for the fields left "by input":
+// event_stride 0 -> 4 with the gyro (a gyro-driven cloud is tight, neighbouring events add little)
+// and 1 without; min_particles -1 -> 20 with the gyro and 40 without (a velocity-carrying cloud
+// needs more), never above num_particles (a smaller num_particles gives a fixed count). Values set
+// explicitly (stride > 0, min_particles >= 0) are kept. docs/results/mosaic.md has the measurements.
+void resolve_input_defaults(RotationParticleFilterOptions* o, bool gyro, int event_stride, int min_particles);
+
 }  // namespace evio::frontend

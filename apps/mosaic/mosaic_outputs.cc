@@ -1,0 +1,193 @@
+#include "mosaic_outputs.h"
+
+#include <algorithm>
+#include <climits>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <ostream>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "evio/calib/error.h"
+#include "evio/calib/json.h"
+#include "evio/evaluation/rotation_error.h"
+#include "evio/mapping/mosaic_image.h"
+#include "evio/sensors/time.h"
+#include "evio/sensors/trajectory.h"
+#include "evio/simulator/scene_config.h"
+
+namespace evio::apps {
+namespace {
+namespace fs = std::filesystem;
+
+// The model block: the tracker's motion and measurement models as they ran. measurement_model
+// auto is relative_motion when the gyro drives the prediction or the particles carry their own
+// velocities (particle_velocity without gyro), previous_mean otherwise (rotation_particle_filter.h).
+std::string model_json(const MosaicConfig& cfg, const frontend::RotationParticleFilterStats& st) {
+  const frontend::RotationParticleFilterOptions& to = cfg.tracker;
+  const bool gyro = st.gyro_predictions > 0;
+  const bool pv = to.motion_model == frontend::RotationMotionModel::kParticleVelocity && !gyro;
+  const frontend::RotationMotionModel motion_used = gyro ? frontend::RotationMotionModel::kRandomWalk : to.motion_model;
+  const bool relative = to.measurement_model == frontend::RotationMeasurementModel::kRelativeMotion ||
+                        (to.measurement_model == frontend::RotationMeasurementModel::kAuto && (gyro || pv));
+  const std::string measurement = relative ? "relative_motion" : "previous_mean";
+  const std::string why = to.measurement_model != frontend::RotationMeasurementModel::kAuto ? "set in the config"
+                          : gyro ? "auto: the gyro drives the prediction"
+                          : pv   ? "auto: the particles carry their own velocities (particle_velocity, no gyro)"
+                                 : "auto: no gyro and no particle velocities";
+  const std::string motion = gyro ? std::string("gyro") : frontend::rotation_motion_model_name(motion_used);
+  const double mean_particles = st.weighted_batches > 0 ? static_cast<double>(st.particle_batches) / static_cast<double>(st.weighted_batches) : 0.0;
+  return "{\"summary\": " +
+         json_string("rotation, " + measurement + " measurement (" + why + "), " + motion + " prediction, " + json_number(mean_particles, 9) +
+                     " particles on average") +
+         ", \"measurement\": {\"option\": \"" + frontend::rotation_measurement_model_name(to.measurement_model) + "\", \"resolved\": \"" +
+         measurement + "\", \"reason\": " + json_string(why) + "}, \"motion\": {\"option\": \"" +
+         frontend::rotation_motion_model_name(to.motion_model) + "\", \"resolved\": \"" + motion +
+         "\", \"gyro_predictions\": " + std::to_string(st.gyro_predictions) + "}, \"particles\": {\"configured\": " +
+         std::to_string(to.num_particles) + ", \"mean\": " + json_number(mean_particles, 9) + "}}";
+}
+
+void write_stats_json(const MosaicArgs& args, const MosaicConfig& cfg, const MosaicRun& run) {
+  const pipeline::MosaicResult& result = run.result;
+  const mapping::MosaicReconstruction& rec = result.reconstruction;
+  const pipeline::MosaicStats& ms = result.stats;
+  const auto& st = ms.tracker;
+  const pipeline::MosaicBootstrapStats& bs = ms.bootstrap;
+  const double processing_s = run.processing_s, cpu_s = run.cpu_s, duration_s = run.duration_s();
+  const int64_t events = run.events;
+  std::ofstream f((fs::path(args.out) / "stats.json").string());
+  f << "{\n  \"dataset\": " << json_string(args.dataset) << ",\n  \"model\": " << model_json(cfg, st)
+    << ",\n  \"events\": " << events
+    << ",\n  \"processing_time_s\": " << json_number(processing_s, 9) << ",\n  \"sequence_duration_s\": " << json_number(duration_s, 9)
+    << ",\n  \"real_time_factor\": " << json_number(duration_s > 0 ? processing_s / duration_s : 0, 9)
+    << ",\n  \"events_per_s\": " << json_number(processing_s > 0 ? events / processing_s : 0, 9)
+    << ",\n  \"cpu_time_s\": " << json_number(cpu_s, 9) << ",\n  \"events_per_cpu_s\": " << json_number(cpu_s > 0 ? events / cpu_s : 0, 9)
+    << ",\n  \"threads\": " << cfg.threads
+    << ",\n  \"use_imu\": " << json_bool(args.use_imu) << ",\n  \"particles\": " << cfg.tracker.num_particles
+    << ",\n  \"batch_size\": " << cfg.tracker.batch_size << ",\n  \"event_stride\": " << cfg.tracker.event_stride
+    << ",\n  \"measurement_model\": \"" << frontend::rotation_measurement_model_name(cfg.tracker.measurement_model) << "\"" << ",\n  \"mosaic_size\": [" << cfg.mosaic.width << ", "
+    << cfg.mosaic.height << "],\n  \"bootstrap\": {\"method\": \"" << (args.use_imu ? "gyro" : "contrast_maximisation")
+    << "\", \"duration_s\": " << json_number((bs.t_end_ns - run.t0_ns) * 1e-9, 9) << ", \"cmax_windows\": " << bs.cmax_windows << ", \"short_windows\": " << bs.short_windows
+    << ", \"tracker_contrast\": " << json_number(bs.tracker_contrast, 9) << ", \"contrast_samples\": " << bs.contrast_samples << "}"
+    << ",\n  \"tracker\": {\"events_used\": " << st.events_used << ", \"skipped_no_previous\": " << st.skipped_no_previous
+    << ", \"skipped_unknown_map\": " << st.skipped_unknown_map << ", \"skipped_stride\": " << st.skipped_stride << ", \"batches\": " << st.batches
+    << ", \"resamples\": " << st.resamples << ", \"linearized_batches\": " << st.linearized_batches << ", \"gyro_predictions\": " << st.gyro_predictions
+    << ", \"mean_particles\": " << json_number(st.weighted_batches > 0 ? static_cast<double>(st.particle_batches) / static_cast<double>(st.weighted_batches) : 0.0, 9)
+    << ", \"particle_evaluations\": " << st.particle_evaluations << "}"
+    << ",\n  \"mapper\": {\"events_mapped\": " << ms.events_mapped << ", \"reconstructions\": " << ms.reconstructions
+    << ", \"seen_pixels\": " << ms.seen_pixels << ", \"seen_fraction\": " << json_number(ms.seen_fraction, 9)
+    << "},\n  \"poisson\": {\"weighting\": \"" << mapping::poisson_weighting_name(rec.weighting)
+    << "\", \"pcg_iterations\": " << rec.weighted_stats.iterations
+    << ", \"initial_relative_residual\": " << json_number(rec.weighted_stats.initial_relative_residual, 9)
+    << ", \"relative_residual\": " << json_number(rec.weighted_stats.relative_residual, 9)
+    << ", \"converged\": " << json_bool(rec.weighted_stats.converged) << "}"
+    << ",\n  \"snapshots\": " << run.snapshots << ",\n  \"quality\": {\"windows\": " << ms.quality_windows << ", \"windows_undecided\": " << ms.quality_windows_undecided
+    << ", \"probe_contrast_min\": " << json_number(ms.quality_min, 9) << ", \"probe_contrast_mean\": " << json_number(ms.quality_mean, 9)
+    << ", \"events_unmapped_lost\": " << ms.events_unmapped_lost << "},\n  \"tracking_lost_segments\": [";
+  for (size_t k = 0; k < result.tracking_lost.size(); ++k) {
+    const pipeline::MosaicLostSegment& g = result.tracking_lost[k];
+    f << (k ? ", " : "") << "{\"t_begin_s\": " << format_seconds(g.t_begin_ns) << ", \"t_end_s\": " << format_seconds(g.t_end_ns)
+      << ", \"recovered\": " << json_bool(g.recovered) << ", \"relocalizations\": " << g.relocalizations
+      << ", \"global_searches\": " << g.global_searches << ", \"global_jumps\": " << g.global_jumps
+      << ", \"map_rolled_back_to_s\": "
+      << (g.map_rolled_back_to_ns == INT64_MIN ? std::string("null") : format_seconds(g.map_rolled_back_to_ns)) << "}";
+  }
+  f << "]\n}\n";
+}
+
+std::pair<double, double> rms_max(const double* e, size_t n) {
+  double s2 = 0, mx = 0;
+  for (size_t k = 0; k < n; ++k) {
+    s2 += e[k] * e[k];
+    mx = std::max(mx, e[k]);
+  }
+  return {n > 0 ? std::sqrt(s2 / static_cast<double>(n)) : 0.0, mx};
+}
+
+// The mosaic against the true panorama of a simulated dataset (scene_resolved.yaml), as eval.json
+// members (empty when the dataset is not a simulated panorama).
+std::string mosaic_quality_json(const MosaicArgs& args, const MosaicConfig& cfg, const mapping::MosaicReconstruction& rec,
+                                const Eigen::Matrix3d& R_w_m, std::ostream& out) {
+  const fs::path scene = fs::path(args.dataset) / "scene_resolved.yaml";
+  if (!fs::exists(scene)) return {};
+  const simulator::SimulationConfig sc = simulator::load_simulation_config(scene.string());
+  if (!sc.panorama) return {};
+  const mapping::ImageF ref = simulator::panorama_log_reference(*sc.panorama, R_w_m, cfg.mosaic.width, cfg.mosaic.height);
+  const mapping::ImageQuality q = mapping::compare_images(rec.log_intensity, ref, &rec.seen);
+  auto quality = [&](const mapping::ImageQuality& x) {
+    return "{\"psnr_db\": " + json_number(x.psnr_db, 9) + ", \"ssim\": " + json_number(x.ssim, 9) + ", \"rmse_log\": " + json_number(x.rmse, 9) +
+           ", \"contrast_gain\": " + json_number(x.scale, 9) + ", \"pixels\": " + std::to_string(x.pixels) +
+           ", \"fit\": \"affine in log intensity over the seen pixels\"}";
+  };
+  std::string json = ",\n  \"mosaic_quality\": " + quality(q);
+  out << "mosaic vs true panorama: PSNR " << json_number(q.psnr_db, 9) << " dB, SSIM " << json_number(q.ssim, 9) << " over "
+      << q.pixels << " seen pixels (affine log-intensity fit, " << mapping::poisson_weighting_name(rec.weighting)
+      << " Poisson weighting)\n";
+  if (rec.weighting == mapping::PoissonWeighting::kInformation) {
+    // The unweighted solve that seeded the weighted one: before / after on the same mosaic.
+    const mapping::ImageQuality u = mapping::compare_images(rec.unweighted_log_intensity, ref, &rec.seen);
+    json += ",\n  \"mosaic_quality_unweighted\": " + quality(u);
+    out << "  unweighted Poisson: PSNR " << json_number(u.psnr_db, 9) << " dB, SSIM " << json_number(u.ssim, 9) << "\n";
+  }
+  return json;
+}
+
+}  // namespace
+
+void write_mosaic_outputs(const MosaicArgs& args, const MosaicConfig& cfg, const MosaicRun& run, std::ostream& out) {
+  const pipeline::MosaicResult& result = run.result;
+  const mapping::MosaicReconstruction& rec = result.reconstruction;
+  write_tum((fs::path(args.out) / "rotation.tum").string(), result.rotation);
+  mapping::write_log_image_png8((fs::path(args.out) / "panorama.png").string(), rec.log_intensity, &rec.seen, cfg.display);
+  mapping::write_log_image_tiff((fs::path(args.out) / "panorama_log.tiff").string(), rec.log_intensity, &rec.seen);
+  mapping::write_mask_png((fs::path(args.out) / "panorama_seen.png").string(), rec.seen);
+  write_stats_json(args, cfg, run);
+  for (const pipeline::MosaicLostSegment& g : result.tracking_lost)
+    out << "tracking lost " << format_seconds(g.t_begin_ns) << " s to " << format_seconds(g.t_end_ns) << " s ("
+        << (g.recovered ? "recovered" : "not recovered") << ", " << g.relocalizations << " local spreads, "
+        << g.global_searches << " global searches, " << g.global_jumps << " jumps"
+        << (g.map_rolled_back_to_ns == INT64_MIN ? std::string() : ", map rolled back to " + format_seconds(g.map_rolled_back_to_ns) + " s")
+        << ")\n";
+  const double processing_s = run.processing_s, cpu_s = run.cpu_s, duration_s = run.duration_s();
+  const int64_t events = run.events;
+  out << "events        " << events << " over " << json_number(duration_s, 9) << " s, bootstrap "
+      << (args.use_imu ? "gyro" : "contrast maximisation") << " " << json_number((result.stats.bootstrap.t_end_ns - run.t0_ns) * 1e-9, 9) << " s\n";
+  out << "speed         " << json_number(processing_s, 9) << " s processing, real-time factor "
+      << json_number(duration_s > 0 ? processing_s / duration_s : 0, 9) << " (one core), "
+      << json_number(processing_s > 0 ? events / processing_s / 1e6 : 0, 9) << " M events/s; CPU time " << json_number(cpu_s, 9) << " s, "
+      << json_number(cpu_s > 0 ? events / cpu_s / 1e6 : 0, 9) << " M events per CPU second\n";
+  out << "mosaic        " << cfg.mosaic.width << "x" << cfg.mosaic.height << ", "
+      << json_number(100.0 * static_cast<double>(result.stats.seen_pixels) / static_cast<double>(rec.seen.size()), 9) << "% seen\n";
+}
+
+void evaluate_mosaic(const MosaicArgs& args, const MosaicConfig& cfg, const MosaicRun& run, std::ostream& out) {
+  const pipeline::MosaicResult& result = run.result;
+  const int64_t boot_end_ns = result.stats.bootstrap.t_end_ns;
+  const evaluation::InitialAlignedRotationError e = evaluation::rotation_error_initial_aligned(read_trajectory(args.gt), result.rotation);
+  if (e.t_ns.empty()) throw InputError(args.gt, 0, "no ground-truth pose within the estimate's time span", "a trajectory overlapping the events");
+  const std::vector<double>& err = e.errors_deg;
+  size_t boot_poses = 0;  // the first boot_poses errors are of bootstrap poses (gyro / CMax rates)
+  while (boot_poses < e.t_ns.size() && e.t_ns[boot_poses] <= boot_end_ns) ++boot_poses;
+  const auto [rms, mx] = rms_max(err.data(), err.size());
+  // The bootstrap alone: its poses up to the tracking start, and its last one (the rotation the
+  // tracker starts from: its error is baked into the bootstrap's part of the mosaic).
+  const auto [boot_rms, boot_max] = rms_max(err.data(), boot_poses);
+  const double boot_end = boot_poses > 0 ? err[boot_poses - 1] : 0.0;
+  const std::string quality_json = mosaic_quality_json(args, cfg, result.reconstruction, e.R_w_m, out);
+  const double boot_s = (boot_end_ns - run.t0_ns) * 1e-9;
+  std::ofstream f((fs::path(args.out) / "eval.json").string());
+  f << "{\n  \"groundtruth\": " << json_string(args.gt) << ",\n  \"estimate\": "
+    << json_string((fs::path(args.out) / "rotation.tum").string()) << ",\n  \"alignment\": \"initial orientation\""
+    << ",\n  \"matched_poses\": " << err.size() << ",\n  \"rot_rms_deg\": " << json_number(rms, 9) << ",\n  \"rot_max_deg\": " << json_number(mx, 9)
+    << ",\n  \"bootstrap\": {\"method\": \"" << (args.use_imu ? "gyro" : "contrast_maximisation") << "\", \"poses\": " << boot_poses
+    << ", \"rot_rms_deg\": " << json_number(boot_rms, 9) << ", \"rot_max_deg\": " << json_number(boot_max, 9) << ", \"rot_end_deg\": " << json_number(boot_end, 9) << "}"
+    << quality_json << "\n}\n";
+  out << "evaluation    rotation error rms " << json_number(rms, 9) << " deg, max " << json_number(mx, 9) << " deg over " << err.size()
+      << " poses (initial orientation aligned)\n";
+  out << "bootstrap     rotation error rms " << json_number(boot_rms, 9) << " deg, max " << json_number(boot_max, 9) << " deg, at its end "
+      << json_number(boot_end, 9) << " deg over " << boot_poses << " poses up to " << json_number(boot_s, 9) << " s\n";
+}
+
+}  // namespace evio::apps
