@@ -184,32 +184,306 @@ class OverlayWriter {
 
 }  // namespace
 
+namespace {
+
+// The camera and the sensor size: --calib, else the dataset folder's calib.yaml (`evio simulate`
+// writes it: size of a scaled camera), else the dataset's own; never assumed.
+struct CornersCamera {
+  std::optional<calib::CameraCalibration> cal;
+  SensorSize sensor;
+};
+
+CornersCamera open_corners_camera(const CornersArgs& args, DatasetReader& reader) {
+  CornersCamera c;
+  if (!args.calib.empty()) {
+    const bool yaml = fs::path(args.calib).extension() == ".yaml" || fs::path(args.calib).extension() == ".yml";
+    if (yaml) {
+      c.cal = calib::load_kalibr_camchain(args.calib).front();
+    } else {
+      const SensorSize s = reader.sensor_size();
+      c.cal = calib::load_ecd_calib(args.calib, s.known() ? s.width : 240, s.known() ? s.height : 180);
+    }
+  } else {
+    c.cal = find_dataset_calibration(args.dataset, "", reader).camera;
+  }
+  c.sensor = reader.sensor_size();
+  if (c.cal) c.sensor = {c.cal->camera.width(), c.cal->camera.height()};
+  if (!c.sensor.known()) {
+    throw InputError(args.dataset, 0, "the sensor size is unknown (no calibration in the dataset)",
+                     "--calib FILE (Kalibr camchain YAML or ECD calib.txt) or --sensor WxH");
+  }
+  return c;
+}
+
+// True corners of a simulated dataset (--gt SCENE.yaml, or DATASET/scene_resolved.yaml that
+// `evio simulate` writes): the checkerboard grid nodes projected through the true camera pose.
+struct CornerTruth {
+  std::string scene;
+  std::vector<simulator::SceneCorner> corners;
+  std::unique_ptr<simulator::Simulator> sim;
+  std::unique_ptr<evaluation::CornerEventScorer> scorer;  // null without true corners
+};
+
+std::unique_ptr<CornerTruth> open_corner_truth(const CornersArgs& args, SensorSize sensor, std::ostream& out) {
+  auto truth = std::make_unique<CornerTruth>();
+  truth->scene = args.gt;
+  std::error_code ec;
+  const fs::path auto_scene = fs::path(args.dataset) / "scene_resolved.yaml";
+  if (truth->scene.empty() && !args.no_gt && fs::is_directory(args.dataset, ec) && fs::is_regular_file(auto_scene, ec))
+    truth->scene = auto_scene.string();
+  if (truth->scene.empty()) return truth;
+  const simulator::SimulationConfig sc = simulator::load_simulation_config(truth->scene);
+  if (sc.simulator.camera.width() != sensor.width || sc.simulator.camera.height() != sensor.height)
+    throw InputError(truth->scene, 0,
+                     "the scene's camera is " + std::to_string(sc.simulator.camera.width()) + " x " +
+                         std::to_string(sc.simulator.camera.height()) + " px",
+                     "the scene the dataset was simulated from (" + std::to_string(sensor.width) + " x " +
+                         std::to_string(sensor.height) + " px)");
+  truth->corners = sc.corners;
+  if (truth->corners.empty()) {
+    out << "evio corners: " << truth->scene << " has no true corners (checkerboard planes): no eval.json\n";
+    return truth;
+  }
+  truth->sim = std::make_unique<simulator::Simulator>(sc.scene, sc.trajectory, sc.simulator);
+  const simulator::Simulator* sim = truth->sim.get();
+  // Written stamp -> simulator time: minus the scene's output.clock_offset_ns, plus its time shift.
+  const int64_t shift = sc.simulator.time_shift_ns - sc.clock_offset_ns;
+  std::vector<bool> inner;
+  for (const simulator::SceneCorner& c : truth->corners) inner.push_back(c.inner);
+  const std::vector<simulator::SceneCorner>* corners = &truth->corners;
+  truth->scorer = std::make_unique<evaluation::CornerEventScorer>(
+      sensor.width, sensor.height, static_cast<int>(corners->size()), inner,
+      [sim, shift, corners](int64_t t_ns, std::vector<Eigen::Vector2d>* px) {
+        px->assign(corners->size(), Eigen::Vector2d::Constant(NAN));
+        const calib::SE3 T_c_w = sim->camera_state(t_ns + shift).T_w_c.inverse();
+        for (size_t c = 0; c < corners->size(); ++c) {
+          Eigen::Vector2d p;
+          if (sim->options().camera.project(T_c_w * (*corners)[c].p_w, &p)) (*px)[c] = p;
+        }
+      },
+      sim->t_begin_ns() - shift, sim->t_end_ns() - shift);
+  return truth;
+}
+
+// corners.txt (every corner event as it is decided) and tracks.txt (one line per track point, each
+// track written when it ends, not kept in memory).
+class CornerFiles {
+ public:
+  CornerFiles(const fs::path& out, bool tracks, const std::optional<calib::CameraCalibration>& cal)
+      : corners_((out / "corners.txt").string()), cal_(cal) {
+    std::fputs("# t[s] x y p   (eFAST corner events, polarity as in the input)\n", corners_.get());
+    if (!tracks) return;
+    tracks_ = std::make_unique<TextOut>((out / "tracks.txt").string());
+    std::fputs(cal ? "# track_id t[s] x y x_undistorted y_undistorted   (px; smoothed track positions; tracks in the order they ended)\n"
+                   : "# track_id t[s] x y   (px; smoothed track positions; tracks in the order they ended)\n",
+               tracks_->get());
+  }
+  void corner(const Event& e, bool zero_one) {
+    *format_seconds(e.t_ns, line_) = '\0';
+    std::fprintf(corners_.get(), "%s %d %d %d\n", line_, e.x, e.y, e.polarity > 0 ? 1 : (zero_one ? 0 : -1));
+  }
+  void tracks(const std::vector<frontend::CornerTrack>& ended) {
+    for (const auto& t : ended) {
+      lengths_.add(t);
+      for (const auto& p : t.points) {
+        *format_seconds(p.t_ns, line_) = '\0';
+        std::fprintf(tracks_->get(), "%lld %s %.3f %.3f", static_cast<long long>(t.id), line_, p.x, p.y);
+        if (cal_) {
+          const auto& k = cal_->camera.intrinsics();
+          Eigen::Vector2d n;
+          if (cal_->camera.undistort(Eigen::Vector2d((p.x - k.cx) / k.fx, (p.y - k.cy) / k.fy), &n)) {
+            std::fprintf(tracks_->get(), " %.3f %.3f", k.fx * n.x() + k.cx, k.fy * n.y() + k.cy);
+          } else {
+            std::fputs(" nan nan", tracks_->get());
+          }
+        }
+        std::fputc('\n', tracks_->get());
+      }
+    }
+  }
+  void close_corners() { corners_.close(); }
+  void close_tracks() { tracks_->close(); }
+  TrackLengths lengths() const { return lengths_.summary(); }
+
+ private:
+  TextOut corners_;
+  std::unique_ptr<TextOut> tracks_;
+  const std::optional<calib::CameraCalibration>& cal_;
+  TrackLengthCounter lengths_;
+  char line_[96];
+};
+
+struct CornersRun {
+  int64_t events = 0, t_first = 0, t_last = 0;
+  double processing_s = 0, overlay_s = 0;  // overlay drawing/PNG time is not processing time
+  double scoring_s = 0;
+  double duration_s() const { return events > 1 ? static_cast<double>(t_last - t_first) * 1e-9 : 0.0; }
+};
+
+// The events through the front-end in chunks; corner events and ended tracks written as they come,
+// overlays drawn every frames_every_ns, and (after the processing timer) the chunk's decisions scored.
+CornersRun stream_corners(const CornersArgs& args, const CornersConfig& cfg, DatasetReader& reader, SensorSize sensor,
+                          pipeline::CornerPipeline& front, CornerFiles& files, OverlayWriter* overlay,
+                          evaluation::CornerEventScorer* scorer) {
+  const frontend::CornerTracker* tracker = front.tracker();
+  Progress progress("evio corners", args.progress, "events");
+  CornersRun run;
+  EventBuffer chunk;
+  std::vector<uint8_t> flags;  // the chunk's corner decisions, scored after the processing timer
+  bool zero_one = true;        // polarity convention of the input, known after the first chunk
+  bool first_chunk = true;
+  for (;;) {
+    chunk.clear();
+    if (reader.read_events(&chunk, size_t{1} << 20) == 0) break;
+    if (first_chunk) {
+      zero_one = reader.event_report().polarity != PolarityConvention::kMinusPlusOne;
+      run.t_first = chunk.front().t_ns;
+      if (overlay) overlay->next_frame_ns = run.t_first + cfg.frames_every_ns;
+      first_chunk = false;
+    }
+    run.t_last = chunk.back().t_ns;
+    const auto t0 = std::chrono::steady_clock::now();
+    if (scorer) flags.assign(chunk.size(), 0);
+    size_t k = 0;
+    for (const Event& e : chunk.span()) {
+      ++run.events;
+      ++k;
+      if (overlay && e.x < sensor.width && e.y < sensor.height) {
+        while (e.t_ns >= overlay->next_frame_ns) {
+          const auto w0 = std::chrono::steady_clock::now();
+          overlay->write(tracker);
+          overlay->next_frame_ns += cfg.frames_every_ns;
+          run.overlay_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - w0).count();
+        }
+        overlay->add_event(e);
+      }
+      if (!front.process(e)) continue;
+      if (scorer) flags[k - 1] = 1;
+      files.corner(e, zero_one);
+      if (overlay) overlay->add_corner(e);
+    }
+    std::vector<frontend::CornerTrack> ended = front.take_finished_tracks();
+    run.processing_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (scorer) {
+      const auto s0 = std::chrono::steady_clock::now();
+      size_t i = 0;
+      for (const Event& e : chunk.span()) scorer->add(e, flags[i++] != 0);
+      run.scoring_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - s0).count();
+    }
+    if (tracker) files.tracks(ended);  // not processing time (as the overlays)
+    progress.update(reader.progress(), run.events, std::to_string(front.stats().corners) + " corners");
+  }
+  files.close_corners();
+  if (tracker) {
+    files.tracks(front.finish());
+    files.close_tracks();
+  }
+  if (overlay && run.events > 0) overlay->write(nullptr);
+  return run;
+}
+
+void write_corners_stats(const CornersArgs& args, const CornersConfig& cfg, SensorSize sensor, const pipeline::CornerPipeline& front,
+                         const CornersRun& run, const TrackLengths& tl, int frames_written) {
+  const frontend::CornerTracker* tracker = front.tracker();
+  const frontend::EfastStats& es = front.efast_stats();
+  const int64_t events = run.events, corners = front.stats().corners;
+  const double duration_s = run.duration_s();
+  TextOut f((fs::path(args.out) / "stats.json").string());
+  std::ostringstream j;
+  // The model block: eFAST tests each event on its own (no frames, no model to choose); what ran.
+  const std::string stages = std::string("eFAST per event") + (tracker ? (cfg.descriptors ? " + DART + tracker" : " + tracker") : "");
+  j << "{\n  \"model\": {\"summary\": " << json_string(stages + ": per-event detector, no frames, no model choice")
+    << ", \"detector\": \"efast\", \"filter_sae\": " << json_bool(cfg.efast.filter_sae)
+    << ", \"tracker\": " << json_bool(tracker) << ", \"descriptors\": " << json_bool(cfg.descriptors)
+    << ", \"frames\": null}";
+  j << ",\n  \"dataset\": " << json_string(args.dataset) << ",\n  \"sensor\": [" << sensor.width << ", " << sensor.height
+    << "],\n  \"events\": " << events << ",\n  \"events_outside_sensor\": " << front.stats().outside
+    << ",\n  \"corners\": " << corners << ",\n  \"reduction_rate\": " << json_number(corners > 0 ? static_cast<double>(events) / static_cast<double>(corners) : 0.0)
+    << ",\n  \"ns_per_event\": " << json_number(events > 0 ? (run.processing_s - run.overlay_s) * 1e9 / static_cast<double>(events) : 0.0)
+    << ",\n  \"duration_s\": " << json_number(duration_s)
+    << ",\n  \"corners_per_second\": " << json_number(duration_s > 0 ? static_cast<double>(corners) / duration_s : 0.0) << ",\n  \"filters\": {\"refractory\": "
+    << (front.refractory_passed() ? std::to_string(*front.refractory_passed()) : "null")
+    << ", \"background_activity\": "
+    << (front.background_activity_passed() ? std::to_string(*front.background_activity_passed()) : "null")
+    << "},\n  \"efast\": {\"filter_sae\": " << json_bool(cfg.efast.filter_sae) << ", \"tested\": " << es.tested
+    << ", \"inner_passed\": " << es.inner_passed << ", \"outer_share\": "
+    << json_number(es.tested > 0 ? static_cast<double>(es.inner_passed) / static_cast<double>(es.tested) : 0.0)
+    << "},\n  \"descriptors\": " << front.stats().descriptors << ",\n  \"descriptor_decisions\": "
+    << (tracker ? tracker->stats().descriptor_decisions : 0) << ",\n  \"tracks\": {\"count\": " << tl.count << ", \"mean_length\": " << json_number(tl.mean)
+    << ", \"median_length\": " << json_number(tl.median) << ", \"max_length\": " << json_number(tl.max)
+    << ", \"mean_duration_s\": " << json_number(tl.mean_duration_s) << "},\n  \"frames_written\": " << frames_written << "\n}\n";
+  std::fputs(j.str().c_str(), f.get());
+  f.close();
+}
+
+void write_corners_eval(const CornersArgs& args, const CornerTruth& truth, const CornersRun& run, std::ostream& out) {
+  const evaluation::CornerMetrics m = truth.scorer->finish();
+  const evaluation::CornerScoringOptions so;
+  auto num9 = [](double v) { return json_number(v, 9); };
+  TextOut f((fs::path(args.out) / "eval.json").string());
+  std::ostringstream j;
+  j << "{\n  \"scene\": " << json_string(truth.scene) << ",\n  \"true_corners\": " << truth.corners.size()
+    << ",\n  \"protocol\": \"a corner event is right when a true corner (checkerboard grid node projected through the "
+       "true pose) lies within match_radius_px of its pixel at its time; pair recall over (corner, bin) pairs with the "
+       "corner visible >= border_px inside the image and moving >= min_speed_pxps\""
+    << ",\n  \"match_radius_px\": " << num9(so.match_radius_px) << ",\n  \"bin_s\": " << num9(so.bin_ns * 1e-9)
+    << ",\n  \"min_speed_pxps\": " << num9(so.min_speed_pxps) << ",\n  \"border_px\": " << num9(so.border_px)
+    << ",\n  \"events\": " << m.events << ",\n  \"corner_events\": " << m.corner_events
+    << ",\n  \"true_positives\": " << m.true_positives << ",\n  \"precision\": " << num9(m.precision())
+    << ",\n  \"chance\": " << num9(m.chance()) << ",\n  \"event_recall\": " << num9(m.event_recall())
+    << ",\n  \"pair_recall\": " << num9(m.pair_recall()) << ",\n  \"pairs\": " << m.pairs
+    << ",\n  \"inner_pair_recall\": " << num9(m.inner_pair_recall()) << ",\n  \"inner_pairs\": " << m.inner_pairs
+    << ",\n  \"f_score\": " << num9(m.f_score()) << ",\n  \"f_error\": " << num9(1.0 - m.f_score())
+    << ",\n  \"scoring_time_s\": " << num9(run.scoring_s) << "\n}\n";
+  std::fputs(j.str().c_str(), f.get());
+  f.close();
+  char b[320];
+  std::snprintf(b, sizeof(b),
+                "ground truth  precision %.3f (chance %.3f), (corner, %.0f ms bin) recall %.3f, F %.3f against %zu true "
+                "corners; wrote eval.json\n",
+                m.precision(), m.chance(), so.bin_ns * 1e-6, m.pair_recall(), m.f_score(), truth.corners.size());
+  out << b;
+}
+
+void print_corners_summary(std::ostream& out, const CornersArgs& args, const CornersConfig& cfg, const CornersCamera& cam,
+                           const pipeline::CornerPipeline& front, const CornersRun& run, const TrackLengths& tl,
+                           const OverlayWriter* overlay) {
+  const frontend::CornerTracker* tracker = front.tracker();
+  const frontend::EfastStats& es = front.efast_stats();
+  const int64_t events = run.events, corners = front.stats().corners, outside = front.stats().outside;
+  const double duration_s = run.duration_s();
+  char buf[512];
+  std::snprintf(buf, sizeof(buf),
+                "events        %lld over %.3f s (sensor %dx%d%s)\n"
+                "corners       %lld (reduction %.1fx, %.0f corners/s, outer circle reached by %.1f%% of tested events)\n"
+                "speed         %.1f ns/event (filters + eFAST%s + corner output, one core; reading excluded)\n",
+                static_cast<long long>(events), duration_s, cam.sensor.width, cam.sensor.height,
+                cam.cal ? ", calibrated" : ", no calibration", static_cast<long long>(corners),
+                corners > 0 ? static_cast<double>(events) / static_cast<double>(corners) : 0.0,
+                duration_s > 0 ? static_cast<double>(corners) / duration_s : 0.0,
+                es.tested > 0 ? 100.0 * static_cast<double>(es.inner_passed) / static_cast<double>(es.tested) : 0.0,
+                events > 0 ? (run.processing_s - run.overlay_s) * 1e9 / static_cast<double>(events) : 0.0,
+                tracker ? (cfg.descriptors ? " + DART + tracker" : " + tracker") : "");
+  out << buf;
+  if (tracker) {
+    std::snprintf(buf, sizeof(buf), "tracks        %zu (>= %zu corner events): length mean %.1f, median %.0f, max %.0f; mean duration %.3f s\n",
+                  tl.count, cfg.tracker.min_length, tl.mean, tl.median, tl.max, tl.mean_duration_s);
+    out << buf;
+  }
+  if (outside > 0) out << "warning       " << outside << " events outside the " << cam.sensor.width << "x" << cam.sensor.height << " sensor were skipped\n";
+  out << "wrote " << args.out << "/corners.txt" << (tracker ? ", tracks.txt" : "") << ", stats.json, corners_config.yaml";
+  if (overlay) out << ", frames/ (" << overlay->written << " PNG)";
+  out << "\n";
+}
+
+}  // namespace
+
 int run_corners(const CornersArgs& args, std::ostream& out) {
   CornersConfig cfg = load_corners_config(args.config, args.set);
   if (args.filter_sae) cfg.efast.filter_sae = true;
   if (args.frames_every_ns >= 0) cfg.frames_every_ns = args.frames_every_ns;
-
   auto reader = open_dataset(args.dataset, args.dataset_options);
-  // Sensor size and camera from the calibration (--calib, else the dataset's own), never assumed.
-  std::optional<calib::CameraCalibration> cal;
-  if (!args.calib.empty()) {
-    const bool yaml = fs::path(args.calib).extension() == ".yaml" || fs::path(args.calib).extension() == ".yml";
-    if (yaml) {
-      const auto cams = calib::load_kalibr_camchain(args.calib);
-      cal = cams.front();
-    } else {
-      const SensorSize s = reader->sensor_size();
-      cal = calib::load_ecd_calib(args.calib, s.known() ? s.width : 240, s.known() ? s.height : 180);
-    }
-  } else {  // the folder's calib.yaml (`evio simulate` writes it: size of a scaled camera), else the dataset's
-    cal = find_dataset_calibration(args.dataset, "", *reader).camera;
-  }
-  SensorSize sensor = reader->sensor_size();
-  if (cal) sensor = {cal->camera.width(), cal->camera.height()};
-  if (!sensor.known()) {
-    throw InputError(args.dataset, 0, "the sensor size is unknown (no calibration in the dataset)",
-                     "--calib FILE (Kalibr camchain YAML or ECD calib.txt) or --sensor WxH");
-  }
+  const CornersCamera cam = open_corners_camera(args, *reader);
   fs::create_directories(args.out);
   {
     TextOut f((fs::path(args.out) / "corners_config.yaml").string());
@@ -218,236 +492,21 @@ int run_corners(const CornersArgs& args, std::ostream& out) {
     f.close();
   }
   std::optional<calib::PinholeCamera> camera;
-  if (cal) camera = cal->camera;
+  if (cam.cal) camera = cam.cal->camera;
   std::string why;
   if (!cfg.Validate(&why)) throw InputError(args.config.empty() ? "--filter-sae" : args.config, 0, why, "valid settings");
-  pipeline::CornerPipeline front(cfg, sensor.width, sensor.height, camera);
-  const frontend::CornerTracker* tracker = front.tracker();
+  pipeline::CornerPipeline front(cfg, cam.sensor.width, cam.sensor.height, camera);
   std::unique_ptr<OverlayWriter> overlay;
-  if (cfg.frames_every_ns > 0) {
-    overlay = std::make_unique<OverlayWriter>((fs::path(args.out) / "frames").string(), sensor.width, sensor.height, cfg);
-  }
+  if (cfg.frames_every_ns > 0)
+    overlay = std::make_unique<OverlayWriter>((fs::path(args.out) / "frames").string(), cam.sensor.width, cam.sensor.height, cfg);
+  const std::unique_ptr<CornerTruth> truth = open_corner_truth(args, cam.sensor, out);
 
-  // True corners of a simulated dataset (--gt SCENE.yaml, or DATASET/scene_resolved.yaml that
-  // `evio simulate` writes): the checkerboard grid nodes projected through the true camera pose.
-  std::string gt_scene = args.gt;
-  {
-    std::error_code ec;
-    const fs::path auto_scene = fs::path(args.dataset) / "scene_resolved.yaml";
-    if (gt_scene.empty() && !args.no_gt && fs::is_directory(args.dataset, ec) && fs::is_regular_file(auto_scene, ec))
-      gt_scene = auto_scene.string();
-  }
-  std::unique_ptr<simulator::Simulator> truth_sim;
-  std::unique_ptr<evaluation::CornerEventScorer> scorer;
-  std::vector<simulator::SceneCorner> true_corners;
-  if (!gt_scene.empty()) {
-    const simulator::SimulationConfig sc = simulator::load_simulation_config(gt_scene);
-    if (sc.simulator.camera.width() != sensor.width || sc.simulator.camera.height() != sensor.height)
-      throw InputError(gt_scene, 0,
-                       "the scene's camera is " + std::to_string(sc.simulator.camera.width()) + " x " +
-                           std::to_string(sc.simulator.camera.height()) + " px",
-                       "the scene the dataset was simulated from (" + std::to_string(sensor.width) + " x " +
-                           std::to_string(sensor.height) + " px)");
-    true_corners = sc.corners;
-    if (true_corners.empty()) {
-      out << "evio corners: " << gt_scene << " has no true corners (checkerboard planes): no eval.json\n";
-    } else {
-      truth_sim = std::make_unique<simulator::Simulator>(sc.scene, sc.trajectory, sc.simulator);
-      const simulator::Simulator* sim = truth_sim.get();
-      // Written stamp -> simulator time: minus the scene's output.clock_offset_ns, plus its time shift.
-      const int64_t shift = sc.simulator.time_shift_ns - sc.clock_offset_ns;
-      std::vector<bool> inner;
-      for (const simulator::SceneCorner& c : true_corners) inner.push_back(c.inner);
-      scorer = std::make_unique<evaluation::CornerEventScorer>(
-          sensor.width, sensor.height, static_cast<int>(true_corners.size()), inner,
-          [sim, shift, &true_corners](int64_t t_ns, std::vector<Eigen::Vector2d>* px) {
-            px->assign(true_corners.size(), Eigen::Vector2d::Constant(NAN));
-            const calib::SE3 T_c_w = sim->camera_state(t_ns + shift).T_w_c.inverse();
-            for (size_t c = 0; c < true_corners.size(); ++c) {
-              Eigen::Vector2d p;
-              if (sim->options().camera.project(T_c_w * true_corners[c].p_w, &p)) (*px)[c] = p;
-            }
-          },
-          sim->t_begin_ns() - shift, sim->t_end_ns() - shift);
-    }
-  }
-  double scoring_s = 0;
-  std::vector<uint8_t> flags;  // the chunk's corner decisions, scored after the processing timer
-
-  TextOut corners_file((fs::path(args.out) / "corners.txt").string());
-  bool zero_one = true;  // polarity convention of the input, known after the first chunk
-  std::fputs("# t[s] x y p   (eFAST corner events, polarity as in the input)\n", corners_file.get());
-
-  // tracks.txt: one line per track point, each track written when it ends (not kept in memory).
-  std::unique_ptr<TextOut> tracks_file;
-  if (tracker) {
-    tracks_file = std::make_unique<TextOut>((fs::path(args.out) / "tracks.txt").string());
-    std::fputs(cal ? "# track_id t[s] x y x_undistorted y_undistorted   (px; smoothed track positions; tracks in the order they ended)\n"
-                   : "# track_id t[s] x y   (px; smoothed track positions; tracks in the order they ended)\n",
-               tracks_file->get());
-  }
-  TrackLengthCounter lengths;
-  char line[96];
-  const auto write_tracks = [&](std::vector<frontend::CornerTrack> ended) {
-    for (const auto& t : ended) {
-      lengths.add(t);
-      for (const auto& p : t.points) {
-        *format_seconds(p.t_ns, line) = '\0';
-        std::fprintf(tracks_file->get(), "%lld %s %.3f %.3f", static_cast<long long>(t.id), line, p.x, p.y);
-        if (cal) {
-          const auto& k = cal->camera.intrinsics();
-          Eigen::Vector2d n;
-          if (cal->camera.undistort(Eigen::Vector2d((p.x - k.cx) / k.fx, (p.y - k.cy) / k.fy), &n)) {
-            std::fprintf(tracks_file->get(), " %.3f %.3f", k.fx * n.x() + k.cx, k.fy * n.y() + k.cy);
-          } else {
-            std::fputs(" nan nan", tracks_file->get());
-          }
-        }
-        std::fputc('\n', tracks_file->get());
-      }
-    }
-  };
-  Progress progress("evio corners", args.progress, "events");
-  EventBuffer chunk;
-  int64_t events = 0;
-  int64_t t_first = 0, t_last = 0;
-  double processing_s = 0, overlay_s = 0;  // overlay drawing/PNG time is not processing time
-  bool first_chunk = true;
-  for (;;) {
-    chunk.clear();
-    const size_t got = reader->read_events(&chunk, size_t{1} << 20);
-    if (got == 0) break;
-    if (first_chunk) {
-      zero_one = reader->event_report().polarity != PolarityConvention::kMinusPlusOne;
-      t_first = chunk.front().t_ns;
-      if (overlay) overlay->next_frame_ns = t_first + cfg.frames_every_ns;
-      first_chunk = false;
-    }
-    t_last = chunk.back().t_ns;
-    const auto t0 = std::chrono::steady_clock::now();
-    if (scorer) flags.assign(chunk.size(), 0);
-    size_t k = 0;
-    for (const Event& e : chunk.span()) {
-      ++events;
-      ++k;
-      if (overlay && e.x < sensor.width && e.y < sensor.height) {
-        while (e.t_ns >= overlay->next_frame_ns) {
-          const auto w0 = std::chrono::steady_clock::now();
-          overlay->write(tracker);
-          overlay->next_frame_ns += cfg.frames_every_ns;
-          overlay_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - w0).count();
-        }
-        overlay->add_event(e);
-      }
-      if (!front.process(e)) continue;
-      if (scorer) flags[k - 1] = 1;
-      char* end = format_seconds(e.t_ns, line);
-      *end = '\0';
-      std::fprintf(corners_file.get(), "%s %d %d %d\n", line, e.x, e.y, e.polarity > 0 ? 1 : (zero_one ? 0 : -1));
-      if (overlay) overlay->add_corner(e);
-    }
-    std::vector<frontend::CornerTrack> ended = front.take_finished_tracks();
-    processing_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    if (scorer) {
-      const auto s0 = std::chrono::steady_clock::now();
-      size_t i = 0;
-      for (const Event& e : chunk.span()) scorer->add(e, flags[i++] != 0);
-      scoring_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - s0).count();
-    }
-    if (tracker) write_tracks(std::move(ended));  // not processing time (as the overlays)
-    progress.update(reader->progress(), events, std::to_string(front.stats().corners) + " corners");
-  }
-  corners_file.close();
-  if (tracker) {
-    write_tracks(front.finish());
-    tracks_file->close();
-  }
-  if (overlay && events > 0) overlay->write(nullptr);
-
-  const double duration_s = events > 1 ? static_cast<double>(t_last - t_first) * 1e-9 : 0.0;
-  const TrackLengths tl = lengths.summary();
-  const frontend::EfastStats& es = front.efast_stats();
-  const int64_t corners = front.stats().corners, outside = front.stats().outside;
-  const double reduction = corners > 0 ? static_cast<double>(events) / static_cast<double>(corners) : 0.0;
-  const double ns_per_event = events > 0 ? (processing_s - overlay_s) * 1e9 / static_cast<double>(events) : 0.0;
-  const double corner_rate = duration_s > 0 ? static_cast<double>(corners) / duration_s : 0.0;
-  {
-    TextOut f((fs::path(args.out) / "stats.json").string());
-    std::ostringstream j;
-    // The model block: eFAST tests each event on its own (no frames, no model to choose); what ran.
-    const std::string stages = std::string("eFAST per event") + (tracker ? (cfg.descriptors ? " + DART + tracker" : " + tracker") : "");
-    j << "{\n  \"model\": {\"summary\": \"" << json_escape(stages + ": per-event detector, no frames, no model choice")
-      << "\", \"detector\": \"efast\", \"filter_sae\": " << (cfg.efast.filter_sae ? "true" : "false")
-      << ", \"tracker\": " << (tracker ? "true" : "false") << ", \"descriptors\": " << (cfg.descriptors ? "true" : "false")
-      << ", \"frames\": null}";
-    j << ",\n  \"dataset\": \"" << json_escape(args.dataset) << "\",\n  \"sensor\": [" << sensor.width << ", " << sensor.height
-      << "],\n  \"events\": " << events << ",\n  \"events_outside_sensor\": " << outside
-      << ",\n  \"corners\": " << corners << ",\n  \"reduction_rate\": " << json_number(reduction)
-      << ",\n  \"ns_per_event\": " << json_number(ns_per_event) << ",\n  \"duration_s\": " << json_number(duration_s)
-      << ",\n  \"corners_per_second\": " << json_number(corner_rate) << ",\n  \"filters\": {\"refractory\": "
-      << (front.refractory_passed() ? std::to_string(*front.refractory_passed()) : "null")
-      << ", \"background_activity\": "
-      << (front.background_activity_passed() ? std::to_string(*front.background_activity_passed()) : "null")
-      << "},\n  \"efast\": {\"filter_sae\": " << (cfg.efast.filter_sae ? "true" : "false") << ", \"tested\": " << es.tested
-      << ", \"inner_passed\": " << es.inner_passed << ", \"outer_share\": "
-      << json_number(es.tested > 0 ? static_cast<double>(es.inner_passed) / static_cast<double>(es.tested) : 0.0)
-      << "},\n  \"descriptors\": " << front.stats().descriptors << ",\n  \"descriptor_decisions\": "
-      << (tracker ? tracker->stats().descriptor_decisions : 0) << ",\n  \"tracks\": {\"count\": " << tl.count << ", \"mean_length\": " << json_number(tl.mean)
-      << ", \"median_length\": " << json_number(tl.median) << ", \"max_length\": " << json_number(tl.max)
-      << ", \"mean_duration_s\": " << json_number(tl.mean_duration_s) << "},\n  \"frames_written\": "
-      << (overlay ? overlay->written : 0) << "\n}\n";
-    std::fputs(j.str().c_str(), f.get());
-    f.close();
-  }
-
-  if (scorer) {
-    const evaluation::CornerMetrics m = scorer->finish();
-    const evaluation::CornerScoringOptions so;
-    auto num9 = [](double v) { return json_number(v, 9); };
-    TextOut f((fs::path(args.out) / "eval.json").string());
-    std::ostringstream j;
-    j << "{\n  \"scene\": \"" << json_escape(gt_scene) << "\",\n  \"true_corners\": " << true_corners.size()
-      << ",\n  \"protocol\": \"a corner event is right when a true corner (checkerboard grid node projected through the "
-         "true pose) lies within match_radius_px of its pixel at its time; pair recall over (corner, bin) pairs with the "
-         "corner visible >= border_px inside the image and moving >= min_speed_pxps\""
-      << ",\n  \"match_radius_px\": " << num9(so.match_radius_px) << ",\n  \"bin_s\": " << num9(so.bin_ns * 1e-9)
-      << ",\n  \"min_speed_pxps\": " << num9(so.min_speed_pxps) << ",\n  \"border_px\": " << num9(so.border_px)
-      << ",\n  \"events\": " << m.events << ",\n  \"corner_events\": " << m.corner_events
-      << ",\n  \"true_positives\": " << m.true_positives << ",\n  \"precision\": " << num9(m.precision())
-      << ",\n  \"chance\": " << num9(m.chance()) << ",\n  \"event_recall\": " << num9(m.event_recall())
-      << ",\n  \"pair_recall\": " << num9(m.pair_recall()) << ",\n  \"pairs\": " << m.pairs
-      << ",\n  \"inner_pair_recall\": " << num9(m.inner_pair_recall()) << ",\n  \"inner_pairs\": " << m.inner_pairs
-      << ",\n  \"f_score\": " << num9(m.f_score()) << ",\n  \"f_error\": " << num9(1.0 - m.f_score())
-      << ",\n  \"scoring_time_s\": " << num9(scoring_s) << "\n}\n";
-    std::fputs(j.str().c_str(), f.get());
-    f.close();
-    char b[320];
-    std::snprintf(b, sizeof(b),
-                  "ground truth  precision %.3f (chance %.3f), (corner, %.0f ms bin) recall %.3f, F %.3f against %zu true "
-                  "corners; wrote eval.json\n",
-                  m.precision(), m.chance(), so.bin_ns * 1e-6, m.pair_recall(), m.f_score(), true_corners.size());
-    out << b;
-  }
-
-  char buf[512];
-  std::snprintf(buf, sizeof(buf),
-                "events        %lld over %.3f s (sensor %dx%d%s)\n"
-                "corners       %lld (reduction %.1fx, %.0f corners/s, outer circle reached by %.1f%% of tested events)\n"
-                "speed         %.1f ns/event (filters + eFAST%s + corner output, one core; reading excluded)\n",
-                static_cast<long long>(events), duration_s, sensor.width, sensor.height,
-                cal ? ", calibrated" : ", no calibration", static_cast<long long>(corners), reduction, corner_rate,
-                es.tested > 0 ? 100.0 * static_cast<double>(es.inner_passed) / static_cast<double>(es.tested) : 0.0,
-                ns_per_event, tracker ? (cfg.descriptors ? " + DART + tracker" : " + tracker") : "");
-  out << buf;
-  if (tracker) {
-    std::snprintf(buf, sizeof(buf), "tracks        %zu (>= %zu corner events): length mean %.1f, median %.0f, max %.0f; mean duration %.3f s\n",
-                  tl.count, cfg.tracker.min_length, tl.mean, tl.median, tl.max, tl.mean_duration_s);
-    out << buf;
-  }
-  if (outside > 0) out << "warning       " << outside << " events outside the " << sensor.width << "x" << sensor.height << " sensor were skipped\n";
-  out << "wrote " << args.out << "/corners.txt" << (tracker ? ", tracks.txt" : "") << ", stats.json, corners_config.yaml";
-  if (overlay) out << ", frames/ (" << overlay->written << " PNG)";
-  out << "\n";
+  CornerFiles files(args.out, front.tracker() != nullptr, cam.cal);
+  const CornersRun run = stream_corners(args, cfg, *reader, cam.sensor, front, files, overlay.get(), truth->scorer.get());
+  const TrackLengths tl = files.lengths();
+  write_corners_stats(args, cfg, cam.sensor, front, run, tl, overlay ? overlay->written : 0);
+  if (truth->scorer) write_corners_eval(args, *truth, run, out);
+  print_corners_summary(out, args, cfg, cam, front, run, tl, overlay.get());
   return 0;
 }
 
