@@ -33,104 +33,90 @@ void write_triggers_txt(const std::string& path, const std::vector<Trigger>& tri
   if (!ok) throw InputError(path, 0, "write failed", "a writable path with free space");
 }
 
-}  // namespace
+// The events into one writer (ECD events.txt or HDF5), opened after the first chunk, when the
+// input's polarity convention and the sensor size are known. Seeks when the reader has an index,
+// else skips by reading; stops at t_end.
+class EventSink {
+ public:
+  EventSink(const ConvertArgs& args, ConvertTarget to, DatasetReader* reader) : args_(args), to_(to), reader_(reader) {}
 
-int run_convert(const ConvertArgs& args, std::ostream& out) {
-  if (args.t_start_ns && args.t_end_ns && *args.t_end_ns <= *args.t_start_ns) {
-    throw InputError("", 0, "--t-end must be after --t-start");
+  EventStatistics copy() {
+    if (args_.t_start_ns) reader_->seek_events(*args_.t_start_ns);
+    EventBuffer chunk;
+    EventStatistics written;
+    Progress progress("evio convert", args_.progress, "events written", 2.0);
+    bool past_end = false;
+    while (!past_end) {
+      chunk.clear();
+      const size_t got = reader_->read_events(&chunk, size_t{1} << 20);
+      open();
+      if (got == 0) break;
+      EventSpan s = chunk.span();
+      if (args_.t_start_ns || args_.t_end_ns) {
+        const int64_t lo = args_.t_start_ns.value_or(INT64_MIN);
+        const int64_t hi = args_.t_end_ns.value_or(INT64_MAX);
+        past_end = !s.empty() && s.back().t_ns >= hi;
+        s = s.slice(lo, hi);
+      }
+      if (h5_) {
+        h5_->write(s);
+      } else {
+        ecd_->write(s);
+      }
+      written.add(s);
+      progress.update(reader_->progress(), written.count);
+    }
+    open();
+    return written;
   }
-  ConvertTarget to = args.to;
-  if (to == ConvertTarget::kAuto) {
-    const std::string ext = fs::path(args.out).extension().string();
-    to = (ext == ".h5" || ext == ".hdf5") ? ConvertTarget::kH5 : ConvertTarget::kEcd;
-  }
-  auto reader = open_dataset(args.in, args.dataset);
-  if (to == ConvertTarget::kEcd) {
-    std::error_code ec;
-    fs::create_directories(args.out, ec);
-    if (!fs::is_directory(args.out, ec)) throw InputError(args.out, 0, "cannot create output folder", "a writable folder path");
-  } else if (!fs::path(args.out).parent_path().empty()) {
-    std::error_code ec;
-    fs::create_directories(fs::path(args.out).parent_path(), ec);
-  }
-
-  // Events: seek when the reader has an index, else skip by reading; stop at t_end.
-  if (args.t_start_ns) reader->seek_events(*args.t_start_ns);
-  // Writers are opened after the first chunk, when the input's polarity convention and the
-  // sensor size are known.
-  std::unique_ptr<EcdEventWriter> ecd_writer;
-  std::unique_ptr<H5EventWriter> h5_writer;
-  auto open_writer = [&] {
-    if (to == ConvertTarget::kH5) {
-      H5WriteOptions o;
-      o.time_unit = args.h5_time_unit;
-      o.compression = args.h5_compression == "gzip"    ? H5WriteOptions::Compression::kGzip
-                      : args.h5_compression == "blosc" ? H5WriteOptions::Compression::kBlosc
-                                                       : H5WriteOptions::Compression::kNone;
-      o.sensor = reader->sensor_size();
-      h5_writer = std::make_unique<H5EventWriter>(args.out, o);
-      return;
-    }
-    PolarityConvention pol = args.polarity;
-    if (pol == PolarityConvention::kUnknown) {
-      pol = reader->event_report().polarity == PolarityConvention::kMinusPlusOne ? PolarityConvention::kMinusPlusOne
-                                                                                  : PolarityConvention::kZeroOne;
-    }
-    ecd_writer = std::make_unique<EcdEventWriter>((fs::path(args.out) / "events.txt").string(), pol);
-  };
-  EventBuffer chunk;
-  EventStatistics written;
-  Progress progress("evio convert", args.progress, "events written", 2.0);
-  bool past_end = false;
-  bool opened = false;
-  while (!past_end) {
-    chunk.clear();
-    const size_t got = reader->read_events(&chunk, size_t{1} << 20);
-    if (!opened) {
-      open_writer();
-      opened = true;
-    }
-    if (got == 0) break;
-    EventSpan s = chunk.span();
-    if (args.t_start_ns || args.t_end_ns) {
-      const int64_t lo = args.t_start_ns.value_or(INT64_MIN);
-      const int64_t hi = args.t_end_ns.value_or(INT64_MAX);
-      past_end = !s.empty() && s.back().t_ns >= hi;
-      s = s.slice(lo, hi);
-    }
-    if (h5_writer) {
-      h5_writer->write(s);
-    } else {
-      ecd_writer->write(s);
-    }
-    written.add(s);
-    progress.update(reader->progress(), written.count);
-  }
-  if (!opened) open_writer();
-
-  if (h5_writer) {
-    const int64_t rounded = h5_writer->close();
-    out << "wrote " << args.out << " (HDF5, DSEC layout, t in " << time_unit_name(args.h5_time_unit) << ", "
-        << args.h5_compression << "): " << written.count << " events";
-    if (written.count > 0) {
-      out << " " << format_seconds(written.t_first_ns) << " .. " << format_seconds(written.t_last_ns) << " s";
-    }
-    if (rounded > 0) out << ", " << rounded << " timestamps rounded to whole microseconds";
-    out << "\n";
-    // The DSEC layout holds events only: say what the input had besides them.
-    const size_t imu = reader->read_imu().size(), frames = reader->read_frames().size(),
-                 triggers = reader->read_triggers().size();
-    const auto gt = reader->read_groundtruth();
-    if (imu + frames + triggers > 0 || (gt && !gt->empty())) {
-      log_warning("HDF5 output holds events only; not written: " + std::to_string(imu) + " IMU samples, " +
-                  std::to_string(frames) + " frames, " + std::to_string(triggers) + " triggers, " +
-                  std::to_string(gt ? gt->size() : 0) + " poses (convert to an ECD folder to keep them)");
-    }
+  // HDF5: the number of timestamps rounded to whole microseconds. ECD: 0.
+  int64_t close() {
+    if (h5_) return h5_->close();
+    ecd_->close();
     return 0;
   }
-  ecd_writer->close();
 
-  // Side streams, sliced to the same window.
+ private:
+  void open() {
+    if (h5_ || ecd_) return;
+    if (to_ == ConvertTarget::kH5) {
+      H5WriteOptions o;
+      o.time_unit = args_.h5_time_unit;
+      o.compression = args_.h5_compression == "gzip"    ? H5WriteOptions::Compression::kGzip
+                      : args_.h5_compression == "blosc" ? H5WriteOptions::Compression::kBlosc
+                                                        : H5WriteOptions::Compression::kNone;
+      o.sensor = reader_->sensor_size();
+      h5_ = std::make_unique<H5EventWriter>(args_.out, o);
+      return;
+    }
+    PolarityConvention pol = args_.polarity;
+    if (pol == PolarityConvention::kUnknown) {
+      pol = reader_->event_report().polarity == PolarityConvention::kMinusPlusOne ? PolarityConvention::kMinusPlusOne
+                                                                                   : PolarityConvention::kZeroOne;
+    }
+    ecd_ = std::make_unique<EcdEventWriter>((fs::path(args_.out) / "events.txt").string(), pol);
+  }
+
+  const ConvertArgs& args_;
+  ConvertTarget to_;
+  DatasetReader* reader_;
+  std::unique_ptr<EcdEventWriter> ecd_;
+  std::unique_ptr<H5EventWriter> h5_;
+};
+
+// The DSEC layout holds events only: say what the input had besides them.
+void warn_h5_drops(DatasetReader* reader) {
+  const size_t imu = reader->read_imu().size(), frames = reader->read_frames().size(), triggers = reader->read_triggers().size();
+  const auto gt = reader->read_groundtruth();
+  if (imu + frames + triggers > 0 || (gt && !gt->empty())) {
+    log_warning("HDF5 output holds events only; not written: " + std::to_string(imu) + " IMU samples, " +
+                std::to_string(frames) + " frames, " + std::to_string(triggers) + " triggers, " +
+                std::to_string(gt ? gt->size() : 0) + " poses (convert to an ECD folder to keep them)");
+  }
+}
+
+// The side streams of an ECD folder, sliced to the same window; returns the summary's counts.
+std::string write_side_streams(const ConvertArgs& args, DatasetReader* reader) {
   std::vector<ImuSample> imu;
   for (const ImuSample& s : reader->read_imu()) {
     if (in_window(s.t_ns, args)) imu.push_back(s);
@@ -164,13 +150,46 @@ int run_convert(const ConvertArgs& args, std::ostream& out) {
       log_warning("calibration not written: ECD calib.txt cannot hold an equidistant model");
     }
   }
+  return ", " + std::to_string(imu.size()) + " IMU samples, " + std::to_string(frames.size()) + " frames, " +
+         std::to_string(triggers.size()) + " triggers, " + std::to_string(poses) + " poses" + (calib_written ? ", calib.txt" : "");
+}
 
-  out << "wrote " << args.out << " (ECD folder): " << written.count << " events";
-  if (written.count > 0) {
-    out << " " << format_seconds(written.t_first_ns) << " .. " << format_seconds(written.t_last_ns) << " s";
+std::string event_span_text(const EventStatistics& written) {
+  return written.count > 0 ? " " + format_seconds(written.t_first_ns) + " .. " + format_seconds(written.t_last_ns) + " s" : "";
+}
+
+}  // namespace
+
+int run_convert(const ConvertArgs& args, std::ostream& out) {
+  if (args.t_start_ns && args.t_end_ns && *args.t_end_ns <= *args.t_start_ns) {
+    throw InputError("", 0, "--t-end must be after --t-start");
   }
-  out << ", " << imu.size() << " IMU samples, " << frames.size() << " frames, " << triggers.size() << " triggers, "
-      << poses << " poses" << (calib_written ? ", calib.txt" : "") << "\n";
+  ConvertTarget to = args.to;
+  if (to == ConvertTarget::kAuto) {
+    const std::string ext = fs::path(args.out).extension().string();
+    to = (ext == ".h5" || ext == ".hdf5") ? ConvertTarget::kH5 : ConvertTarget::kEcd;
+  }
+  auto reader = open_dataset(args.in, args.dataset);
+  std::error_code ec;
+  if (to == ConvertTarget::kEcd) {
+    fs::create_directories(args.out, ec);
+    if (!fs::is_directory(args.out, ec)) throw InputError(args.out, 0, "cannot create output folder", "a writable folder path");
+  } else if (!fs::path(args.out).parent_path().empty()) {
+    fs::create_directories(fs::path(args.out).parent_path(), ec);
+  }
+  EventSink sink(args, to, reader.get());
+  const EventStatistics written = sink.copy();
+  const int64_t rounded = sink.close();
+  if (to == ConvertTarget::kH5) {
+    out << "wrote " << args.out << " (HDF5, DSEC layout, t in " << time_unit_name(args.h5_time_unit) << ", "
+        << args.h5_compression << "): " << written.count << " events" << event_span_text(written);
+    if (rounded > 0) out << ", " << rounded << " timestamps rounded to whole microseconds";
+    out << "\n";
+    warn_h5_drops(reader.get());
+    return 0;
+  }
+  const std::string side = write_side_streams(args, reader.get());
+  out << "wrote " << args.out << " (ECD folder): " << written.count << " events" << event_span_text(written) << side << "\n";
   return 0;
 }
 
