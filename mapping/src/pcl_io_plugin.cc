@@ -1,7 +1,7 @@
 // The PCL half of landmark-map export, built as a plugin (libevio_pcl_io.so) that
 // landmark_map.cc loads with dlopen at the first map write or read. PCL's I/O pulls in VTK and
 // about 67 shared libraries; a program that never exports a map (every evio subcommand but vio,
-// and vio until its end) no longer loads them at start-up. Plain C entry points: no C++ types or
+// and vio until its end) does not load them. Plain C entry points: no C++ types or
 // exceptions cross the boundary.
 #include <cstddef>
 #include <exception>

@@ -24,9 +24,9 @@
 namespace evio::frontend {
 
 // Defaults chosen on the simulated checkerboard sequence (tests/frontend/corner_ground_truth.h,
-// test_corner_tracks_simulated): over gain {0.05, 0.1, 0.25} x gate {2, 3, 4} px x velocity window
-// {10, 20, 40} ms, gain 0.1 / gate 4 px / 20 ms gave the lowest error with the longest tracks
-// (1.24 px, purity 0.98, 0.36 s mean duration); a 2 px gate fragments tracks 3x.
+// test_corner_tracks_simulated) by a grid over the position gain, the gate and the velocity
+// window: the setting with the lowest error and the longest tracks; a narrower gate fragments the
+// tracks (docs/results/corners.md).
 struct CornerTrackerOptions {
   double max_distance_px = 4.0;        // association gate around the predicted position, px
   int64_t max_gap_ns = 30'000'000;     // a track with no corner event for this long ends, ns

@@ -40,10 +40,11 @@
 //   - window_ns 30 ms: edges moving at 100-300 px/s (typical hand-held DAVIS240 motion) leave a
 //     trail of 3-9 px, a visible structure that is not yet smeared over the whole context.
 //   - polarity kBoth: a corner's arms can fire with either polarity; both carry the structure.
-//   - half_wedge_shifts true: with 30-degree wedges, rotations by 15 deg (odd multiples) lost
-//     almost every match with whole-wedge shifts only (recall ~2%); measured in the test.
-//   - binning kSoft: measured in the rotation/scale test, hard binning loses most matches at
-//     rotations that are not whole wedges (15, 45, 75 deg); see the report/test output.
+//   - half_wedge_shifts true: with 30-degree wedges, a rotation by an odd multiple of 15 deg
+//     falls between two whole-wedge shifts, and whole shifts alone lose almost every such match
+//     (the rotation/scale test).
+//   - binning kSoft: with hard binning a rotation that is not a whole number of wedges (15, 45,
+//     75 deg) flips pixels between bins and most matches are lost (the rotation/scale test).
 //   - normalisation kL2, weighting kCount: see the enums.
 #pragma once
 

@@ -35,12 +35,12 @@ struct EventFrameOptions {
   int64_t max_window_ns = 50'000'000;
   // Low event rates (a hover, a low-texture view): a frame that reaches max_window_ns with fewer
   // than min_events events is not dropped but keeps its events until it has min_events, up to this
-  // long (ns, >= max_window_ns; 0: off, such frames are dropped as before). The motion compensation
+  // long (ns, >= max_window_ns; 0: off, such frames are dropped). The motion compensation
   // carries the longer window: slow motion is what makes the rate low (VioPipeline turns them on
   // once initialised).
   int64_t sparse_max_window_ns = 500'000'000;
   // ... only after this long without a frame (ns, >= 0): a short dip of the rate (a velocity
-  // reversal) drops its sparse frames as before, and only a real starvation gets the long ones,
+  // reversal) drops its sparse frames, and only a real starvation gets the long ones,
   // whose compensation over 0.1-0.5 s is less precise than a 50 ms frame's.
   int64_t sparse_after_ns = 200'000'000;
   // Shortest frame window, ns, 0..max_window_ns (default 0: N events decide). At high event rates
@@ -90,9 +90,9 @@ struct EventFrameOptions {
   // intensity at its pixel has changed by the contrast threshold since the pixel's previous event,
   // i.e. after the edge that caused it has moved C / |grad log I| onward; frames warped with the
   // true motion then lie behind the edges along the flow, by about the same distance at every
-  // speed (poster_6dof: 0.5-0.7 px at 15-180 px/s). Compensated frames move each warped event
-  // this far along the image motion at its position at the reference time (the gyro's rotation,
-  // and with use_depth the translation at the event's depth).
+  // speed (a property of the texture's edges, not of the motion; docs/results/vio.md). Compensated
+  // frames move each warped event this far along the image motion at its position at the
+  // reference time (the gyro's rotation, and with use_depth the translation at the event's depth).
   double event_lag_px = 0.0;
   // Keep the CV_32F accumulator (before normalisation) in EventFrame::accumulator.
   bool keep_accumulator = true;
@@ -159,9 +159,9 @@ class EventFrameBuilder {
   // depth: each event's point is where its bearing meets the plane (z = d_m b_z / (n_c . b)).
   void set_motion_plane(const Eigen::Vector3d& v_c, const Eigen::Vector3d& n_c, double d_m);
   // The motion of each frame at its own reference time instead (set_motion's velocity, set once,
-  // is stale by the time the next frame closes: on poster_6dof a velocity one frame old made event
-  // tracks run ahead along their motion by 0.2-0.7 px, none with the velocity at the reference
-  // time). An empty function removes it. A provider's answer is checked like set_motion's.
+  // is stale by the time the next frame closes, and a stale velocity makes event tracks run ahead
+  // along their motion; docs/design-notes.md). An empty function removes it. A provider's answer is
+  // checked like set_motion's.
   void set_motion_provider(FrameMotionProvider provider) { provider_ = std::move(provider); }
   // Turns the sparse windows (options().sparse_max_window_ns) on or off from the next frame on
   // (a caller may hold them off until its estimate can compensate long windows).

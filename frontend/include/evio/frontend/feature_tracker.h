@@ -88,8 +88,9 @@ struct FeatureTrackerOptions {
   // With template_max_age_frames > 1: a template whose frame is turned by more than this against
   // the current one (deg, from the chained IMU rotation priors; >= 0, 0 = no limit) is not used:
   // the track goes from the previous frame and its template restarts. Translation-only KLT
-  // against a turned template is biased (10-15 deg in-plane: 1.5-2.5 px, and the forward-backward
-  // check passes). A frame without the IMU rotation restarts every template.
+  // against a turned template is biased (an in-plane turn of ten degrees or more shifts it by
+  // more than a pixel, and the forward-backward check still passes). A frame without the IMU
+  // rotation restarts every template.
   double template_max_rotation_deg = 0;
   // Long-baseline verification (frames, >= 0; 0 = off): besides the RANSAC between consecutive
   // frames, the tracks that existed at an anchor frame are verified by a second 2-point RANSAC

@@ -100,17 +100,18 @@ enum class RotationMeasurementModel {
   // (Exp(phi) b to second order in phi); events with t - t_p > relative_max_interval_ns are not used.
   kRelativeMotion,
   // kRelativeMotion while the gyro drives the prediction or the particles carry velocities
-  // (kParticleVelocity), kPreviousMean otherwise (with the mean as the reference the relative
-  // measurement leaves the rotation's scale free: measured 18 deg RMS against 3.5 deg for
-  // kPreviousMean on poster_rotation, 1 s).
+  // (kParticleVelocity), kPreviousMean otherwise: with the filter's own mean as the reference the
+  // relative measurement leaves the rotation's scale free, and the estimate drifts far more than
+  // with kPreviousMean (docs/results/mosaic.md).
   kAuto,
 };
 const char* rotation_measurement_model_name(RotationMeasurementModel m);  // "previous_mean", "relative_motion", "auto"
 
 struct RotationParticleFilterOptions {
-  // Particles, >= 1. Default 100: on the known-map test sequences (0.2-1.3 M events/s) more
-  // particles did not lower the error without gyro (the likelihood compares with the filter's own
-  // past estimates, so the error behaves like odometry drift), and cost grows linearly.
+  // Particles, >= 1. Default 100: beyond that the error stops falling (it is set by the
+  // measurement, not by the sampling; without gyro the likelihood compares with the filter's own
+  // past estimates, so the error behaves like odometry drift), while the cost grows linearly
+  // (docs/results/mosaic.md, the filter alone on a known map).
   int num_particles = 100;
   // Adaptive particle count (KLD-sampling, Fox, IJRR 2003): at each resampling the rotation
   // offsets from the mean of the predicted cloud (the particles before resampling, weight above
@@ -123,11 +124,10 @@ struct RotationParticleFilterOptions {
   // A tight cloud (gyro-driven) needs few particles, a wide one keeps up to num_particles.
   // Defaults: bins of 2 mrad (about a third of a texel at 1024 texels per turn) and epsilon 0.5
   // (k = 10 bins: 22 particles); Fox's usual 0.05 asks for at least 66 particles from k = 2 on,
-  // which kept 100 of 100 on poster_rotation. `evio mosaic` uses min_particles 20 with the gyro
-  // (poster_rotation 2 s, three seeds: 20.3 particles on average, 0.100 deg RMS at 1.82 M events/s
-  // of CPU time, against 0.094 deg at 1.32 M with 100 fixed; min 10: 17.1, 0.110 deg, 1.89 M) and
-  // 40 without (fewer made the events-only error grow: 10 gave 1.82 deg against 1.56 deg on the
-  // slow 4 s scene).
+  // so a 100-particle cloud would hardly ever shrink. `evio mosaic` uses min_particles 20 with the
+  // gyro (a gyro-driven cloud is tight: about the same error as 100 fixed particles at a fraction
+  // of the cost) and 40 without (fewer let the events-only error grow); see
+  // resolve_input_defaults below and docs/design-notes.md (Mosaic).
   int min_particles = 0;
   double kld_bin_rad = 0.002;
   double kld_epsilon = 0.5;
@@ -152,11 +152,12 @@ struct RotationParticleFilterOptions {
   RotationMotionModel motion_model = RotationMotionModel::kRandomWalk;
   RotationMeasurementModel measurement_model = RotationMeasurementModel::kAuto;
   // Random-walk noise density without gyro, rad/sqrt(s), > 0 (default 0.3: 1 mrad of spread per
-  // 10 us batch; 0.1..1 were tried on the known-map sequences, 0.3 was best at 150 deg/s).
+  // 10 us batch; chosen on the known-map scenario, docs/results/mosaic.md).
   double motion_noise_rad_per_sqrt_s = 0.3;
-  // Noise density with gyro-driven prediction, rad/sqrt(s), > 0 (default 0.03; 0.03/0.1/0.3 gave
-  // 1.0/2.6/10.9 mrad RMS at 150 deg/s). Covers the gyro's white noise, residual bias and the
-  // camera-IMU time alignment, so it is far above a real gyro's noise density (~0.003 rad/s/sqrt(Hz)).
+  // Noise density with gyro-driven prediction, rad/sqrt(s), > 0 (default 0.03; a wider prediction
+  // only spreads the cloud and raises the error, docs/results/mosaic.md). Covers the gyro's white
+  // noise, residual bias and the camera-IMU time alignment, so it is far above a real gyro's noise
+  // density (~0.003 rad/s/sqrt(Hz)).
   double gyro_noise_rad_per_sqrt_s = 0.03;
   // Gyro samples older than this (relative to the prediction time) are not used, ns, > 0 (default
   // 20 ms): the filter falls back to motion_model.
@@ -185,9 +186,10 @@ struct RotationParticleFilterOptions {
   // rad/s/sqrt(s), > 0 (default 2), the rotation's own noise density on top of the velocity
   // (replaces motion_noise_rad_per_sqrt_s), rad/sqrt(s), > 0 (default 0.03), and the standard
   // deviation of the velocities set by set_velocity() around the given one, rad/s, >= 0 (default
-  // 0.5). Known map, events only, 1 s at 60 / 150 / 500 deg/s (bench/rotation_pf_table): velocity
-  // noise 1 / 2 / 4 gave 8.8 / 14.9 / 20.3, 6.5 / 6.2 / 6.3, lost / 9.7 / 11.4 mrad RMS (with a
-  // 0.05 rad path cap); rotation noise 0.01 lost the 500 deg/s run, 0.1 and 0.3 lost more runs.
+  // 0.5). The velocity noise must let the cloud follow the fastest motion (too little loses it at
+  // high speed) without widening it at slow speed; the rotation noise on top is small, since too
+  // little loses fast motion and more loses tracking elsewhere. Chosen on the known-map scenario
+  // at 60-500 deg/s (bench/rotation_pf_table; docs/results/mosaic.md).
   double velocity_noise_rad_s_per_sqrt_s = 2.0;
   double velocity_rotation_noise_rad_per_sqrt_s = 0.03;
   double initial_velocity_spread_rad_s = 0.5;
@@ -195,10 +197,9 @@ struct RotationParticleFilterOptions {
   // relative_max_interval_ns before the batch time (ns, > 0, default 100 ms), or whose path under
   // the mean velocity since then is longer than relative_max_path_rad (rad, > 0, default 0.1:
   // about 16 texels at 1024 per turn), is not used (a constant velocity over a long path is a poor
-  // model). Known map, 1 s at 60 / 150 / 500 deg/s: a 30 ms cap without a path cap lost the
-  // 60 deg/s run (too few events), 100 ms gave 7.6 / 5.5 / 7.8 mrad RMS; path caps 0.05 / 0.1 / 0.2
-  // rad with 100 ms: 14.9 / 7.9 / 7.6, 6.2 / 5.2 / 5.2, 9.7 / 6.2 / 6.0 mrad (previous_mean: 12.5 /
-  // 7.6 / 6.6 mrad).
+  // model). The time cap must leave slow motion enough events (a short cap alone starves a slow
+  // pan); the path cap bounds the constant-velocity error at high speed. Chosen on the known-map
+  // scenario at 60-500 deg/s (docs/results/mosaic.md).
   int64_t relative_max_interval_ns = 100'000'000;
   double relative_max_path_rad = 0.1;
   uint64_t seed = 1;  // seed of every random choice (process noise, resampling)
@@ -289,8 +290,9 @@ class RotationParticleFilter {
   double effective_sample_size() const;
   // Tracking quality of the latest weighted batch: the mean, over its events that some particle
   // could evaluate, of the log-likelihood (relative to the Gaussian's peak, floored by the outlier
-  // probability) under the particles' weights before the batch; NaN before any. Tracking on a
-  // good map gives about -0.4, a lost filter about -1.9 (simulated poster and shapes rotation).
+  // probability) under the particles' weights before the batch; NaN before any. A lost filter
+  // scores lower than a tracking one, but the level depends on the scene and the map:
+  // last_probe_contrast() is the scene-independent test.
   double last_batch_loglik() const { return last_loglik_; }
   int64_t last_batch_loglik_events() const { return last_loglik_events_; }
   // The latest probed batch (probe_every_batches): its weighted mean log-likelihood per event minus

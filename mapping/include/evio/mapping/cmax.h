@@ -124,12 +124,11 @@ void sample_at_warped(const ImageF& img, WarpModel m, const CmaxEvents& ev, cons
 
 enum class CmaxObjective {
   // Variance for flow and flow_accel (their warps keep areas: no collapse); mean squared gradient magnitude for
-  // rotation (30 s of simulated poster / boxes rotation, angular velocity RMS error: variance 1.53 /
-  // 2.73 deg/s, gradient magnitude 1.60 / 1.69: it weighs edges, not blobs, and the roll about the
-  // optical axis, which moves pixels least, gains most); normalised gradient magnitude for
+  // rotation (it weighs edges, not blobs, and the roll about the optical axis, which moves pixels
+  // least, gains most; docs/design-notes.md); normalised gradient magnitude for
   // similarity, similarity_accel and 6dof, whose dilation / forward motion can shrink all events into a point, which
-  // maximises the variance (measured: the variance objective collapses a similarity warp to
-  // dilation 115/s on a scene with 1.5/s).
+  // maximises the variance (the variance objective drives a similarity warp to a large spurious
+  // dilation).
   kAuto,
   kVariance,      // variance of the IWE (Gallego et al. CVPR 2018), events^2 / px^2
   kMeanSquare,    // mean of the squared IWE (Stoffregen & Kleeman CVPR 2019)
@@ -162,8 +161,8 @@ struct CmaxOptions {
   double tolerance_px = 0.005;
   // The same for the coarse levels, in that level's pixels (> 0). A coarse level only has to bring
   // the estimate into the next finer level's basin (about its blur, one pixel there), and its own
-  // optimum differs from the finer level's by more than this (ECD 10 ms window: level 1's by 0.12 of
-  // its pixels), so tightening it further buys nothing but evaluations.
+  // optimum differs from the finer level's by more than this, so tightening it further buys
+  // nothing but evaluations.
   double coarse_tolerance_px = 0.05;
   // Coarse levels use at most this many events (an even stride over the window; 0 = all), since
   // a 2^L-times smaller IWE needs fewer events for the same votes per pixel. Level 0 uses all.

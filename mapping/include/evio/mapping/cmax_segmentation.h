@@ -55,12 +55,10 @@ struct SegmentationOptions {
   int max_clusters = 5;       // automatic count: the most clusters considered (>= 1, <= 16)
   // Candidate warp models (sorted by parameter count); the count is decided on the richest, then
   // each cluster takes the simplest that is good enough; empty = {flow}. similarity_accel (a
-  // constant acceleration) is not among the defaults: on dynamic_3objects' sinusoidally moving
-  // sprites (2 seeds x 3.2 s) it raised the mean accuracy by under a point and the right count in
-  // 17 more of 127 windows, at 1.1-1.7x the time, but on real constant-velocity data (the ECD
-  // slider) small clusters took it with spurious accelerations (up to 24000 px/s^2): the 1% per
-  // extra parameter penalty does not keep it out where it is not needed. Ask for it when objects
-  // accelerate within a window.
+  // constant acceleration) is not among the defaults: on accelerating objects it gains little
+  // accuracy for its time, and on constant-velocity data small clusters take it with spurious
+  // accelerations (the per-parameter penalty does not keep it out where it is not needed;
+  // docs/results/segment.md). Ask for it when objects accelerate within a window.
   std::vector<WarpModel> models = {WarpModel::kFlow, WarpModel::kSimilarity};
   SegmentationInit init = SegmentationInit::kKmeans;
   int tile_px = 30;           // k-means initialisation: tile size of the local flows, px (>= 8)
@@ -83,9 +81,8 @@ struct SegmentationOptions {
   double new_motion_px = 1.0;
   // Automatic count: after the merges, rounds of proposals for the tiles the clusters leave
   // unexplained (as above, against the cluster holding most of the tile's events), each kept
-  // only if it survives the merges (>= 0; 0 = none). Off by default: on dynamic_3objects (2 seeds,
-  // 3.2 s, 40k and 70k-event windows) one round changed the mean accuracy by -0.03..+0.01 and the
-  // right counts by -2..+7 of 21-37 windows, at 1.3-1.7x the time.
+  // only if it survives the merges (>= 0; 0 = none). Off by default: a round did not improve the
+  // accuracy consistently and costs time (docs/results/segment.md).
   int split_rounds = 0;
   int footprint_radius_px = 4;  // dilation of a cluster's footprint for the next window, px (>= 0)
   uint64_t seed = 1;          // k-means++ seeding

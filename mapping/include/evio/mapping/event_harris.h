@@ -31,9 +31,10 @@ struct EventHarrisOptions {
   double window_sigma_px = 1.0; // its sigma, px, > 0
   double harris_k = 0.04;       // R = det M - k trace(M)^2, k in [0, 0.25)
   double threshold = 1e-6;      // minimum R of a corner event, (log intensity / px)^4, >= 0; R scales
-                                // with contrast^4 and edge strength^4 (the real ECD slider slice at
-                                // contrast 0.1: 1,478 corner events of 50,000; the simulated checkerboard,
-                                // contrast 0.2 and edges of 1.8 log: 5e-4)
+                                // with contrast^4 and edge strength^4, so the threshold goes with the
+                                // contrast and the scene (the default is for contrast 0.1 on real DAVIS
+                                // data; the simulated checkerboard's tests, contrast 0.2 and edges of
+                                // 1.8 log, use 5e-4; docs/results/corners.md)
   int nms_radius = 3;           // non-maximum suppression radius, px, 0..8 (0: none)
   int border_px = 4;            // events closer to the border are never corners, px, >= 0
   bool Validate(std::string* why) const;

@@ -74,9 +74,9 @@ struct GradientMosaicOptions {
   // Edge weight of the weighted solve: (weight_reference_std / std of the edge gradient)^2 capped
   // at 1 (edge_weights()), log units / mosaic px (>= min_gradient_std). min_gradient_std = pure
   // information weighting (weights grow with the number of updates up to the covariance floor);
-  // larger values give full weight to every edge known at least this well. Default 0.03: on 3 s of
-  // poster_rotation 0.001 / 0.003 / 0.01 / 0.03 / 0.1 gave 28.74 / 28.94 / 29.31 / 29.47 / 29.05 dB
-  // (unweighted 28.61): the error left after tracking does not shrink with a texel's update count.
+  // larger values give full weight to every edge known at least this well. Default 0.03: the
+  // error left after tracking does not shrink with a texel's update count, so weighting beyond
+  // that level does not help (docs/design-notes.md, Mosaic).
   double weight_reference_std = 3e-2;
   // Weight of an edge between two texels that are not seen but were in the camera's view
   // (mark_viewed): no events there is evidence of a small gradient, which the EKF (updated by
@@ -87,9 +87,8 @@ struct GradientMosaicOptions {
   // are not seen are known too, with the solve's value (flat where no events came), instead of
   // NaN. An unknown texel says nothing about a particle, so on a sparse scene (flat shapes with
   // edges) a particle that slides off the thin band of seen edge texels is not penalised. Default
-  // false: with the gyro (3 s / 1.5-4 s sequences) it took shapes_rotation from 0.463 to 0.339 deg
-  // RMS and boxes from 0.107 to 0.090, but poster slow from 0.218 to 0.329 and medium from 0.144 to
-  // 0.205 (texels entering the view count as known before their events are mapped).
+  // false: it helps sparse scenes and hurts densely textured ones, where texels entering the view
+  // count as known before their events are mapped (docs/design-notes.md, Mosaic).
   bool map_viewed_texels = false;
   bool Validate(std::string* why) const;
 };

@@ -1,6 +1,7 @@
 // Landmark map export: 3D points (world frame, m) with optional per-point values, written as PLY
-// (binary little-endian or ASCII) or PCD through PCL. PCL stays inside this file's .cc (it is slow
-// to compile); callers pass plain Eigen points.
+// (binary little-endian or ASCII) or PCD through PCL. PCL stays inside the plugin libevio_pcl_io.so
+// (src/pcl_io_plugin.cc), which landmark_map.cc opens at the first map write or read (PCL is slow to
+// compile and its I/O loads VTK); callers pass plain Eigen points.
 #pragma once
 
 #include <string>

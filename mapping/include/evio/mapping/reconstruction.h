@@ -155,13 +155,12 @@ class ComplementaryFilter : public LogIntensityFilter {
 // initial_variance. Between updates nothing changes (reading the image costs a copy).
 // Differences from the paper: it fuses a frame as a continuous-time measurement (Riccati gain) of
 // a frame deblurred and interpolated between its neighbours with events, which needs the next frame.
-// Measured on the simulator's HDR scene (bench/reconstruct_budget, PSNR of 115 views 17.3 ms apart):
-// the latest frame held as that continuous measurement pulled the state towards a frame up to a
-// frame period old after every event (18.4 dB); held and augmented by the events since it (causal)
-// it still let P collapse within one frame interval, counting one frame as many measurements
-// (23.2 dB at best over the noise settings); the update at the frame's time, the exact Kalman
-// update of the model above, gives 28.7 dB and costs nothing per event. Not done: deblurring frames
-// over their exposure (ideal frames, without blur and noise, give 30.2 dB).
+// Here a frame is one measurement at its own time, the exact Kalman update of the model above,
+// which is causal and costs nothing per event. Held as a continuous measurement instead, the latest
+// frame pulls the state towards a frame up to a frame period old after every event; held and
+// augmented by the events since it, it still lets P collapse within one frame interval, counting
+// one frame as many measurements (the error budget of bench/reconstruct_budget:
+// docs/results/reconstruct.md). Not done: deblurring frames over their exposure.
 struct AsyncKalmanFilterOptions {
   double contrast_on = 0.1;           // log-intensity step of an ON event, > 0
   double contrast_off = 0.1;          // step of an OFF event (subtracted), > 0

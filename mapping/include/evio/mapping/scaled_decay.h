@@ -17,7 +17,7 @@ namespace evio::mapping {
 
 // exp(a) rounded to float, for a <= ~80: e^a = 2^k e^r with k = round(a / ln 2), |r| <= ln(2)/2,
 // e^r by its Taylor polynomial of degree 7 in double (truncation below 5e-9 relative, under the
-// float rounding of 6e-8). About a third of glibc's exp() per event, and branch-free but for the
+// float rounding of 6e-8). Cheaper per event than glibc's exp(), and branch-free but for the
 // underflow test.
 inline float exp_to_float(double a) {
   if (a < -87.0) return 0.0f;

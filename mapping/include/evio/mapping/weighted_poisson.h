@@ -25,13 +25,13 @@ enum class PoissonPreconditioner {
   kNone,    // plain CG
   kJacobi,  // diag(A)^-1
   // The unweighted Laplacian's inverse (PoissonSolver::solve_laplacian; one DCT/DFT solve per
-  // iteration): exact for uniform weights. The default: on a 3 s poster_rotation mosaic (floor
-  // 0.03) 20 iterations against Jacobi 386, none 916, scaled spectral 1004.
+  // iteration): exact for uniform weights. The default: on the mosaics it needs far fewer
+  // iterations than the others (docs/design-notes.md, Mosaic).
   kSpectral,
   // S^-1/2 (-lap)^-1 S^-1/2 with S = diag(A) / diag(-lap) (each texel's mean incident edge weight):
   // the spectral inverse rescaled to the local weight level, exact for uniform weights of any value.
-  // Slower than kSpectral on every case measured (the rescaling spreads the spectrum where the
-  // weight changes from texel to texel); kept for comparison.
+  // Slower than kSpectral on the mosaics (the rescaling spreads the spectrum where the weight
+  // changes from texel to texel); kept for comparison.
   kScaledSpectral,
 };
 // "none", "jacobi", "spectral", "scaled_spectral".
@@ -41,8 +41,8 @@ struct WeightedPoissonOptions {
   // Edge weights below this are raised to it, dimensionless (in (0, 1]; weights are information
   // relative to a fully known gradient, 1). Makes A positive definite on zero-mean images; smaller
   // values let unseen texels pull less on seen ones (on exact gradients the seen error is about
-  // 0.45 x the floor) but need more iterations. Default 0.03: on 3 s mosaics the quality was the
-  // same within 0.05 dB for 1e-3..3e-2 and the iterations fell from 56 to 19.
+  // 0.45 x the floor) but need more iterations. Default 0.03: over 1e-3..3e-2 the mosaic quality
+  // does not change, and the larger floor needs the fewest iterations (docs/results/mosaic.md).
   double weight_floor = 3e-2;
   // Converged when ||b - A L||_2 <= tolerance * ||b||_2, dimensionless (> 0, < 1).
   double tolerance = 1e-4;

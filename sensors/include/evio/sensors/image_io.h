@@ -1,7 +1,7 @@
 // Image files (PNG, TIFF, JPEG, ...) through OpenCV's imgcodecs, which evio loads at the first
 // image read or write from its plugin libevio_image_io.so (calib/plugin.h): imgcodecs pulls in
-// GDAL and about 140 shared libraries, and programs that never touch an image file no longer load
-// them at start-up. Same semantics as cv::imread / cv::imwrite.
+// GDAL and about 140 shared libraries, and programs that never touch an image file do not load
+// them. Same semantics as cv::imread / cv::imwrite.
 #pragma once
 
 #include <string>

@@ -1,5 +1,5 @@
 // YAML configuration machinery shared by the simulator's scene parser and the subcommands that
-// read config files (`evio corners`, `evio vio`, `evio mosaic`): command-line overrides (`--set key.sub=value`), and a
+// read config files (`--config`): command-line overrides (`--set key.sub=value`), and a
 // Section that knows its dotted key path and YAML node, rejects unknown keys (typos are errors),
 // reads typed values with ranges and units, and turns every problem into an evio::InputError at
 // the node's line -- or, for values set on the command line, against that option.

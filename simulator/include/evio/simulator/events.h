@@ -3,7 +3,7 @@
 // L = log(I + eps); when L crosses reference +- C the pixel fires, once per crossing, at the time
 // interpolated linearly between the two rendered samples. Per-pixel thresholds with Gaussian
 // mismatch, refractory period, shot noise, leak events, hot pixels and timestamp jitter, seeded.
-// The full model (reference rules for refractory, noise and leak) is stated in sim_events.cc.
+// The full model (reference rules for refractory, noise and leak) is stated in src/events.cc.
 #pragma once
 
 #include <cstdint>

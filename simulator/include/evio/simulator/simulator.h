@@ -28,9 +28,9 @@ namespace evio::simulator {
 //   max_log_change / (largest |dL/dt| seen in the last step)   (brightness-change bound)
 // clamped to [min_step_ns, max_step_ns]. A bound of 0 disables it. Results converge as the
 // bounds shrink (events are placed by linear interpolation between renders). Default: the image
-// motion bound alone at 1 px: on the poster_6dof replay (59.8 s, 95.1 M events) halving it to
-// 0.5 px changes the event count by 0.70% and doubles the run time. The brightness bound is off by
-// default: sharp (antialiased) edges make it choose 10-50 us steps for little change in counts.
+// motion bound alone at 1 px: a finer step changes the event counts little at twice the cost
+// (docs/results/bench.md). The brightness bound is off by default: sharp (antialiased) edges make
+// it choose 10-50 us steps for little change in counts.
 struct SteppingOptions {
   double max_flow_px = 1.0;         // px per step, >= 0
   double max_log_change = 0.0;      // log-intensity units per step, >= 0 (0 = off; e.g. 0.05 = C/4 for C = 0.2)
