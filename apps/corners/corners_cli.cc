@@ -12,7 +12,7 @@ int main(int argc, char** argv) try {
   CLI::Option* dataset_opt = cli->add_option("DATASET", corners.dataset, "Dataset (any format evio reads)");
   CLI::Option* out_opt = cli->add_option("-o,--out", corners.out, "Output folder (created)");
   cli->add_option("--config", corners.config,
-                  "YAML with refractory, background_activity, efast, tracker and frames sections (README.md)");
+                  "YAML with refractory, background_activity, efast, tracker and frames sections (docs/commands/corners.md)");
   cli->add_option("--calib", corners.calib,
                   "Calibration (Kalibr camchain .yaml or ECD calib.txt); default: the dataset folder's calib.yaml, else the dataset's own. Gives the sensor "
                   "size and the undistortion of track positions");

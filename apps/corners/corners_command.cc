@@ -113,7 +113,7 @@ const yaml_config::Table<C>& corners_config_table() {
 
 CornersConfig load_corners_config(const std::string& path, const std::vector<std::string>& sets) {
   return yaml_config::read_config(corners_config_table(), CornersConfig{}, path, sets,
-                                  "a corners config YAML (see README.md, `evio corners`)");
+                                  "a corners config YAML (see docs/commands/corners.md)");
 }
 
 std::string corners_config_text(const CornersConfig& c) {

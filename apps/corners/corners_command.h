@@ -16,7 +16,7 @@
 
 namespace evio::apps {
 
-// Everything `--config FILE` can set (YAML schema in README.md; `evio corners --print-config`):
+// Everything `--config FILE` can set (docs/commands/corners.md; `evio corners --print-config`):
 // the front-end chain's options (pipeline::CornerPipelineOptions: refractory, background_activity,
 // efast, tracker, dart) plus the PNG overlays.
 struct CornersConfig : pipeline::CornerPipelineOptions {

@@ -1,5 +1,5 @@
 // `evio eval GT EST [EST2 ...]`: trajectory evaluation against ground truth (evio::evaluation):
-// a table on stdout, and with an output folder results.json (schema in README.md), per estimate
+// a table on stdout, and with an output folder results.json (schema in docs/commands/eval.md), per estimate
 // the aligned estimate, the matched ground truth (TUM) and per-pair errors (csv), and a summary
 // over runs of the same label (csv, yaml, json, LaTeX rows). Optionally runs
 // scripts/plot_trajectory.py on those outputs.
@@ -51,7 +51,7 @@ struct EstimateEvaluation {
 // Evaluates each estimate (throws evio::InputError when options are invalid or nothing associates).
 std::vector<EstimateEvaluation> evaluate_all(const EvalArgs& args);
 
-// results.json, exactly the schema of README.md (numbers printed with %.17g).
+// results.json, exactly the schema of docs/commands/eval.md (numbers printed with %.17g).
 std::string results_json(const EvalArgs& args, const std::vector<EstimateEvaluation>& results);
 
 // Summary over runs: per label and metric, count/mean/median/min/max of the runs' values

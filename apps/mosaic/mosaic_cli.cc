@@ -10,7 +10,7 @@ int main(int argc, char** argv) try {
   evio::apps::MosaicArgs mosaic;
   CLI::Option* dataset_opt = cli->add_option("DATASET", mosaic.dataset, "Dataset with events (IMU for --use-imu; any format evio reads)");
   CLI::Option* out_opt = cli->add_option("-o,--out", mosaic.out, "Output folder (created)");
-  cli->add_option("--config", mosaic.config, "Mosaic config YAML (README.md; --print-config lists every key)");
+  cli->add_option("--config", mosaic.config, "Mosaic config YAML (docs/commands/mosaic.md; --print-config lists every key)");
   cli->add_option("--calib", mosaic.calib,
                   "Calibration: Kalibr camchain .yaml or ECD calib.txt; default: the dataset folder's calib.yaml, "
                   "else the dataset's calibration");

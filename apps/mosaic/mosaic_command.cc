@@ -147,7 +147,7 @@ double process_cpu_s() {
 MosaicConfig load_mosaic_config(const std::string& path, std::string* resolved_yaml,
                                 const std::vector<std::string>& sets) {
   MosaicConfig c = read_config(mosaic_config_table(), default_mosaic_config(), path, sets,
-                               "a mosaic config YAML (see README.md, `evio mosaic`)");
+                               "a mosaic config YAML (see docs/commands/mosaic.md)");
   if (resolved_yaml) *resolved_yaml = mosaic_config_text(c);
   return c;
 }

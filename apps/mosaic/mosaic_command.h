@@ -23,7 +23,7 @@
 
 namespace evio::apps {
 
-// Everything `--config FILE` sets (YAML sections mosaic, tracker, bootstrap, output; README.md):
+// Everything `--config FILE` sets (YAML sections mosaic, tracker, bootstrap, output; docs/commands/mosaic.md):
 // the pipeline's options (mosaic.*, tracker.*, bootstrap.*, output.trajectory_ms/snapshot_ms)
 // plus what only the command uses.
 struct MosaicConfig : pipeline::MosaicPipelineOptions {

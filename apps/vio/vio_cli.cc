@@ -10,7 +10,7 @@ int main(int argc, char** argv) try {
   evio::apps::VioArgs vio;
   CLI::Option* dataset_opt = cli->add_option("DATASET", vio.dataset, "Dataset with events and IMU (any format evio reads)");
   CLI::Option* out_opt = cli->add_option("-o,--out", vio.out, "Output folder (created)");
-  cli->add_option("--config", vio.config, "VIO config YAML (README.md; examples in datasets/vio/*.yaml; --print-config lists every key)");
+  cli->add_option("--config", vio.config, "VIO config YAML (docs/commands/vio.md; examples in datasets/vio/*.yaml; --print-config lists every key)");
   cli->add_option("--calib", vio.calib,
                   "Calibration: Kalibr camchain .yaml (with imu0 noise) or ECD calib.txt; default: the dataset "
                   "folder's calib.yaml, else the dataset's calibration");

@@ -140,7 +140,7 @@ const Table<C>& vio_config_table() {
   return table;
 }
 
-const char* kVioConfigExpected = "a VIO config YAML (see README.md, `evio vio`)";
+const char* kVioConfigExpected = "a VIO config YAML (see docs/commands/vio.md)";
 const char* kVioConfigHeader =
     "# evio vio configuration, resolved: every key with the value used (comments: unit and range).\n"
     "# Readable by `evio vio --config`.\n";

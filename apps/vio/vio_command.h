@@ -17,7 +17,7 @@
 
 namespace evio::apps {
 
-// Everything `--config FILE` sets (YAML schema in README.md and datasets/vio/*.yaml): the
+// Everything `--config FILE` sets (docs/commands/vio.md and datasets/vio/*.yaml): the
 // pipeline's options (sections frontend, filters, frames, tracker, efast, corner_tracker, window,
 // init) plus the IMU noise used when neither --calib nor the dataset's calib.yaml has imu0.
 // init.method `groundtruth` is the pipeline's `given` method with the state from --gt (a

@@ -29,7 +29,7 @@ struct CmaxMotionPipelineOptions {
   // pipeline from the camera, or the sensor size without one).
   mapping::CmaxOptions cmax;
   // Windows: the defaults (CmaxWindowOptions) come from the simulated poster_rotation /
-  // boxes_rotation (DAVIS240C, 3 and 6 M events/s, up to ~250 deg/s; README, `evio flow`): a window
+  // boxes_rotation (DAVIS240C, 3 and 6 M events/s, up to ~250 deg/s; docs/results/flow.md): a window
   // needs several pixels of motion (15k events, ~5 ms: 19 deg/s RMS; 120k events or 25 ms: 1.5
   // and 2.7 deg/s), and no more than ~25 ms of it under 17 rad/s^2 (longer windows at slow motion
   // went 8-11 deg/s off); undistortion auto; 1 px dither of integer pixels.

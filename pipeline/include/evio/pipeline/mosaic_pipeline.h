@@ -73,7 +73,7 @@ struct MosaicPipelineOptions {
   // solve only. The tracker's reconstructions are always unweighted (spectral / region solves).
   // Default kInformation: on 3 s with the gyro it raised the mosaic's PSNR / SSIM against the true
   // panorama from 28.61 dB / 0.903 to 29.38 dB / 0.912 (poster_rotation) and from 19.04 / 0.753 to
-  // 19.73 / 0.774 (shapes_rotation), for one solve of about 0.4 s (README, `evio mosaic`). With it,
+  // 19.73 / 0.774 (shapes_rotation), for one solve of about 0.4 s (docs/results/mosaic.md). With it,
   // the camera's field of view is marked on the mosaic every footprint_period_ns
   // (GradientMosaic::mark_viewed) for the weights of event-free texels.
   mapping::PoissonWeighting output_weighting = mapping::PoissonWeighting::kInformation;
