@@ -9,7 +9,7 @@
 #include <sstream>
 
 #include "evio/calib/error.h"
-#include "script_path.h"
+#include "evio/calib/script_path.h"
 #include "sweep_engine.h"
 #include "sweep_results.h"
 #include "sweep_spec.h"
