@@ -6,7 +6,7 @@
 // --resume, and the report (Markdown, CSV, LaTeX, HTML) listing every cell.
 #include "sweep_command.h"
 
-#include "sweep_cluster.h"
+#include "evio/sweep/cluster.h"
 
 #include <signal.h>
 #include <sys/wait.h>
@@ -29,13 +29,16 @@
 #include "evio/calib/error.h"
 #include "evio_test/temp_dir.h"
 #include "evio_test/text_file.h"
-#include "sweep_engine.h"
-#include "sweep_report.h"
-#include "sweep_results.h"
-#include "sweep_spec.h"
+#include "evio/sweep/engine.h"
+#include "evio/sweep/report.h"
+#include "evio/sweep/results.h"
+#include "evio/sweep/spec.h"
 
-namespace evio::apps {
+namespace evio::sweep {
 namespace {
+
+using apps::run_sweep;
+using apps::SweepArgs;
 
 namespace fs = std::filesystem;
 
@@ -1011,4 +1014,4 @@ TEST(SweepExtremes, NonfiniteNumbersAreFoundInTextOutputsAndFloatTiffs) {
 }
 
 }  // namespace
-}  // namespace evio::apps
+}  // namespace evio::sweep

@@ -1,4 +1,4 @@
-#include "sweep_cluster.h"
+#include "evio/sweep/cluster.h"
 
 #include <fcntl.h>
 #include <signal.h>
@@ -24,9 +24,9 @@
 
 #include "evio/calib/error.h"
 #include "evio/calib/json.h"
-#include "sweep_results.h"
+#include "evio/sweep/results.h"
 
-namespace evio::apps {
+namespace evio::sweep {
 namespace fs = std::filesystem;
 
 namespace {
@@ -622,4 +622,4 @@ std::string slurm_array_script(const SweepEngineOptions& o, size_t count, const 
 std::unique_ptr<SweepEngine> make_parallel_engine(const SweepEngineOptions& options) { return std::make_unique<ParallelEngine>(options); }
 std::unique_ptr<SweepEngine> make_slurm_engine(const SweepEngineOptions& options) { return std::make_unique<SlurmEngine>(options); }
 
-}  // namespace evio::apps
+}  // namespace evio::sweep

@@ -1,4 +1,4 @@
-#include "sweep_results.h"
+#include "evio/sweep/results.h"
 
 #include <fcntl.h>
 #include <sys/file.h>
@@ -22,7 +22,7 @@
 #include "evio/calib/log.h"
 #include "evio/calib/json.h"
 
-namespace evio::apps {
+namespace evio::sweep {
 namespace fs = std::filesystem;
 
 namespace {
@@ -507,4 +507,4 @@ std::map<std::string, SweepRecord> latest_sweep_records(const std::vector<SweepR
   return out;
 }
 
-}  // namespace evio::apps
+}  // namespace evio::sweep
