@@ -487,9 +487,9 @@ std::string sweep_outcome_path(const SweepJob& job) {
 
 std::string sweep_outcome_json(const SweepOutcome& o) {
   std::ostringstream j;
-  j << "{\"exit_code\": " << o.exit_code << ", \"timed_out\": " << (o.timed_out ? "true" : "false") << ", \"wall_s\": " << json_number(o.wall_s)
-    << ", \"cpu_s\": " << json_number(o.cpu_s) << ", \"peak_rss_mb\": " << json_number(o.peak_rss_mb) << ", \"host\": \"" << json_escape(o.host)
-    << "\", \"started_utc\": \"" << json_escape(o.started_utc) << "\"}\n";
+  j << "{\"exit_code\": " << o.exit_code << ", \"timed_out\": " << json_bool(o.timed_out) << ", \"wall_s\": " << json_number(o.wall_s)
+    << ", \"cpu_s\": " << json_number(o.cpu_s) << ", \"peak_rss_mb\": " << json_number(o.peak_rss_mb) << ", \"host\": " << json_string(o.host)
+    << ", \"started_utc\": " << json_string(o.started_utc) << "}\n";
   return j.str();
 }
 
