@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Runs clang-tidy (the checks in .clang-tidy) over evio's sources: every module (calib, sensors,
-# frontend, backend, mapping, evaluation, pipeline, simulator) and apps, with the compile commands
+# frontend, backend, mapping, evaluation, pipeline, simulator, sweep) and apps, with the compile commands
 # of a build folder. Prints each warning and a count per check; exits 1 when there is any.
 #   scripts/tidy.sh                 every source file (a few minutes per 10 files on one core)
 #   scripts/tidy.sh --changed [REV] the .cc files changed since REV (default: HEAD), plus the .cc
@@ -18,7 +18,7 @@ if [ -z "$tidy" ]; then
   exit 2
 fi
 [ -f "$build_dir/compile_commands.json" ] || cmake -S . -B "$build_dir" -DCMAKE_BUILD_TYPE=Release >/dev/null
-modules="calib sensors frontend backend mapping evaluation pipeline simulator apps"
+modules="calib sensors frontend backend mapping evaluation pipeline simulator sweep apps"
 files=()
 if [ "${1:-}" = "--changed" ]; then
   rev=${2:-HEAD}

@@ -19,8 +19,8 @@
 #include "evio/evaluation/run_summary.h"
 #include "evio/sensors/dataset.h"
 #include "evio/calib/log.h"
+#include "evio/calib/script_path.h"
 #include "evio/sensors/time.h"
-#include "script_path.h"
 
 namespace evio::apps {
 namespace fs = std::filesystem;

@@ -4,14 +4,14 @@
 
 #include "cli_common.h"
 #include "evio/calib/error.h"
-#include "sweep_cluster.h"
+#include "evio/sweep/cluster.h"
 #include "sweep_command.h"
 
 int main(int argc, char** argv) try {
-  // The per-cell runner of the parallel and slurm engines (sweep_cluster.h), not for users.
+  // The per-cell runner of the parallel and slurm engines (evio/sweep/cluster.h), not for users.
   if (argc > 1 && std::string(argv[1]) == "--run-cell") {
     try {
-      return evio::apps::run_cell(std::vector<std::string>(argv + 1, argv + argc));
+      return evio::sweep::run_cell(std::vector<std::string>(argv + 1, argv + argc));
     } catch (const evio::InputError& e) {
       std::fprintf(stderr, "evio: error: %s\n", e.what());
       return 125;

@@ -1,8 +1,8 @@
-// evio sweep: the speed-accuracy sweep of evio's algorithms. A spec (sweep_spec.h) names datasets,
+// evio sweep: the speed-accuracy sweep of evio's algorithms. A spec (evio/sweep/spec.h) names datasets,
 // algorithms and parameter grids; every cell (dataset x algorithm entry x grid point) runs as its
-// own `evio <algorithm>` child process in DIR/cells/<cell>/ through an engine (sweep_engine.h);
-// its outcome, resources and metrics are appended to DIR/results.jsonl (sweep_results.h) and the
-// report (sweep_report.h) is written to DIR/report/. --resume reruns only cells without a
+// own `evio <algorithm>` child process in DIR/cells/<cell>/ through an engine (evio/sweep/engine.h);
+// its outcome, resources and metrics are appended to DIR/results.jsonl (evio/sweep/results.h) and the
+// report (evio/sweep/report.h) is written to DIR/report/. --resume reruns only cells without a
 // successful record.
 #pragma once
 
@@ -14,7 +14,7 @@ namespace evio::apps {
 struct SweepArgs {
   std::string spec;                     // SPEC.yaml (not needed with report_only)
   std::string out;                      // the sweep folder DIR
-  std::string engine = "local";         // how cells run (sweep_engine.h)
+  std::string engine = "local";         // how cells run (evio/sweep/engine.h)
   int jobs = 0;                         // cells at once (per host with hosts); <= 0: the number of cores
   std::string hosts;                    // parallel: GNU parallel --sshloginfile; empty: this machine
   std::string slurm_partition;          // slurm: sbatch --partition; empty: the default partition

@@ -1,12 +1,11 @@
-// `evio sweep`: spec parsing and its errors (file:line and the expected form), cell expansion,
-// the Pareto front, results.jsonl records and their atomic appends from concurrent processes, and
-// whole sweeps through the local engine with stand-in programs (shell scripts named evio-<alg>
-// that write a stats.json, fail or hang on request): every cell recorded once under --jobs 2,
-// failed and timed-out cells recorded (a killed cell with a negative exit code) and rerun by
-// --resume, and the report (Markdown, CSV, LaTeX, HTML) listing every cell.
+// `evio sweep` (run_sweep) on whole sweeps of stand-in programs (shell scripts named evio-<alg> that
+// write a stats.json, fail, crash, write NaN or hang on request), through the local engine and GNU
+// parallel: every cell recorded once under --jobs 2, generated datasets made once, failed, timed-out
+// and killed cells recorded (a killed cell with a negative exit code) and rerun by --resume, an
+// interrupted or killed sweep taking its cells with it, each cell's own peak RSS, each cell's outcome,
+// and the report (Markdown, CSV, LaTeX, HTML, plots, means over repeat keys, the outcome table)
+// listing every cell. The library's parts alone: tests/sweep/.
 #include "sweep_command.h"
-
-#include "sweep_cluster.h"
 
 #include <signal.h>
 #include <sys/wait.h>
@@ -17,269 +16,24 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
-#include <limits>
 #include <map>
 #include <set>
 #include <sstream>
 
 #include <gtest/gtest.h>
-#include <opencv2/core.hpp>
-#include <opencv2/imgcodecs.hpp>
 
 #include "evio/calib/error.h"
+#include "evio/sweep/results.h"
 #include "evio_test/temp_dir.h"
 #include "evio_test/text_file.h"
-#include "sweep_engine.h"
-#include "sweep_report.h"
-#include "sweep_results.h"
-#include "sweep_spec.h"
 
-namespace evio::apps {
+namespace evio::sweep {
 namespace {
 
+using apps::run_sweep;
+using apps::SweepArgs;
+
 namespace fs = std::filesystem;
-
-// The error message of parsing `text` as a spec in dir (empty when it parses).
-std::string spec_error(const std::string& text, const std::string& dir) {
-  try {
-    parse_sweep_spec(text, "spec.yaml", dir);
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  return {};
-}
-
-TEST(SweepSpec, ParsesDatasetsAlgorithmsAndGrids) {
-  evio_test::TempDir tmp;
-  fs::create_directories(tmp.file("rec"));
-  tmp.write("scene.yaml", "x: 1\n");
-  const SweepSpec s = parse_sweep_spec(
-      "name: t\ntimeout_s: 5\ndatasets:\n  - rec\n  - {name: sim, scene: scene.yaml, duration: 0.5, seed: 3, set: {a.b: [1, 2]}}\n"
-      "algorithms:\n  - algorithm: vio\n    variant: small\n    args: [--config, '{spec_dir}/c.yaml']\n"
-      "    grid: {frames.events_per_frame: [5000, 15000], window.size: 5}\n    timeout_s: 9\n"
-      "  - {algorithm: corners, datasets: [sim]}\n",
-      "spec.yaml", tmp.path());
-  EXPECT_EQ(s.name, "t");
-  EXPECT_EQ(s.timeout_s, 5);
-  ASSERT_EQ(s.datasets.size(), 2u);
-  EXPECT_EQ(s.datasets[0].name, "rec");
-  EXPECT_FALSE(s.datasets[0].simulated());
-  EXPECT_EQ(s.datasets[1].name, "sim");
-  EXPECT_EQ(s.datasets[1].duration_s, "0.5");
-  EXPECT_EQ(s.datasets[1].set, std::vector<std::string>{"a.b=[1, 2]"});
-  EXPECT_EQ(simulate_arguments(s.datasets[1], "/o"),
-            (std::vector<std::string>{"simulate", tmp.file("scene.yaml"), "--out", "/o", "--duration", "0.5", "--seed", "3", "--set", "a.b=[1, 2]"}));
-  ASSERT_EQ(s.algorithms.size(), 2u);
-  EXPECT_EQ(s.algorithms[0].variant, "small");
-  ASSERT_EQ(s.algorithms[0].grid.size(), 2u);
-  EXPECT_EQ(s.algorithms[0].grid[0].second, (std::vector<std::string>{"5000", "15000"}));
-  EXPECT_EQ(s.algorithms[0].grid[1].second, std::vector<std::string>{"5"});
-  EXPECT_EQ(s.algorithms[0].timeout_s, 9);
-  EXPECT_EQ(s.algorithms[1].datasets, std::vector<std::string>{"sim"});
-}
-
-TEST(SweepSpec, EnvironmentVariablesInPathsSetAndArgs) {
-  evio_test::TempDir tmp;
-  fs::create_directories(tmp.file("real/rec"));
-  tmp.write("scene.yaml", "x: 1\n");
-  ::setenv("EVIO_SWEEP_TEST_DATA", tmp.file("real").c_str(), 1);
-  const SweepSpec s = parse_sweep_spec(
-      "datasets:\n  - {name: r, path: '{env:EVIO_SWEEP_TEST_DATA}/rec'}\n"
-      "  - {name: sim, scene: scene.yaml, set: {trajectory.path: '{env:EVIO_SWEEP_TEST_DATA}/t.csv'}}\n"
-      "  - {name: sim2, scene: scene.yaml, set: ['a={env:EVIO_SWEEP_TEST_DATA}']}\n"
-      "algorithms:\n  - {algorithm: vio, args: [--calib, '{env:EVIO_SWEEP_TEST_DATA}/c.yaml']}\n",
-      "spec.yaml", tmp.path());
-  EXPECT_EQ(s.datasets[0].path, tmp.file("real/rec"));
-  EXPECT_EQ(s.datasets[1].set, std::vector<std::string>{"trajectory.path=" + tmp.file("real") + "/t.csv"});
-  EXPECT_EQ(s.datasets[2].set, std::vector<std::string>{"a=" + tmp.file("real")});
-  EXPECT_EQ(s.algorithms[0].args, (std::vector<std::string>{"--calib", tmp.file("real") + "/c.yaml"}));
-  ::unsetenv("EVIO_SWEEP_TEST_DATA");
-  const std::string e = spec_error("datasets:\n  - {name: r, path: '{env:EVIO_SWEEP_TEST_DATA}/rec'}\nalgorithms: [{algorithm: vio}]\n", tmp.path());
-  EXPECT_NE(e.find("spec.yaml:2: '{env:EVIO_SWEEP_TEST_DATA}/rec' needs the environment variable EVIO_SWEEP_TEST_DATA, which is not set"),
-            std::string::npos) << e;
-  EXPECT_NE(e.find("expected: export EVIO_SWEEP_TEST_DATA=VALUE"), std::string::npos) << e;
-}
-
-TEST(SweepSpec, ErrorsNameFileLineAndExpectedForm) {
-  evio_test::TempDir tmp;
-  fs::create_directories(tmp.file("rec"));
-  const std::string ds = "datasets: [rec]\n";
-  struct Case {
-    std::string text, error;
-  };
-  const std::vector<Case> cases = {
-      {"datasets: [rec\n", "spec.yaml:"},  // YAML syntax
-      {"- 1\n", "spec.yaml:1: the spec is not a mapping"},
-      {ds + "algorithms: []\n", "spec.yaml:2: `algorithms:` is missing or not a non-empty list"},
-      {ds + "algorithms:\n  - algorithm: vio\nfoo: 1\n", "spec.yaml:4: unknown key 'foo' in the spec"},
-      {"datasets: [nothere]\nalgorithms: [{algorithm: vio}]\n", "spec.yaml:1: dataset path " + tmp.file("nothere") + ": no such file"},
-      {ds + "algorithms:\n  - algorithm: vioo\n", "spec.yaml:3: unknown algorithm 'vioo' (expected: one of vio, mosaic, corners, flow, segment, reconstruct)"},
-      {ds + "algorithms:\n  - {algorithm: vio, datasets: [x]}\n", "spec.yaml:3: unknown dataset 'x'"},
-      {ds + "algorithms:\n  - {algorithm: vio, args: [--out, x]}\n", "spec.yaml:3: args sets --out"},
-      {ds + "algorithms:\n  - algorithm: vio\n    grid: {'a b': [1]}\n", "spec.yaml:4: grid key 'a b' is not a config key"},
-      {ds + "algorithms:\n  - algorithm: vio\n    grid:\n      a.b: []\n", "spec.yaml:5: grid key 'a.b' has no values"},
-      {ds + "algorithms:\n  - {algorithm: vio, timeout_s: soon}\n", "spec.yaml:3: timeout_s 'soon' is not a number of seconds"},
-      {"datasets: [rec, rec]\nalgorithms: [{algorithm: vio}]\n", "spec.yaml:1: two datasets named 'rec'"},
-      {"datasets: [{name: a, path: rec, duration: 1}]\nalgorithms: [{algorithm: vio}]\n", "duration, seed and set apply to a `scene` only"},
-      {"datasets: [{name: 'a/b', path: rec}]\nalgorithms: [{algorithm: vio}]\n", "name 'a/b' is not a plain name"},
-      {ds + "algorithms:\n  - algorithm: vio\n  - algorithm: vio\n", "spec.yaml:4: the cell vio-rec-"},
-  };
-  for (const Case& c : cases) {
-    std::string e = spec_error(c.text, tmp.path());
-    if (e.empty()) {  // the duplicate cell is found by the expansion
-      try {
-        expand_sweep_cells(parse_sweep_spec(c.text, "spec.yaml", tmp.path()), tmp.file("data"));
-      } catch (const InputError& x) {
-        e = x.what();
-      }
-    }
-    EXPECT_NE(e.find(c.error), std::string::npos) << "spec:\n" << c.text << "error: " << e;
-    EXPECT_NE(e.find("expected"), std::string::npos) << e;
-  }
-  EXPECT_NE(spec_error("", tmp.path()).find("the spec is not a mapping"), std::string::npos);
-}
-
-TEST(SweepCells, GridProductInOrderWithStableIds) {
-  evio_test::TempDir tmp;
-  fs::create_directories(tmp.file("rec"));
-  tmp.write("scene.yaml", "x: 1\n");
-  const std::string text =
-      "datasets: [rec, {name: sim, scene: scene.yaml}]\nalgorithms:\n"
-      "  - {algorithm: flow, args: ['{dataset}/x', '{spec_dir}'], grid: {a: [1, 2, 3], b: [x, y]}}\n"
-      "  - {algorithm: corners, datasets: [sim], timeout_s: 2}\n";
-  const SweepSpec s = parse_sweep_spec(text, "spec.yaml", tmp.path());
-  const std::vector<SweepCell> cells = expand_sweep_cells(s, tmp.file("data"));
-  ASSERT_EQ(cells.size(), 2u * 6u + 1u);
-  EXPECT_EQ(cells[0].params, (std::vector<std::pair<std::string, std::string>>{{"a", "1"}, {"b", "x"}}));
-  EXPECT_EQ(cells[1].params, (std::vector<std::pair<std::string, std::string>>{{"a", "1"}, {"b", "y"}}));
-  EXPECT_EQ(cells[5].params, (std::vector<std::pair<std::string, std::string>>{{"a", "3"}, {"b", "y"}}));
-  EXPECT_EQ(cells[0].dataset, "rec");
-  EXPECT_EQ(cells[6].dataset, "sim");
-  EXPECT_TRUE(cells[6].simulated);
-  EXPECT_EQ(cells[6].dataset_path, tmp.file("data") + "/sim");
-  EXPECT_EQ(cells[0].args, (std::vector<std::string>{tmp.file("rec") + "/x", tmp.path()}));
-  EXPECT_EQ(cells[12].algorithm, "corners");
-  EXPECT_EQ(cells[12].timeout_s, 2);
-  std::set<std::string> ids;
-  for (const SweepCell& c : cells) {
-    ids.insert(c.id);
-    EXPECT_EQ(c.id.rfind(c.algorithm + "-" + c.dataset + "-", 0), 0u) << c.id;
-  }
-  EXPECT_EQ(ids.size(), cells.size());
-  // The same spec gives the same ids (what --resume matches); another value another id.
-  EXPECT_EQ(expand_sweep_cells(parse_sweep_spec(text, "other.yaml", tmp.path()), tmp.file("data"))[3].id, cells[3].id);
-  std::string changed = text;
-  changed.replace(changed.find("[1, 2, 3]"), 9, "[1, 2, 4]");
-  const auto cells2 = expand_sweep_cells(parse_sweep_spec(changed, "spec.yaml", tmp.path()), tmp.file("data"));
-  EXPECT_EQ(cells2[0].id, cells[0].id);
-  EXPECT_NE(cells2[4].id, cells[4].id);
-}
-
-TEST(SweepPareto, KeepsCellsNoOtherBeatsInTimeAndError) {
-  // (time, error): 0 (1, 5) front, 1 (2, 3) front, 2 (3, 4) dominated by 1, 3 (2, 3.5) dominated by 1,
-  // 4 (5, 1) front, 5 NaN error left out, 6 (5, 1) equal to 4: not strictly better.
-  const std::vector<std::pair<double, double>> p = {{1, 5}, {2, 3}, {3, 4}, {2, 3.5}, {5, 1}, {0.5, NAN}, {5, 1}};
-  EXPECT_EQ(pareto_front(p), (std::vector<size_t>{0, 1, 4}));
-  EXPECT_TRUE(pareto_front({}).empty());
-}
-
-TEST(SweepResults, VioMetricsReadBothTrajectoriesOfEvalJson) {
-  evio_test::TempDir tmp;
-  tmp.write("eval.json",
-            "{\"estimates\": [{\"ate\": {\"trans_m\": {\"rmse\": 0.02}}, \"mean_position_error_percent\": 0.25,"
-            " \"yaw_drift_deg_per_m\": 0.03, \"final_yaw_error_deg\": -0.5},"
-            " {\"mean_position_error_percent\": 0.375}]}\n");
-  tmp.write("stats.json", "{\"sequence_duration_s\": 10, \"keyframes\": 40}\n");
-  SweepRecord r;
-  read_cell_metrics("vio", tmp.path(), &r);
-  EXPECT_EQ(r.metric("ate_rmse_m"), 0.02);
-  EXPECT_EQ(r.metric("mean_position_error_percent"), 0.25);
-  EXPECT_EQ(r.metric("mean_position_error_percent_causal"), 0.375);  // trajectory_causal.tum
-  EXPECT_EQ(r.metric("final_yaw_error_deg"), -0.5);
-  EXPECT_EQ(r.metric("keyframes"), 40);
-  EXPECT_TRUE(std::isnan(r.metric("rotation_only_keyframes")));
-  EXPECT_EQ(r.duration_s, 10);
-}
-
-SweepRecord example_record(const std::string& cell, int exit_code) {
-  SweepRecord r;
-  r.cell = cell;
-  r.algorithm = "flow";
-  r.dataset = "d \"quoted\"";
-  r.params = {{"window.events", "30000"}, {"cmax.model", "rotation"}, {"list", "[1, 2]"}};
-  r.args = {"--model", "rotation"};
-  r.exit_code = exit_code;
-  r.timed_out = exit_code == -9;
-  r.wall_s = 1.5;
-  r.cpu_s = 1.25;
-  r.peak_rss_mb = 33;
-  r.duration_s = 2;
-  r.metrics = {{"angular_velocity_rms_degps", 1.3125}, {"windows", NAN}};
-  r.error_metric = "angular_velocity_rms_degps";
-  r.note = "a note";
-  return r;
-}
-
-TEST(SweepResults, RecordIsOneJsonLineThatReadsBack) {
-  const SweepRecord r = example_record("flow-d-00000001", -9);
-  const std::string line = sweep_record_json(r);
-  ASSERT_EQ(line.back(), '\n');
-  EXPECT_EQ(line.find('\n'), line.size() - 1);
-  for (const char* key : {"\"cell\": ", "\"algorithm\": ", "\"dataset\": ", "\"params\": {", "\"exit_code\": -9", "\"wall_s\": 1.5",
-                          "\"cpu_s\": 1.25", "\"peak_rss_mb\": 33", "\"metrics\": {", "\"windows\": null", "\"window.events\": 30000",
-                          "\"cmax.model\": \"rotation\"", "\"real_time_factor\": 0.75"}) {
-    EXPECT_NE(line.find(key), std::string::npos) << key << " in " << line;
-  }
-  evio_test::TempDir tmp;
-  const std::string path = tmp.file("results.jsonl");
-  append_sweep_record(path, r);
-  { std::ofstream(path, std::ios::app) << "{\"cell\": \"torn"; }  // a torn line is skipped
-  append_sweep_record(path, example_record("flow-d-00000001", 0));
-  const std::vector<SweepRecord> back = read_sweep_records(path);
-  ASSERT_EQ(back.size(), 2u);  // the torn line is skipped, the record after it is whole
-  EXPECT_EQ(back[0].exit_code, -9);
-  EXPECT_TRUE(back[0].timed_out);
-  EXPECT_EQ(back[0].dataset, "d \"quoted\"");
-  EXPECT_EQ(back[0].params, r.params);
-  EXPECT_EQ(back[0].args, r.args);
-  EXPECT_EQ(back[0].metric("angular_velocity_rms_degps"), 1.3125);
-  EXPECT_TRUE(std::isnan(back[0].metric("windows")));
-  EXPECT_EQ(back[0].error_metric, "angular_velocity_rms_degps");
-  EXPECT_EQ(back[1].exit_code, 0);
-  EXPECT_EQ(latest_sweep_records(back).at("flow-d-00000001").exit_code, 0);
-}
-
-TEST(SweepResults, ConcurrentAppendsFromProcessesNeverInterleave) {
-  evio_test::TempDir tmp;
-  const std::string path = tmp.file("results.jsonl");
-  const int kProcs = 4, kLines = 100;
-  std::vector<pid_t> pids;
-  for (int p = 0; p < kProcs; ++p) {
-    const pid_t pid = fork();
-    ASSERT_GE(pid, 0);
-    if (pid == 0) {
-      for (int i = 0; i < kLines; ++i) {
-        SweepRecord r = example_record("cell-" + std::to_string(p) + "-" + std::to_string(i), 0);
-        r.args.assign(1, std::string(9000, 'a' + p));  // longer than PIPE_BUF
-        append_sweep_record(path, r);
-      }
-      _exit(0);
-    }
-    pids.push_back(pid);
-  }
-  for (pid_t pid : pids) {
-    int status = 0;
-    waitpid(pid, &status, 0);
-    EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0);
-  }
-  const std::vector<SweepRecord> back = read_sweep_records(path);
-  ASSERT_EQ(back.size(), static_cast<size_t>(kProcs * kLines));
-  for (const SweepRecord& r : back) {
-    ASSERT_EQ(r.args.size(), 1u);
-    EXPECT_EQ(r.args[0], std::string(9000, r.args[0][0]));
-  }
-  EXPECT_EQ(latest_sweep_records(back).size(), static_cast<size_t>(kProcs * kLines));
-}
 
 // Stand-ins for evio-<algorithm> in a folder: DATASET --out DIR -q [--marker FILE] [--set k=v]...
 // --set err=X writes X as the flow error (and the corners count), fail=1 exits 1, and --marker FILE
@@ -545,119 +299,6 @@ TEST(SweepRun, UnknownEngineIsAnError) {
   EXPECT_FALSE(fs::exists(a.out + "/results.jsonl"));
 }
 
-TEST(SweepRunner, OutcomeJsonAndRunnerArgumentsReadBack) {
-  SweepOutcome o;
-  o.exit_code = -9;
-  o.timed_out = true;
-  o.wall_s = 1.25;
-  o.cpu_s = 0.5;
-  o.peak_rss_mb = 12.5;
-  o.host = "node \"7\"";
-  o.started_utc = "2026-11-27T20:00:00Z";
-  SweepOutcome back;
-  ASSERT_TRUE(parse_sweep_outcome(sweep_outcome_json(o), &back));
-  EXPECT_EQ(back.exit_code, -9);
-  EXPECT_TRUE(back.timed_out);
-  EXPECT_EQ(back.wall_s, 1.25);
-  EXPECT_EQ(back.cpu_s, 0.5);
-  EXPECT_EQ(back.peak_rss_mb, 12.5);
-  EXPECT_EQ(back.host, o.host);
-  EXPECT_EQ(back.started_utc, o.started_utc);
-  EXPECT_FALSE(parse_sweep_outcome("", &back));
-  EXPECT_FALSE(parse_sweep_outcome("{\"exit_code\": 0, \"wall", &back));  // a torn file is no outcome
-
-  SweepJob j;
-  j.program = "/p/evio-flow";
-  j.args = {"rec", "--out", "c/out", "--set", "a=b c"};
-  j.stdout_path = "c/stdout.log";
-  j.stderr_path = "c/stderr.log";
-  j.timeout_s = 2.5;
-  EXPECT_EQ(sweep_outcome_path(j), "c/outcome.json");
-  std::string outcome;
-  const SweepJob parsed = parse_run_cell_arguments(run_cell_arguments(j), &outcome);
-  EXPECT_EQ(outcome, "c/outcome.json");
-  EXPECT_EQ(parsed.program, j.program);
-  EXPECT_EQ(parsed.args, j.args);
-  EXPECT_EQ(parsed.stdout_path, j.stdout_path);
-  EXPECT_EQ(parsed.stderr_path, j.stderr_path);
-  EXPECT_EQ(parsed.timeout_s, 2.5);
-  try {
-    parse_run_cell_arguments({"--run-cell", "o.json", "--stdout", "x", "--", "p"}, &outcome);
-    ADD_FAILURE() << "incomplete arguments accepted";
-  } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("expected: --run-cell OUTCOME.json --timeout S"), std::string::npos) << e.what();
-  }
-}
-
-TEST(SweepRunner, RunCellWritesTheOutcomeAndExitsWithTheJobsCode) {
-  evio_test::TempDir tmp;
-  SweepJob j;
-  j.program = "/bin/sh";
-  j.args = {"-c", "echo out; echo err >&2; exit 3"};
-  j.stdout_path = tmp.file("a/b/stdout.log");  // the runner creates the folders
-  j.stderr_path = tmp.file("a/b/stderr.log");
-  EXPECT_EQ(run_cell(run_cell_arguments(j)), 3);
-  SweepOutcome o;
-  ASSERT_TRUE(parse_sweep_outcome(evio_test::read_text(tmp.file("a/b/outcome.json")), &o));
-  EXPECT_EQ(o.exit_code, 3);
-  EXPECT_GE(o.wall_s, 0);
-  EXPECT_FALSE(o.host.empty());
-  EXPECT_EQ(evio_test::read_text(j.stdout_path), "out\n");
-  EXPECT_EQ(evio_test::read_text(j.stderr_path), "err\n");
-  EXPECT_FALSE(fs::exists(tmp.file("a/b/outcome.json.tmp" + std::to_string(getpid()))));
-  // Past its timeout the job is killed: -9 in the outcome, 128 + 9 as the runner's code.
-  j.args = {"-c", "sleep 5"};
-  j.timeout_s = 0.2;
-  EXPECT_EQ(run_cell(run_cell_arguments(j)), 137);
-  ASSERT_TRUE(parse_sweep_outcome(evio_test::read_text(tmp.file("a/b/outcome.json")), &o));
-  EXPECT_EQ(o.exit_code, -9);
-  EXPECT_TRUE(o.timed_out);
-  EXPECT_LT(o.wall_s, 3);
-}
-
-TEST(SweepParallel, JoblogLinesAreReadOnceComplete) {
-  const std::string log =
-      "Seq\tHost\tStarttime\tJobRuntime\tSend\tReceive\tExitval\tSignal\tCommand\n"
-      "2\t:\t1764273600.123\t0.512\t0\t0\t0\t0\teval a\n"
-      "1\tevio-b\t1764273600.100\t1.250\t10\t20\t137\t0\teval b\n"
-      "3\t:\t1764273600.200\t0.100\t0\t0\t255\t9\teval c\n"
-      "4\t:\t1764273600.300\t0.1";  // still being written
-  const std::vector<ParallelJoblogEntry> e = parse_parallel_joblog(log);
-  ASSERT_EQ(e.size(), 3u);
-  EXPECT_EQ(e[0].seq, 2u);
-  EXPECT_EQ(e[0].host, ":");
-  EXPECT_EQ(e[1].seq, 1u);
-  EXPECT_EQ(e[1].host, "evio-b");
-  EXPECT_EQ(e[1].runtime_s, 1.25);
-  EXPECT_EQ(e[1].exit_value, 137);
-  EXPECT_EQ(e[2].signal, 9);
-}
-
-TEST(SweepSlurm, ArrayScriptAndExitCodes) {
-  SweepEngineOptions o;
-  o.jobs = 3;
-  o.dir = "/shared/sweep";
-  o.slurm_partition = "short";
-  o.slurm_args = "--mem=4G  --qos=low";
-  const std::string s = slurm_array_script(o, 10, "/shared/sweep/slurm/run1.jobs", "/shared/sweep/slurm/run1", 150);
-  EXPECT_EQ(s.rfind("#!/bin/bash\n", 0), 0u);
-  for (const char* line : {"#SBATCH --array=0-9%3\n", "#SBATCH --output=/shared/sweep/slurm/run1-%a.out\n",
-                           "#SBATCH --error=/shared/sweep/slurm/run1-%a.err\n", "#SBATCH --chdir=/shared/sweep\n",
-                           "#SBATCH --time=4\n", "#SBATCH --partition=short\n", "#SBATCH --mem=4G\n", "#SBATCH --qos=low\n",
-                           "sed -n \"$((SLURM_ARRAY_TASK_ID + 1))p\" /shared/sweep/slurm/run1.jobs"}) {
-    EXPECT_NE(s.find(line), std::string::npos) << line << " not in\n" << s;
-  }
-  o.jobs = 0;
-  o.slurm_partition.clear();
-  const std::string t = slurm_array_script(o, 1, "j", "l", -1);
-  EXPECT_NE(t.find("#SBATCH --array=0-0\n"), std::string::npos) << t;
-  EXPECT_EQ(t.find("--time"), std::string::npos) << t;
-  EXPECT_EQ(t.find("--partition"), std::string::npos) << t;
-  EXPECT_EQ(slurm_exit_code("0:0"), 0);
-  EXPECT_EQ(slurm_exit_code("1:0"), 1);
-  EXPECT_EQ(slurm_exit_code("0:9"), -9);
-}
-
 bool have_parallel() { return std::system("parallel --version > /dev/null 2>&1") == 0; }
 
 // The metrics of each cell, by cell id, as text ("name=value ..."; NaN compares equal to NaN).
@@ -846,15 +487,6 @@ TEST(SweepReport, MeansOverRepeatKeysWithTheirSpreadAndFront) {
   check();
 }
 
-TEST(SweepSpec, MeanOverNamesGridKeys) {
-  evio_test::TempDir tmp;
-  const std::string err = spec_error("mean_over: [tracker.seed]\ndatasets: [{name: a, path: .}]\nalgorithms:\n"
-                                     "  - {algorithm: vio, grid: {frames.events_per_frame: [1, 2]}}\n", tmp.path());
-  EXPECT_NE(err.find("spec.yaml:1: mean_over key 'tracker.seed' is not a grid key of any algorithm entry"), std::string::npos) << err;
-  EXPECT_EQ(spec_error("mean_over: tracker.seed\ndatasets: [{name: a, path: .}]\nalgorithms:\n"
-                       "  - {algorithm: vio, grid: {tracker.seed: [1, 2]}}\n", tmp.path()), "");
-}
-
 TEST(SweepReport, SaysSoWhenNoCellHasAFiniteError) {
   evio_test::TempDir tmp;
   const SweepArgs a = fake_sweep(tmp, "datasets: [rec]\nalgorithms: [{algorithm: flow}]\n");  // err: null
@@ -976,39 +608,7 @@ TEST(SweepExtremes, AllOkSweepHasNoOutcomeTableUnlessAsked) {
   const std::string md = evio_test::read_text(a.out + "/report/pareto.md");
   EXPECT_NE(md.find("## Outcomes"), std::string::npos);
   EXPECT_NE(md.find("| rec | ok |"), std::string::npos) << md;
-  EXPECT_NE(spec_error("report: [pareto]\ndatasets: [rec]\nalgorithms: [{algorithm: flow}]\n", tmp.file("")).find("unknown report section 'pareto'"), std::string::npos);
-  EXPECT_NE(spec_error("accept_errors: maybe\ndatasets: [rec]\nalgorithms: [{algorithm: flow}]\n", tmp.file("")).find("accept_errors 'maybe' is not true or false"), std::string::npos);
-}
-
-TEST(SweepExtremes, NonfiniteNumbersAreFoundInTextOutputsAndFloatTiffs) {
-  evio_test::TempDir tmp;
-  const std::string out = tmp.file("out");
-  fs::create_directories(out + "/images");
-  std::ofstream(out + "/images.txt") << "0.1 images/frame_00000000.png\n";
-  std::ofstream(out + "/stats.json") << "{\"images\": 2, \"info\": \"nanoflann infinity-free\", \"t\": 1e-9}\n";
-  cv::Mat img(4, 5, CV_32F, cv::Scalar(0.5));
-  ASSERT_TRUE(cv::imwrite(out + "/images/frame_00000000.tiff", img));
-  EXPECT_EQ(find_nonfinite_output("reconstruct", out), "");
-  img.at<float>(2, 3) = std::numeric_limits<float>::infinity();
-  ASSERT_TRUE(cv::imwrite(out + "/images/frame_00000001.tiff", img));
-  EXPECT_EQ(find_nonfinite_output("reconstruct", out), "images/frame_00000001.tiff: pixel (3, 2) is Inf");
-  // mosaic: NaN marks the panorama's unseen pixels; it counts only where panorama_seen.png says seen.
-  cv::Mat pano(4, 5, CV_32F, cv::Scalar(std::numeric_limits<float>::quiet_NaN()));
-  pano.at<float>(1, 1) = -2.0f;
-  cv::Mat seen(4, 5, CV_8U, cv::Scalar(0));
-  seen.at<uint8_t>(1, 1) = 255;
-  ASSERT_TRUE(cv::imwrite(out + "/panorama_log.tiff", pano));
-  ASSERT_TRUE(cv::imwrite(out + "/panorama_seen.png", seen));
-  EXPECT_EQ(find_nonfinite_output("mosaic", out), "");
-  seen.at<uint8_t>(3, 4) = 255;
-  ASSERT_TRUE(cv::imwrite(out + "/panorama_seen.png", seen));
-  EXPECT_EQ(find_nonfinite_output("mosaic", out), "panorama_log.tiff: pixel (4, 3) is NaN where panorama_seen.png marks it seen");
-  std::ofstream(out + "/stats.json") << "{\"images\": 2, \"mean\": NaN}\n";
-  std::ofstream(out + "/trajectory.tum") << "1.0 0 0 0 0 0 0 1\n2.0 inf 0 0 0 0 0 1\n";
-  EXPECT_EQ(find_nonfinite_output("vio", out), "trajectory.tum:2: inf");
-  EXPECT_EQ(find_nonfinite_output("flow", out), "stats.json:1: NaN");
-  EXPECT_EQ(find_nonfinite_output("corners", tmp.file("absent")), "");
 }
 
 }  // namespace
-}  // namespace evio::apps
+}  // namespace evio::sweep

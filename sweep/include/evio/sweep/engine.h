@@ -2,7 +2,7 @@
 // each, with its log files and timeout) and reports each job's outcome as it ends: exit code
 // (negative: the signal that ended it), wall and CPU time and peak RSS of the child. `local` is a
 // bounded pool of child processes on this machine (fork/exec, wait4); `parallel` (GNU parallel, on
-// this machine or over ssh with --hosts) and `slurm` (a job array) are in sweep_cluster.h: they run
+// this machine or over ssh with --hosts) and `slurm` (a job array) are in cluster.h: they run
 // each job through `evio-sweep --run-cell` (run_job below on the machine that runs it), which writes
 // the outcome as JSON next to the job's logs, so every engine measures the same way.
 #pragma once
@@ -12,7 +12,7 @@
 #include <string>
 #include <vector>
 
-namespace evio::apps {
+namespace evio::sweep {
 
 struct SweepJob {
   std::string program;            // executable path
@@ -81,4 +81,4 @@ void request_sweep_stop();
 bool sweep_stop_requested();
 void clear_sweep_stop();
 
-}  // namespace evio::apps
+}  // namespace evio::sweep

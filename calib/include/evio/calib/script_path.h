@@ -4,10 +4,10 @@
 
 #include <string>
 
-namespace evio::apps {
+namespace evio {
 
 // given when not empty; else the first existing of <source>/scripts/<name> and
 // <prefix>/share/evio/scripts/<name> (prefix from /proc/self/exe); empty when none exists.
 std::string find_evio_script(const std::string& name, const std::string& given = {});
 
-}  // namespace evio::apps
+}  // namespace evio

@@ -1,4 +1,4 @@
-#include "sweep_report.h"
+#include "evio/sweep/report.h"
 
 #include <algorithm>
 #include <cmath>
@@ -9,12 +9,12 @@
 #include <sstream>
 
 #include "evio/calib/error.h"
-#include "script_path.h"
-#include "sweep_engine.h"
-#include "sweep_results.h"
-#include "sweep_spec.h"
+#include "evio/calib/script_path.h"
+#include "evio/sweep/engine.h"
+#include "evio/sweep/results.h"
+#include "evio/sweep/spec.h"
 
-namespace evio::apps {
+namespace evio::sweep {
 namespace fs = std::filesystem;
 
 namespace {
@@ -643,4 +643,4 @@ SweepReportResult write_sweep_report(const SweepReportOptions& opts) {
   return res;
 }
 
-}  // namespace evio::apps
+}  // namespace evio::sweep

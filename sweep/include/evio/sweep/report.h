@@ -8,7 +8,7 @@
 #include <utility>
 #include <vector>
 
-namespace evio::apps {
+namespace evio::sweep {
 
 // Indices of the Pareto-optimal points of (time, error) pairs, fastest first: a point is kept when
 // no other point has time <= and error <= with one of them strictly smaller. Points with a
@@ -38,4 +38,4 @@ struct SweepReportResult {
 // not ok or opts.extremes is set. Throws InputError when there is no record to report.
 SweepReportResult write_sweep_report(const SweepReportOptions& opts);
 
-}  // namespace evio::apps
+}  // namespace evio::sweep

@@ -7,7 +7,7 @@
 #include <utility>
 #include <vector>
 
-namespace evio::apps {
+namespace evio::sweep {
 
 // One dataset of the sweep: a recording evio reads (`path`), a simulator scene (`scene`) that the
 // sweep generates once into OUT/data/<name>/ with `evio simulate`, or the output of an external
@@ -90,4 +90,4 @@ std::vector<SweepCell> expand_sweep_cells(const SweepSpec& spec, const std::stri
 // The evio simulate arguments that generate a simulated dataset into out_dir (without the program).
 std::vector<std::string> simulate_arguments(const SweepDataset& d, const std::string& out_dir);
 
-}  // namespace evio::apps
+}  // namespace evio::sweep

@@ -1,7 +1,7 @@
-#include "sweep_engine.h"
+#include "evio/sweep/engine.h"
 
-#include "sweep_cluster.h"
-#include "sweep_results.h"
+#include "evio/sweep/cluster.h"
+#include "evio/sweep/results.h"
 
 #include <fcntl.h>
 #include <signal.h>
@@ -20,7 +20,7 @@
 #include <stdexcept>
 #include <thread>
 
-namespace evio::apps {
+namespace evio::sweep {
 
 namespace {
 
@@ -124,7 +124,7 @@ void kill_group(pid_t pid) {
   if (kill(-pid, SIGKILL) != 0) kill(pid, SIGKILL);
 }
 
-// The job as `runner --run-cell ...` (sweep_cluster.h): the runner applies the job's timeout itself;
+// The job as `runner --run-cell ...` (cluster.h): the runner applies the job's timeout itself;
 // this engine kills it only 30 s after that (a runner that hangs). Its own messages go to
 // runner.log beside the job's logs; a stale outcome file is removed first.
 SweepJob through_runner(const SweepJob& job, const std::string& runner) {
@@ -156,7 +156,7 @@ SweepOutcome runner_outcome(const SweepJob& job, const SweepOutcome& runner) {
 }
 
 // At most `jobs` children at once; a child past its timeout is killed with its process group. With
-// a runner, each job runs as `runner --run-cell ...` (sweep_engine.h, "Peak RSS").
+// a runner, each job runs as `runner --run-cell ...` (engine.h, "Peak RSS").
 class LocalEngine : public SweepEngine {
  public:
   explicit LocalEngine(int jobs, std::string runner = {})
@@ -245,4 +245,4 @@ void request_sweep_stop() { g_stop = 1; }
 bool sweep_stop_requested() { return g_stop != 0; }
 void clear_sweep_stop() { g_stop = 0; }
 
-}  // namespace evio::apps
+}  // namespace evio::sweep

@@ -1,4 +1,4 @@
-#include "script_path.h"
+#include "evio/calib/script_path.h"
 
 #include <filesystem>
 #include <vector>
@@ -7,7 +7,7 @@
 #define EVIO_SCRIPTS_DIR ""
 #endif
 
-namespace evio::apps {
+namespace evio {
 namespace fs = std::filesystem;
 
 std::string find_evio_script(const std::string& name, const std::string& given) {
@@ -28,4 +28,4 @@ std::string find_evio_script(const std::string& name, const std::string& given) 
   return {};
 }
 
-}  // namespace evio::apps
+}  // namespace evio

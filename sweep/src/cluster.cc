@@ -1,4 +1,4 @@
-#include "sweep_cluster.h"
+#include "evio/sweep/cluster.h"
 
 #include <fcntl.h>
 #include <signal.h>
@@ -24,9 +24,9 @@
 
 #include "evio/calib/error.h"
 #include "evio/calib/json.h"
-#include "sweep_results.h"
+#include "evio/sweep/results.h"
 
-namespace evio::apps {
+namespace evio::sweep {
 namespace fs = std::filesystem;
 
 namespace {
@@ -487,9 +487,9 @@ std::string sweep_outcome_path(const SweepJob& job) {
 
 std::string sweep_outcome_json(const SweepOutcome& o) {
   std::ostringstream j;
-  j << "{\"exit_code\": " << o.exit_code << ", \"timed_out\": " << (o.timed_out ? "true" : "false") << ", \"wall_s\": " << json_number(o.wall_s)
-    << ", \"cpu_s\": " << json_number(o.cpu_s) << ", \"peak_rss_mb\": " << json_number(o.peak_rss_mb) << ", \"host\": \"" << json_escape(o.host)
-    << "\", \"started_utc\": \"" << json_escape(o.started_utc) << "\"}\n";
+  j << "{\"exit_code\": " << o.exit_code << ", \"timed_out\": " << json_bool(o.timed_out) << ", \"wall_s\": " << json_number(o.wall_s)
+    << ", \"cpu_s\": " << json_number(o.cpu_s) << ", \"peak_rss_mb\": " << json_number(o.peak_rss_mb) << ", \"host\": " << json_string(o.host)
+    << ", \"started_utc\": " << json_string(o.started_utc) << "}\n";
   return j.str();
 }
 
@@ -622,4 +622,4 @@ std::string slurm_array_script(const SweepEngineOptions& o, size_t count, const 
 std::unique_ptr<SweepEngine> make_parallel_engine(const SweepEngineOptions& options) { return std::make_unique<ParallelEngine>(options); }
 std::unique_ptr<SweepEngine> make_slurm_engine(const SweepEngineOptions& options) { return std::make_unique<SlurmEngine>(options); }
 
-}  // namespace evio::apps
+}  // namespace evio::sweep

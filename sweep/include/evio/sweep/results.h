@@ -9,7 +9,7 @@
 #include <utility>
 #include <vector>
 
-namespace evio::apps {
+namespace evio::sweep {
 
 struct SweepRecord {
   std::string cell, algorithm, variant, dataset, dataset_path;
@@ -83,4 +83,4 @@ void sweep_write_file(const std::string& path, const std::string& text);
 // The last record of each cell.
 std::map<std::string, SweepRecord> latest_sweep_records(const std::vector<SweepRecord>& records);
 
-}  // namespace evio::apps
+}  // namespace evio::sweep

@@ -1,4 +1,4 @@
-#include "sweep_spec.h"
+#include "evio/sweep/spec.h"
 
 #include <yaml-cpp/yaml.h>
 
@@ -15,7 +15,7 @@
 
 #include "evio/calib/error.h"
 
-namespace evio::apps {
+namespace evio::sweep {
 namespace fs = std::filesystem;
 
 namespace {
@@ -377,4 +377,4 @@ std::vector<SweepCell> expand_sweep_cells(const SweepSpec& spec, const std::stri
   return cells;
 }
 
-}  // namespace evio::apps
+}  // namespace evio::sweep

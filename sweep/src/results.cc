@@ -1,4 +1,4 @@
-#include "sweep_results.h"
+#include "evio/sweep/results.h"
 
 #include <fcntl.h>
 #include <sys/file.h>
@@ -22,7 +22,7 @@
 #include "evio/calib/log.h"
 #include "evio/calib/json.h"
 
-namespace evio::apps {
+namespace evio::sweep {
 namespace fs = std::filesystem;
 
 namespace {
@@ -179,10 +179,8 @@ std::string json_value(const std::string& v) {
   const double d = std::strtod(v.c_str(), &end);
   if (!v.empty() && *end == '\0' && std::isfinite(d) && v.find_first_of("xXnN") == std::string::npos) return v;
   if (v == "true" || v == "false") return v;
-  return "\"" + json_escape(v) + "\"";
+  return json_string(v);
 }
-
-std::string quoted(const std::string& s) { return "\"" + json_escape(s) + "\""; }
 
 std::string text(const YAML::Node& n, const char* key) {
   const YAML::Node v = n[key];
@@ -206,7 +204,7 @@ std::string to_json(const YAML::Node& n) {
     std::string s = "{";
     bool first = true;
     for (const auto& kv : n) {
-      s += (first ? "" : ", ") + quoted(kv.first.Scalar()) + ": " + to_json(kv.second);
+      s += (first ? "" : ", ") + json_string(kv.first.Scalar()) + ": " + to_json(kv.second);
       first = false;
     }
     return s + "}";
@@ -224,7 +222,7 @@ std::string to_json(const YAML::Node& n) {
     const double d = std::strtod(v.c_str(), &end);
     if (!v.empty() && *end == '\0' && std::isfinite(d)) return v;
   }
-  return quoted(v);
+  return json_string(v);
 }
 
 }  // namespace
@@ -397,21 +395,21 @@ bool sweep_outcome_is_defect(const std::string& outcome) {
 
 std::string sweep_record_json(const SweepRecord& r) {
   std::ostringstream j;
-  j << "{\"cell\": " << quoted(r.cell) << ", \"algorithm\": " << quoted(r.algorithm) << ", \"variant\": " << quoted(r.variant)
-    << ", \"dataset\": " << quoted(r.dataset) << ", \"dataset_path\": " << quoted(r.dataset_path) << ", \"params\": {";
-  for (size_t i = 0; i < r.params.size(); ++i) j << (i ? ", " : "") << quoted(r.params[i].first) << ": " << json_value(r.params[i].second);
+  j << "{\"cell\": " << json_string(r.cell) << ", \"algorithm\": " << json_string(r.algorithm) << ", \"variant\": " << json_string(r.variant)
+    << ", \"dataset\": " << json_string(r.dataset) << ", \"dataset_path\": " << json_string(r.dataset_path) << ", \"params\": {";
+  for (size_t i = 0; i < r.params.size(); ++i) j << (i ? ", " : "") << json_string(r.params[i].first) << ": " << json_value(r.params[i].second);
   j << "}, \"args\": [";
-  for (size_t i = 0; i < r.args.size(); ++i) j << (i ? ", " : "") << quoted(r.args[i]);
-  j << "], \"exit_code\": " << r.exit_code << ", \"timed_out\": " << (r.timed_out ? "true" : "false")
+  for (size_t i = 0; i < r.args.size(); ++i) j << (i ? ", " : "") << json_string(r.args[i]);
+  j << "], \"exit_code\": " << r.exit_code << ", \"timed_out\": " << json_bool(r.timed_out)
     << ", \"wall_s\": " << json_number(r.wall_s, 6) << ", \"cpu_s\": " << json_number(r.cpu_s, 6)
     << ", \"peak_rss_mb\": " << json_number(r.peak_rss_mb, 6) << ", \"duration_s\": " << json_number(r.duration_s, 9)
     << ", \"real_time_factor\": " << json_number(r.duration_s > 0 ? r.wall_s / r.duration_s : NAN, 6)
     << ", \"real_time_factor_cpu\": " << json_number(r.duration_s > 0 ? r.cpu_s / r.duration_s : NAN, 6)
     << ", \"metrics\": {";
-  for (size_t i = 0; i < r.metrics.size(); ++i) j << (i ? ", " : "") << quoted(r.metrics[i].first) << ": " << json_number(r.metrics[i].second, 9);
-  j << "}, \"error_metric\": " << (r.error_metric.empty() ? "null" : quoted(r.error_metric)) << ", \"note\": " << quoted(r.note)
-    << ", \"outcome\": " << quoted(r.outcome) << ", \"outcome_detail\": " << quoted(r.outcome_detail)
-    << ", \"engine\": " << quoted(r.engine) << ", \"host\": " << quoted(r.host) << ", \"started_utc\": " << quoted(r.started_utc)
+  for (size_t i = 0; i < r.metrics.size(); ++i) j << (i ? ", " : "") << json_string(r.metrics[i].first) << ": " << json_number(r.metrics[i].second, 9);
+  j << "}, \"error_metric\": " << (r.error_metric.empty() ? "null" : json_string(r.error_metric)) << ", \"note\": " << json_string(r.note)
+    << ", \"outcome\": " << json_string(r.outcome) << ", \"outcome_detail\": " << json_string(r.outcome_detail)
+    << ", \"engine\": " << json_string(r.engine) << ", \"host\": " << json_string(r.host) << ", \"started_utc\": " << json_string(r.started_utc)
     << ", \"model\": " << (r.model_json.empty() ? "null" : r.model_json) << "}\n";
   return j.str();
 }
@@ -507,4 +505,4 @@ std::map<std::string, SweepRecord> latest_sweep_records(const std::vector<SweepR
   return out;
 }
 
-}  // namespace evio::apps
+}  // namespace evio::sweep

@@ -27,9 +27,9 @@
 #include <string>
 #include <vector>
 
-#include "sweep_engine.h"
+#include "evio/sweep/engine.h"
 
-namespace evio::apps {
+namespace evio::sweep {
 
 // The argument quoted for a POSIX shell (as is when it needs no quoting).
 std::string sweep_shell_quote(const std::string& s);
@@ -71,4 +71,4 @@ std::string slurm_array_script(const SweepEngineOptions& o, size_t count, const 
 std::unique_ptr<SweepEngine> make_parallel_engine(const SweepEngineOptions& options);
 std::unique_ptr<SweepEngine> make_slurm_engine(const SweepEngineOptions& options);
 
-}  // namespace evio::apps
+}  // namespace evio::sweep
