@@ -1,6 +1,7 @@
 // The input side shared by `evio flow` and `evio segment`: the dataset with its camera (the
 // pinhole the 3-D warps need) and sensor size, and a timed stream of its sub-pixel events over
-// [t_start, t_end) into a pipeline, with progress on stderr.
+// [t_start, t_end) into a pipeline, with progress on stderr. `evio reconstruct` opens its dataset
+// and camera here too.
 #pragma once
 
 #include <cstdint>

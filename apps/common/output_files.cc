@@ -26,6 +26,12 @@ void TextOut::close() {
   if (!ok || !closed) throw InputError(path_, 0, "write failed (disk full?)", "a writable output folder");
 }
 
+void write_text_file(const std::string& path, const std::string& text) {
+  TextOut f(path);
+  std::fputs(text.c_str(), f.get());
+  f.close();
+}
+
 double robust_scale(const mapping::ImageF& img) {
   std::vector<float> v;
   v.reserve(static_cast<size_t>(img.size()));

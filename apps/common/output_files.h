@@ -1,5 +1,6 @@
 // Output helpers shared by the commands: a checked text file (a full disk is an error naming the
-// file, not a short file) and 8-bit PNGs of images of warped events with a robust display range.
+// file, not a short file), a whole text file written at once, and 8-bit PNGs of images of warped
+// events with a robust display range.
 #pragma once
 
 #include <cstdio>
@@ -24,6 +25,9 @@ class TextOut {
   std::string path_;
   std::FILE* f_;
 };
+
+// Writes the text as the whole file (through TextOut: the same errors).
+void write_text_file(const std::string& path, const std::string& text);
 
 // The display scale of an IWE: the 99th percentile of its non-zero magnitudes (a few hot pixels
 // do not set the range), at least 1 event.

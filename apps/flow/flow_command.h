@@ -4,7 +4,7 @@
 // row per window), stats.json, flow_config.yaml (the resolved config), optional IWE PNGs before
 // and after warping, and for the rotation model with a ground truth (--gt or the dataset's own)
 // motion_eval.csv: the ground truth's angular velocity per window in the camera frame, the error,
-// and the gyro's when the dataset has IMU.
+// and the gyro's when the dataset has IMU (evaluation/angular_velocity_windows.h).
 //
 // motion.csv: `t_start_s,t_end_s,model,p0,...,p{n-1},contrast_zero,contrast_final,iterations,time_ms`
 // with p0.. the model's parameters (mapping::warp_parameter_names):

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <ostream>
 #include <sstream>
 
@@ -13,13 +14,14 @@
 #include <opencv2/imgproc.hpp>
 
 #include "evio/calib/error.h"
+#include "evio/calib/json.h"
+#include "evio/evaluation/image_quality_summary.h"
 #include "evio/sensors/config_table.h"
 #include "evio/sensors/ecd.h"
 #include "evio/sensors/time.h"
 #include "evio/simulator/scene_config.h"
 #include "evio/simulator/simulator.h"
 #include "cmax_input.h"
-#include "evio/calib/json.h"
 #include "option_tables.h"
 #include "output_files.h"
 #include "progress.h"
@@ -128,6 +130,353 @@ cv::Mat grey8(const cv::Mat& m, const std::string& where) {
   return g;
 }
 
+using Clock = std::chrono::steady_clock;
+
+double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+// The filter of the configured method (cf's and akf's sections with the frames section and
+// use_frames; hf: the complementary filter's high-pass limit), starting at t_start_ns.
+std::unique_ptr<mapping::LogIntensityFilter> make_filter(const ReconstructConfig& cfg, int width, int height,
+                                                         int64_t t_start_ns) {
+  switch (cfg.method) {
+    case ReconstructionMethod::kHighPass:
+    case ReconstructionMethod::kComplementary: {
+      mapping::ComplementaryFilterOptions o = cfg.cf;
+      o.frame = cfg.frames;
+      o.high_pass = cfg.method == ReconstructionMethod::kHighPass;
+      o.use_frames = cfg.use_frames;
+      return std::make_unique<mapping::ComplementaryFilter>(width, height, t_start_ns, o);
+    }
+    case ReconstructionMethod::kGradient: {
+      mapping::PoissonGradientOptions o;
+      o.filter = cfg.cf;
+      o.filter.frame = cfg.frames;
+      o.filter.use_frames = cfg.use_frames;
+      o.sobel = cfg.gradient_sobel;
+      return std::make_unique<mapping::PoissonGradientFilter>(width, height, t_start_ns, o);
+    }
+    case ReconstructionMethod::kKalman: {
+      mapping::AsyncKalmanFilterOptions o = cfg.akf;
+      o.frame = cfg.frames;
+      o.use_frames = cfg.use_frames;
+      return std::make_unique<mapping::AsyncKalmanFilter>(width, height, t_start_ns, o);
+    }
+  }
+  return nullptr;
+}
+
+// The true views of a simulated dataset (--gt SCENE.yaml, or DATASET/scene_resolved.yaml that
+// `evio simulate` writes): each image scored against the clean view rendered at its time
+// (mapping::compare_images); an image that is still flat (nothing to fit) is not scored.
+class TrueViewScorer {
+ public:
+  // nullptr without a scene (none given or found, or --no-gt). Throws evio::InputError when the
+  // scene's camera is not the sensor's size.
+  static std::unique_ptr<TrueViewScorer> open(const ReconstructArgs& args, int width, int height) {
+    std::string scene = args.gt;
+    std::error_code ec;
+    const fs::path auto_scene = fs::path(args.dataset) / "scene_resolved.yaml";
+    if (scene.empty() && !args.no_gt && fs::is_directory(args.dataset, ec) && fs::is_regular_file(auto_scene, ec))
+      scene = auto_scene.string();
+    if (scene.empty()) return nullptr;
+    const simulator::SimulationConfig sc = simulator::load_simulation_config(scene);
+    if (sc.simulator.camera.width() != width || sc.simulator.camera.height() != height)
+      throw InputError(scene, 0,
+                       "the scene's camera is " + std::to_string(sc.simulator.camera.width()) + " x " +
+                           std::to_string(sc.simulator.camera.height()) + " px",
+                       "the scene the dataset was simulated from (" + std::to_string(width) + " x " +
+                           std::to_string(height) + " px)");
+    return std::unique_ptr<TrueViewScorer>(new TrueViewScorer(scene, sc));
+  }
+
+  void score(int64_t t_ns, const mapping::ImageF& img) {
+    const auto t0 = Clock::now();
+    if (img.size() > 0 && img.minCoeff() < img.maxCoeff()) {
+      const mapping::ImageQuality q = mapping::compare_images(img, truth_.true_log_view(t_ns - clock_offset_ns_), nullptr);
+      scores_.push_back({t_ns * 1e-9, q.psnr_db, q.ssim});
+    } else {
+      ++unscored_;
+    }
+    time_s_ += seconds_since(t0);
+  }
+
+  // eval.json and its summary line.
+  void write_eval(const std::string& path, std::ostream& out) const {
+    const evaluation::ImageScoreSummary s = evaluation::summarize_image_scores(scores_);
+    std::vector<std::string> per_image;
+    for (const evaluation::ImageScore& q : scores_)
+      per_image.push_back(JsonObject(9).number("t_s", q.t_s).number("psnr_db", q.psnr_db).number("ssim", q.ssim).str());
+    JsonObject j(9, JsonObject::Layout::kLines);
+    j.string("scene", scene_)
+        .string("reference", "log(I + log_eps) of the clean view rendered at each image's time; PSNR and SSIM after a "
+                             "global affine fit (mapping::compare_images)")
+        .integer("images_scored", static_cast<int64_t>(s.images))
+        .integer("images_unscored", unscored_)
+        .number("psnr_db", s.psnr_db_mean)
+        .number("ssim", s.ssim_mean)
+        .number("ssim_error", 1.0 - s.ssim_mean)
+        .number("psnr_db_min", s.psnr_db_min)
+        .number("ssim_min", s.ssim_min)
+        .number("scoring_time_s", time_s_)
+        .raw("per_image", json_array(per_image));
+    write_text_file(path, j.str() + "\n");
+    out << "evio reconstruct: against the true views of " << scene_ << ": PSNR " << json_number(s.psnr_db_mean, 9)
+        << " dB, SSIM " << json_number(s.ssim_mean, 9) << " (mean of " << s.images << " images; " << unscored_
+        << " flat images not scored); wrote eval.json\n";
+  }
+
+ private:
+  TrueViewScorer(std::string scene, const simulator::SimulationConfig& sc)
+      : scene_(std::move(scene)), truth_(sc.scene, sc.trajectory, sc.simulator), clock_offset_ns_(sc.clock_offset_ns) {}
+
+  std::string scene_;
+  simulator::Simulator truth_;
+  int64_t clock_offset_ns_;  // output.clock_offset_ns of the scene: written stamp - simulator time
+  std::vector<evaluation::ImageScore> scores_;
+  int64_t unscored_ = 0;     // images whose estimate is still flat
+  double time_s_ = 0;        // rendering and scoring, s
+};
+
+// Each image's outputs: images/frame_NNNNNNNN.png and .tiff, its line of images.txt, a frame of
+// video.mp4 (--video), and its score against the true view (a simulated dataset).
+class ImageWriter {
+ public:
+  // Opens images.txt and the video (images/ exists); says on `out` when no video can be written.
+  ImageWriter(const ReconstructArgs& args, const ReconstructConfig& cfg, int width, int height, std::ostream& out)
+      : out_dir_(args.out), display_(cfg.display), width_(width), height_(height) {
+    list_.emplace((fs::path(args.out) / "images.txt").string());
+    std::fputs("# timestamp[s] image (evio reconstruct)\n", list_->get());
+    if (!args.video) return;
+    std::string why;
+    video_status_ = video_.open((fs::path(args.out) / "video.mp4").string(), cfg.video_fps, width, height, &why)
+                        ? "written"
+                        : "unavailable: " + why;
+    if (!video_.is_open()) out << "evio reconstruct: --video: no video.mp4 written (" << why << ")\n";
+  }
+
+  void set_scorer(TrueViewScorer* truth) { truth_ = truth; }
+
+  void write(int64_t t_ns, const mapping::ImageF& img) {
+    char name[64];
+    std::snprintf(name, sizeof(name), "images/frame_%08lld", static_cast<long long>(images_));
+    const std::string base = (fs::path(out_dir_) / name).string();
+    mapping::write_log_image_png8(base + ".png", img, nullptr, display_);
+    mapping::write_log_image_tiff(base + ".tiff", img, nullptr);
+    std::fprintf(list_->get(), "%s %s.png\n", format_seconds(t_ns).c_str(), name);
+    if (truth_) truth_->score(t_ns, img);
+    if (video_.is_open()) {
+      const mapping::ImageF d = mapping::log_image_to_display(img, nullptr, display_);
+      cv::Mat m(height_, width_, CV_8UC1);
+      for (int y = 0; y < height_; ++y)
+        for (int x = 0; x < width_; ++x) m.at<uint8_t>(y, x) = static_cast<uint8_t>(std::lround(255.0 * d(y, x)));
+      video_.write(m);
+    }
+    ++images_;
+  }
+
+  void close() {
+    list_->close();
+    video_.close();
+  }
+
+  int64_t images() const { return images_; }
+  const std::string& video_status() const { return video_status_; }
+
+ private:
+  const std::string out_dir_;
+  const mapping::LogImageDisplayOptions display_;
+  const int width_, height_;
+  std::optional<TextOut> list_;
+  VideoOut video_;
+  std::string video_status_ = "not requested";
+  TrueViewScorer* truth_ = nullptr;
+  int64_t images_ = 0;
+};
+
+// The filter fed in time order: events in batches up to the next frame or image time (events at a
+// frame's time precede it), frames fused when due, and an image read out at each requested time
+// (--at, or every period from the first event) and handed to the ImageWriter. The filter starts at
+// the first event, or the first frame when that is earlier.
+class FilterStream {
+ public:
+  FilterStream(const ReconstructConfig& cfg, int width, int height, std::vector<Frame> frames, std::vector<int64_t> at,
+               const std::string& dataset, ImageWriter* images)
+      : cfg_(cfg), width_(width), height_(height), frames_(std::move(frames)), at_(std::move(at)),
+        period_ns_(std::max<int64_t>(1, std::llround(1e9 / cfg.rate_hz))), dataset_(dataset), images_(images) {
+    std::sort(at_.begin(), at_.end());
+  }
+
+  void process(const Event* ev, size_t n) {
+    if (!filter_) {
+      t_first_ = ev[0].t_ns;
+      if (!frames_.empty()) t_first_ = std::min(t_first_, frames_.front().t_ns);
+      next_rate_ = ev[0].t_ns;
+      filter_ = make_filter(cfg_, width_, height_, t_first_);
+    }
+    size_t i = 0;
+    while (i < n) {
+      due_before(ev[i].t_ns, false);
+      const int64_t tf = next_frame_time(), ti = next_image_time();
+      size_t j = i;
+      while (j < n && ev[j].t_ns <= tf && ev[j].t_ns < ti) ++j;
+      if (j == i) j = i + 1;
+      const auto t0 = Clock::now();
+      filter_->process(ev + i, j - i);
+      filter_s_ += seconds_since(t0);
+      i = j;
+    }
+    t_last_ = ev[n - 1].t_ns;
+  }
+
+  // The images after the last event: at the --at times left; with --rate, up to the last event.
+  // Throws evio::InputError when there was no event.
+  void finish() {
+    if (!filter_) throw InputError(dataset_, 0, "no events", "a recording with events");
+    due_before(at_.empty() ? t_last_ : std::max(t_last_, at_.back()), true);
+  }
+
+  int64_t t_first_ns() const { return t_first_; }
+  int64_t t_last_ns() const { return t_last_; }
+  const mapping::ReconstructionStats& stats() const { return filter_->stats(); }
+  double filter_s() const { return filter_s_; }    // in process() and add_frame()
+  double readout_s() const { return readout_s_; }  // in log_intensity()
+
+ private:
+  int64_t next_frame_time() const { return next_frame_ < frames_.size() ? frames_[next_frame_].t_ns : INT64_MAX; }
+  int64_t next_image_time() const { return at_.empty() ? next_rate_ : (next_at_ < at_.size() ? at_[next_at_] : INT64_MAX); }
+
+  // Everything due at or before t (frames at t_f <= t, images at times < t, or <= t when
+  // inclusive_images), in time order.
+  void due_before(int64_t t, bool inclusive_images) {
+    for (;;) {
+      const int64_t tf = next_frame_time(), ti = next_image_time();
+      const bool image_due = inclusive_images ? ti <= t : ti < t;
+      if (tf <= t && tf <= ti) {
+        fuse_frame(frames_[next_frame_++]);
+      } else if (image_due) {
+        write_image_at(ti);
+        if (at_.empty()) next_rate_ += period_ns_; else ++next_at_;
+      } else {
+        return;
+      }
+    }
+  }
+
+  void fuse_frame(Frame& f) {
+    if (f.image.empty()) load_frame_image(&f);
+    const std::string& where = f.path.empty() ? dataset_ : f.path;
+    const cv::Mat g = grey8(f.image, where);
+    f.image.release();
+    if (g.cols != width_ || g.rows != height_)
+      throw InputError(where, 0, "frame of " + std::to_string(g.cols) + " x " + std::to_string(g.rows) + " px",
+                       "frames of the sensor's size " + std::to_string(width_) + " x " + std::to_string(height_));
+    const auto t0 = Clock::now();
+    filter_->add_frame(f.t_ns, mapping::GreyView{g.data, g.cols, g.rows, static_cast<std::ptrdiff_t>(g.step)});
+    filter_s_ += seconds_since(t0);
+  }
+
+  void write_image_at(int64_t t) {
+    const auto t0 = Clock::now();
+    filter_->log_intensity(t, &img_);
+    readout_s_ += seconds_since(t0);
+    images_->write(t, img_);
+  }
+
+  const ReconstructConfig& cfg_;
+  const int width_, height_;
+  std::vector<Frame> frames_;
+  std::vector<int64_t> at_;
+  const int64_t period_ns_;
+  const std::string dataset_;
+  ImageWriter* images_;
+  std::unique_ptr<mapping::LogIntensityFilter> filter_;
+  double filter_s_ = 0, readout_s_ = 0;
+  int64_t t_first_ = 0, t_last_ = 0;
+  size_t next_frame_ = 0, next_at_ = 0;
+  int64_t next_rate_ = 0;
+  mapping::ImageF img_;
+};
+
+// --corners: event Harris corner events (contrasts: the cf section's) on every event, written to
+// corners.txt as `evio corners` writes them (polarity as in the input).
+class CornerWriter {
+ public:
+  CornerWriter(const std::string& path, const ReconstructConfig& cfg, int width, int height)
+      : file_(path), cfg_(cfg), width_(width), height_(height) {
+    std::fputs("# t[s] x y p   (event Harris corner events, polarity as in the input)\n", file_.get());
+  }
+
+  bool started() const { return harris_ != nullptr; }
+  // The detector starts at t_start_ns; zero_one: the input's polarity is 0/1 (else -1/+1).
+  void start(int64_t t_start_ns, bool zero_one) {
+    mapping::EventHarrisOptions h = cfg_.harris;
+    h.contrast_on = cfg_.cf.contrast_on;
+    h.contrast_off = cfg_.cf.contrast_off;
+    harris_ = std::make_unique<mapping::EventHarrisDetector>(width_, height_, t_start_ns, h);
+    zero_one_ = zero_one;
+  }
+
+  void process(const Event* ev, size_t n) {
+    const auto t0 = Clock::now();
+    char line[96];
+    for (size_t k = 0; k < n; ++k) {
+      if (!harris_->process(ev[k])) continue;
+      *format_seconds(ev[k].t_ns, line) = '\0';
+      std::fprintf(file_.get(), "%s %d %d %d\n", line, ev[k].x, ev[k].y, ev[k].polarity > 0 ? 1 : (zero_one_ ? 0 : -1));
+    }
+    time_s_ += seconds_since(t0);
+  }
+
+  void close() { file_.close(); }
+  int64_t corners() const { return harris_ ? harris_->stats().corners : 0; }
+  double time_s() const { return time_s_; }
+
+ private:
+  TextOut file_;
+  const ReconstructConfig& cfg_;
+  const int width_, height_;
+  std::unique_ptr<mapping::EventHarrisDetector> harris_;
+  bool zero_one_ = true;
+  double time_s_ = 0;
+};
+
+// stats.json.
+std::string reconstruct_stats(const ReconstructConfig& cfg, const FilterStream& run, int64_t events, int64_t images,
+                              double wall_s, const CornerWriter* corners, const std::string& video_status) {
+  const mapping::ReconstructionStats& st = run.stats();
+  const std::string method = mapping::reconstruction_method_name(cfg.method);
+  const double filter_s = run.filter_s();
+  JsonObject j(9, JsonObject::Layout::kLines);
+  j.raw("model", JsonObject(9)
+                     .string("summary", method + (cfg.use_frames ? ", frames fused: " + std::to_string(st.frames)
+                                                                 : std::string(", events only (frames not used)")))
+                     .string("method", method)
+                     .string("selection", "fixed")
+                     .boolean("use_frames", cfg.use_frames)
+                     .integer("frames_fused", st.frames)
+                     .str())
+      .string("method", method)
+      .boolean("use_frames", cfg.use_frames)
+      .integer("events", events)
+      .integer("events_outside_sensor", st.events_outside)
+      .integer("frames_fused", st.frames)
+      .integer("images", images)
+      .number("t_first_s", run.t_first_ns() * 1e-9)
+      .number("t_last_s", run.t_last_ns() * 1e-9)
+      .number("filter_time_s", filter_s)
+      .number("time_per_event_ns", events ? filter_s * 1e9 / static_cast<double>(events) : 0.0)
+      .number("events_per_s", filter_s > 0 ? static_cast<double>(events) / filter_s : 0.0)
+      .number("readout_time_s", run.readout_s())
+      .number("wall_time_s", wall_s)
+      .integer("rebases", st.rebases);
+  if (corners)
+    j.integer("corner_events", corners->corners())
+        .number("harris_time_s", corners->time_s())
+        .number("harris_time_per_event_ns", events ? corners->time_s() * 1e9 / static_cast<double>(events) : 0.0);
+  j.string("video", video_status);
+  return j.str() + "\n";
+}
+
 }  // namespace
 
 bool ReconstructConfig::Validate(std::string* why) const {
@@ -181,288 +530,63 @@ ReconstructConfig resolve_reconstruct_config(const ReconstructArgs& args) {
 }
 
 int run_reconstruct(const ReconstructArgs& args, std::ostream& out) {
-  using clock = std::chrono::steady_clock;
   const ReconstructConfig cfg = resolve_reconstruct_config(args);
+
+  // ---- inputs: the dataset, its sensor size and (--use-frames) its APS frames ---------------------
   CmaxInput input = open_cmax_input(args.dataset, args.dataset_options, args.calib, {});
   DatasetReader* reader = input.reader.get();
   const int width = input.sensor.width, height = input.sensor.height;
-
   std::vector<Frame> frames;
   if (cfg.use_frames) {
     frames = reader->read_frames();
     if (frames.empty())
       throw InputError(args.dataset, 0, "--use-frames: the dataset has no APS frames", "a recording with frames, or no --use-frames");
   }
-  // Times of the images: --at, or every 1/rate from the first event.
-  std::vector<int64_t> at = args.at_ns;
-  std::sort(at.begin(), at.end());
-  const int64_t period_ns = std::max<int64_t>(1, std::llround(1e9 / cfg.rate_hz));
 
+  // ---- outputs, the true views (a simulated dataset) and the filter --------------------------------
   fs::create_directories(fs::path(args.out) / "images");
-  {
-    TextOut f((fs::path(args.out) / "reconstruct_config.yaml").string());
-    std::fputs(reconstruct_config_text(cfg).c_str(), f.get());
-    f.close();
-  }
-  TextOut list((fs::path(args.out) / "images.txt").string());
-  std::fputs("# timestamp[s] image (evio reconstruct)\n", list.get());
-  VideoOut video;
-  std::string video_status = "not requested";
-  if (args.video) {
-    std::string why;
-    video_status = video.open((fs::path(args.out) / "video.mp4").string(), cfg.video_fps, width, height, &why)
-                       ? "written"
-                       : "unavailable: " + why;
-    if (!video.is_open()) out << "evio reconstruct: --video: no video.mp4 written (" << why << ")\n";
-  }
+  write_text_file((fs::path(args.out) / "reconstruct_config.yaml").string(), reconstruct_config_text(cfg));
+  ImageWriter images(args, cfg, width, height, out);
+  const std::unique_ptr<TrueViewScorer> truth = TrueViewScorer::open(args, width, height);
+  images.set_scorer(truth.get());
+  FilterStream run(cfg, width, height, std::move(frames), args.at_ns, args.dataset, &images);
+  std::unique_ptr<CornerWriter> corners;
+  if (args.corners) corners = std::make_unique<CornerWriter>((fs::path(args.out) / "corners.txt").string(), cfg, width, height);
 
-  // True views of a simulated dataset (--gt SCENE.yaml, or DATASET/scene_resolved.yaml that
-  // `evio simulate` writes): each image scored against the clean view rendered at its time.
-  std::string gt_scene = args.gt;
-  {
-    std::error_code ec;
-    const fs::path auto_scene = fs::path(args.dataset) / "scene_resolved.yaml";
-    if (gt_scene.empty() && !args.no_gt && fs::is_directory(args.dataset, ec) && fs::is_regular_file(auto_scene, ec))
-      gt_scene = auto_scene.string();
-  }
-  std::unique_ptr<simulator::Simulator> truth;
-  int64_t truth_clock_offset_ns = 0;  // output.clock_offset_ns of the scene: written stamp - simulator time
-  if (!gt_scene.empty()) {
-    const simulator::SimulationConfig sc = simulator::load_simulation_config(gt_scene);
-    if (sc.simulator.camera.width() != width || sc.simulator.camera.height() != height)
-      throw InputError(gt_scene, 0,
-                       "the scene's camera is " + std::to_string(sc.simulator.camera.width()) + " x " +
-                           std::to_string(sc.simulator.camera.height()) + " px",
-                       "the scene the dataset was simulated from (" + std::to_string(width) + " x " +
-                           std::to_string(height) + " px)");
-    truth = std::make_unique<simulator::Simulator>(sc.scene, sc.trajectory, sc.simulator);
-    truth_clock_offset_ns = sc.clock_offset_ns;
-  }
-  struct ScoredImage {
-    double t_s, psnr_db, ssim;
-  };
-  std::vector<ScoredImage> scored;
-  int64_t unscored = 0;  // images whose estimate is still flat (nothing to fit)
-  double gt_s = 0;       // rendering and scoring, s
-
-  std::unique_ptr<mapping::LogIntensityFilter> filter;
-  double filter_s = 0, readout_s = 0;  // in process/add_frame; in log_intensity
-  int64_t images = 0, events = 0, t_first = 0, t_last = 0;
-  size_t next_frame = 0, next_at = 0;
-  int64_t next_rate = 0;
-  mapping::ImageF img;
-  auto write_image_at = [&](int64_t t) {
-    const auto c0 = clock::now();
-    filter->log_intensity(t, &img);
-    readout_s += std::chrono::duration<double>(clock::now() - c0).count();
-    char name[64];
-    std::snprintf(name, sizeof(name), "images/frame_%08lld", static_cast<long long>(images));
-    const std::string base = (fs::path(args.out) / name).string();
-    mapping::write_log_image_png8(base + ".png", img, nullptr, cfg.display);
-    mapping::write_log_image_tiff(base + ".tiff", img, nullptr);
-    std::fprintf(list.get(), "%s %s.png\n", format_seconds(t).c_str(), name);
-    if (truth) {
-      const auto g0 = clock::now();
-      if (img.size() > 0 && img.minCoeff() < img.maxCoeff()) {
-        const mapping::ImageQuality q = mapping::compare_images(img, truth->true_log_view(t - truth_clock_offset_ns), nullptr);
-        scored.push_back({t * 1e-9, q.psnr_db, q.ssim});
-      } else {
-        ++unscored;
-      }
-      gt_s += std::chrono::duration<double>(clock::now() - g0).count();
-    }
-    if (video.is_open()) {
-      const mapping::ImageF d = mapping::log_image_to_display(img, nullptr, cfg.display);
-      cv::Mat m(height, width, CV_8UC1);
-      for (int y = 0; y < height; ++y)
-        for (int x = 0; x < width; ++x) m.at<uint8_t>(y, x) = static_cast<uint8_t>(std::lround(255.0 * d(y, x)));
-      video.write(m);
-    }
-    ++images;
-  };
-  auto fuse_frame = [&](Frame& f) {
-    if (f.image.empty()) load_frame_image(&f);
-    const cv::Mat g = grey8(f.image, f.path.empty() ? args.dataset : f.path);
-    f.image.release();
-    if (g.cols != width || g.rows != height)
-      throw InputError(f.path.empty() ? args.dataset : f.path, 0,
-                       "frame of " + std::to_string(g.cols) + " x " + std::to_string(g.rows) + " px",
-                       "frames of the sensor's size " + std::to_string(width) + " x " + std::to_string(height));
-    const auto c0 = clock::now();
-    filter->add_frame(f.t_ns, mapping::GreyView{g.data, g.cols, g.rows, static_cast<std::ptrdiff_t>(g.step)});
-    filter_s += std::chrono::duration<double>(clock::now() - c0).count();
-  };
-  // Everything due at or before t (frames at t_f <= t, images at times < t), in time order.
-  auto due_before = [&](int64_t t, bool inclusive_images) {
-    for (;;) {
-      const int64_t tf = next_frame < frames.size() ? frames[next_frame].t_ns : INT64_MAX;
-      const int64_t ti = at.empty() ? next_rate : (next_at < at.size() ? at[next_at] : INT64_MAX);
-      const bool image_due = inclusive_images ? ti <= t : ti < t;
-      if (tf <= t && tf <= ti) {
-        fuse_frame(frames[next_frame++]);
-      } else if (image_due) {
-        write_image_at(ti);
-        if (at.empty()) next_rate += period_ns; else ++next_at;
-      } else {
-        return;
-      }
-    }
-  };
-
-  // --corners: event Harris corner events on every event, written as `evio corners` writes them.
-  std::unique_ptr<mapping::EventHarrisDetector> harris;
-  std::unique_ptr<TextOut> corners_file;
-  bool zero_one = true;  // polarity convention of the input, known after the first chunk
-  double harris_s = 0;
-  if (args.corners) {
-    corners_file = std::make_unique<TextOut>((fs::path(args.out) / "corners.txt").string());
-    std::fputs("# t[s] x y p   (event Harris corner events, polarity as in the input)\n", corners_file->get());
-  }
-  char line[96];
-
+  // ---- the event stream ------------------------------------------------------------------------------
   Progress progress("evio reconstruct", args.progress, "events");
   EventBuffer chunk;
-  const auto wall0 = clock::now();
+  int64_t events = 0;
+  const auto wall0 = Clock::now();
   for (;;) {
     chunk.clear();
     if (reader->read_events(&chunk, 1 << 16) == 0) break;
-    const Event* ev = chunk.data();
-    const size_t n = chunk.size();
-    if (!filter) {
-      t_first = ev[0].t_ns;
-      if (!frames.empty()) t_first = std::min(t_first, frames.front().t_ns);
-      next_rate = ev[0].t_ns;
-      if (args.corners) {
-        mapping::EventHarrisOptions h = cfg.harris;
-        h.contrast_on = cfg.cf.contrast_on;
-        h.contrast_off = cfg.cf.contrast_off;
-        harris = std::make_unique<mapping::EventHarrisDetector>(width, height, t_first, h);
-        zero_one = reader->event_report().polarity != PolarityConvention::kMinusPlusOne;
-      }
-      switch (cfg.method) {
-        case ReconstructionMethod::kHighPass:
-        case ReconstructionMethod::kComplementary: {
-          mapping::ComplementaryFilterOptions o = cfg.cf;
-          o.frame = cfg.frames;
-          o.high_pass = cfg.method == ReconstructionMethod::kHighPass;
-          o.use_frames = cfg.use_frames;
-          filter = std::make_unique<mapping::ComplementaryFilter>(width, height, t_first, o);
-          break;
-        }
-        case ReconstructionMethod::kGradient: {
-          mapping::PoissonGradientOptions o;
-          o.filter = cfg.cf;
-          o.filter.frame = cfg.frames;
-          o.filter.use_frames = cfg.use_frames;
-          o.sobel = cfg.gradient_sobel;
-          filter = std::make_unique<mapping::PoissonGradientFilter>(width, height, t_first, o);
-          break;
-        }
-        case ReconstructionMethod::kKalman: {
-          mapping::AsyncKalmanFilterOptions o = cfg.akf;
-          o.frame = cfg.frames;
-          o.use_frames = cfg.use_frames;
-          filter = std::make_unique<mapping::AsyncKalmanFilter>(width, height, t_first, o);
-          break;
-        }
-      }
-    }
-    // Batches of events between the next frame or image time.
-    size_t i = 0;
-    while (i < n) {
-      due_before(ev[i].t_ns, false);
-      const int64_t tf = next_frame < frames.size() ? frames[next_frame].t_ns : INT64_MAX;
-      const int64_t ti = at.empty() ? next_rate : (next_at < at.size() ? at[next_at] : INT64_MAX);
-      size_t j = i;
-      while (j < n && ev[j].t_ns <= tf && ev[j].t_ns < ti) ++j;  // events at t_f precede the frame
-      if (j == i) j = i + 1;
-      const auto c0 = clock::now();
-      filter->process(ev + i, j - i);
-      filter_s += std::chrono::duration<double>(clock::now() - c0).count();
-      i = j;
-    }
-    if (harris) {
-      const auto c0 = clock::now();
-      for (size_t k = 0; k < n; ++k) {
-        if (!harris->process(ev[k])) continue;
-        char* end = format_seconds(ev[k].t_ns, line);
-        *end = '\0';
-        std::fprintf(corners_file->get(), "%s %d %d %d\n", line, ev[k].x, ev[k].y, ev[k].polarity > 0 ? 1 : (zero_one ? 0 : -1));
-      }
-      harris_s += std::chrono::duration<double>(clock::now() - c0).count();
-    }
-    events += static_cast<int64_t>(n);
-    t_last = ev[n - 1].t_ns;
-    progress.update(reader->progress(), events, std::to_string(images) + " images");
+    run.process(chunk.data(), chunk.size());
+    if (corners && !corners->started())  // the input's polarity convention is known after the first chunk
+      corners->start(run.t_first_ns(), reader->event_report().polarity != PolarityConvention::kMinusPlusOne);
+    if (corners) corners->process(chunk.data(), chunk.size());
+    events += static_cast<int64_t>(chunk.size());
+    progress.update(reader->progress(), events, std::to_string(images.images()) + " images");
   }
-  if (!filter) throw InputError(args.dataset, 0, "no events", "a recording with events");
-  // Images at --at times after the last event; with --rate, up to the last event.
-  due_before(at.empty() ? t_last : std::max(t_last, at.back()), true);
-  list.close();
-  video.close();
-  if (corners_file) corners_file->close();
-  const double wall_s = std::chrono::duration<double>(clock::now() - wall0).count();
+  run.finish();
+  images.close();
+  if (corners) corners->close();
+  const double wall_s = seconds_since(wall0);
 
-  const mapping::ReconstructionStats& st = filter->stats();
-  const double ns_per_event = events ? filter_s * 1e9 / static_cast<double>(events) : 0.0;
-  {
-    TextOut f((fs::path(args.out) / "stats.json").string());
-    std::ostringstream j;
-    const std::string method = mapping::reconstruction_method_name(cfg.method);
-    j << "{\n  \"model\": {\"summary\": \"" << method
-      << (cfg.use_frames ? ", frames fused: " + std::to_string(st.frames) : std::string(", events only (frames not used)"))
-      << "\", \"method\": \"" << method << "\", \"selection\": \"fixed\", \"use_frames\": " << (cfg.use_frames ? "true" : "false")
-      << ", \"frames_fused\": " << st.frames << "}";
-    j << ",\n  \"method\": \"" << method << "\",\n  \"use_frames\": "
-      << (cfg.use_frames ? "true" : "false") << ",\n  \"events\": " << events << ",\n  \"events_outside_sensor\": "
-      << st.events_outside << ",\n  \"frames_fused\": " << st.frames << ",\n  \"images\": " << images
-      << ",\n  \"t_first_s\": " << json_number(t_first * 1e-9, 9) << ",\n  \"t_last_s\": " << json_number(t_last * 1e-9, 9)
-      << ",\n  \"filter_time_s\": " << json_number(filter_s, 9) << ",\n  \"time_per_event_ns\": " << json_number(ns_per_event, 9)
-      << ",\n  \"events_per_s\": " << json_number(filter_s > 0 ? static_cast<double>(events) / filter_s : 0.0, 9)
-      << ",\n  \"readout_time_s\": " << json_number(readout_s, 9) << ",\n  \"wall_time_s\": " << json_number(wall_s, 9) << ",\n  \"rebases\": " << st.rebases;
-    if (harris)
-      j << ",\n  \"corner_events\": " << harris->stats().corners << ",\n  \"harris_time_s\": " << json_number(harris_s, 9)
-        << ",\n  \"harris_time_per_event_ns\": " << json_number(events ? harris_s * 1e9 / static_cast<double>(events) : 0.0, 9);
-    j << ",\n  \"video\": \""
-      << json_escape(video_status) << "\"\n}\n";
-    std::fputs(j.str().c_str(), f.get());
-    f.close();
-  }
-  if (truth) {
-    double psnr = 0, ssim = 0, psnr_min = INFINITY, ssim_min = INFINITY;
-    for (const ScoredImage& q : scored) {
-      psnr += q.psnr_db / static_cast<double>(scored.size());
-      ssim += q.ssim / static_cast<double>(scored.size());
-      psnr_min = std::min(psnr_min, q.psnr_db);
-      ssim_min = std::min(ssim_min, q.ssim);
-    }
-    if (scored.empty()) psnr = ssim = psnr_min = ssim_min = NAN;
-    TextOut f((fs::path(args.out) / "eval.json").string());
-    std::ostringstream j;
-    j << "{\n  \"scene\": \"" << json_escape(gt_scene) << "\",\n  \"reference\": \"log(I + log_eps) of the clean view "
-      << "rendered at each image's time; PSNR and SSIM after a global affine fit (mapping::compare_images)\""
-      << ",\n  \"images_scored\": " << scored.size() << ",\n  \"images_unscored\": " << unscored
-      << ",\n  \"psnr_db\": " << json_number(psnr, 9) << ",\n  \"ssim\": " << json_number(ssim, 9) << ",\n  \"ssim_error\": " << json_number(1.0 - ssim, 9)
-      << ",\n  \"psnr_db_min\": " << json_number(psnr_min, 9) << ",\n  \"ssim_min\": " << json_number(ssim_min, 9)
-      << ",\n  \"scoring_time_s\": " << json_number(gt_s, 9) << ",\n  \"per_image\": [";
-    for (size_t k = 0; k < scored.size(); ++k)
-      j << (k ? ", " : "") << "{\"t_s\": " << json_number(scored[k].t_s, 9) << ", \"psnr_db\": " << json_number(scored[k].psnr_db, 9)
-        << ", \"ssim\": " << json_number(scored[k].ssim, 9) << "}";
-    j << "]\n}\n";
-    std::fputs(j.str().c_str(), f.get());
-    f.close();
-    out << "evio reconstruct: against the true views of " << gt_scene << ": PSNR " << json_number(psnr, 9) << " dB, SSIM "
-        << json_number(ssim, 9) << " (mean of " << scored.size() << " images; " << unscored << " flat images not scored); wrote eval.json\n";
-  }
+  // ---- stats.json, eval.json and the summary ---------------------------------------------------------
+  write_text_file((fs::path(args.out) / "stats.json").string(),
+                  reconstruct_stats(cfg, run, events, images.images(), wall_s, corners.get(), images.video_status()));
+  if (truth) truth->write_eval((fs::path(args.out) / "eval.json").string(), out);
+  const double filter_s = run.filter_s();
   out << "evio reconstruct: " << mapping::reconstruction_method_name(cfg.method) << (cfg.use_frames ? " with frames" : "")
-      << ", " << events << " events, " << st.frames << " frames fused, " << images << " images; filter "
-      << json_number(ns_per_event, 9) << " ns per event (" << json_number(filter_s > 0 ? events / filter_s * 1e-6 : 0.0, 9)
-      << " M events/s), wall " << json_number(wall_s, 9) << " s\n"
+      << ", " << events << " events, " << run.stats().frames << " frames fused, " << images.images() << " images; filter "
+      << json_number(events ? filter_s * 1e9 / static_cast<double>(events) : 0.0, 9) << " ns per event ("
+      << json_number(filter_s > 0 ? events / filter_s * 1e-6 : 0.0, 9) << " M events/s), wall " << json_number(wall_s, 9) << " s\n"
       << "wrote " << args.out << "/images.txt, images/, stats.json, reconstruct_config.yaml"
-      << (video_status == "written" ? ", video.mp4" : "") << (harris ? ", corners.txt" : "") << "\n";
-  if (harris)
-    out << "event Harris: " << harris->stats().corners << " corner events (" << json_number(harris_s * 1e9 / std::max<int64_t>(1, events), 9)
-        << " ns per event)\n";
+      << (images.video_status() == "written" ? ", video.mp4" : "") << (corners ? ", corners.txt" : "") << "\n";
+  if (corners)
+    out << "event Harris: " << corners->corners() << " corner events ("
+        << json_number(corners->time_s() * 1e9 / std::max<int64_t>(1, events), 9) << " ns per event)\n";
   return 0;
 }
 

@@ -14,6 +14,7 @@
 //   eval.json                   for a simulated dataset (--gt SCENE.yaml, or DATASET/scene_resolved.yaml):
 //                               PSNR and SSIM of every image against the clean view rendered at its time
 //                               (Simulator::true_log_view, mapping::compare_images), their means and minima
+//                               (evaluation/image_quality_summary.h)
 #pragma once
 
 #include <cstdint>

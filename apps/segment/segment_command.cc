@@ -5,7 +5,6 @@
 #include <cstdio>
 #include <deque>
 #include <filesystem>
-#include <fstream>
 #include <map>
 #include <memory>
 #include <ostream>
@@ -15,12 +14,12 @@
 #include <opencv2/core.hpp>
 
 #include "evio/calib/error.h"
-#include "evio/evaluation/label_evaluation.h"
+#include "evio/calib/json.h"
+#include "evio/evaluation/windowed_label_evaluation.h"
 #include "evio/sensors/config_table.h"
 #include "evio/sensors/image_io.h"
 #include "evio/sensors/time.h"
 #include "cmax_input.h"
-#include "evio/calib/json.h"
 #include "option_tables.h"
 #include "output_files.h"
 
@@ -79,39 +78,6 @@ const Table<C>& segment_config_table() {
   return table;
 }
 
-
-// The true per-event labels (the simulator's event_labels.txt: one integer per line, in the
-// order of the dataset's events), read in step with the events.
-class TrueLabels {
- public:
-  explicit TrueLabels(const std::string& path) : path_(path), f_(path) {
-    if (!f_) throw InputError(path, 0, "cannot open the true labels", kExpected);
-  }
-  uint16_t next() {
-    std::string l;
-    if (!std::getline(f_, l)) throw InputError(path_, line_, "fewer labels than events", kExpected);
-    ++line_;
-    char* end = nullptr;
-    const unsigned long v = std::strtoul(l.c_str(), &end, 10);
-    if (end == l.c_str() || v > 65535) throw InputError(path_, line_, "'" + l + "' is not a label", kExpected);
-    return static_cast<uint16_t>(v);
-  }
-  bool more() {
-    std::string l;
-    while (std::getline(f_, l))
-      if (l.find_first_not_of(" \t\r") != std::string::npos) return true;
-    return false;
-  }
-  const std::string& path() const { return path_; }
-
- private:
-  static constexpr const char* kExpected =
-      "one label per event of the dataset, in event order (0 background, 1..N objects, 65535 noise)";
-  std::string path_;
-  std::ifstream f_;
-  int64_t line_ = 0;
-};
-
 // A colour per label (BGR), well apart for the first few; -1 (noise) grey.
 cv::Vec3b label_colour(int id) {
   static const cv::Vec3b palette[] = {{60, 76, 231}, {113, 204, 46}, {219, 152, 52}, {15, 196, 241},
@@ -138,6 +104,267 @@ void write_colour_iwe(const std::string& path, const pipeline::SegmentationWindo
   cv::Mat out;
   acc.convertTo(out, CV_8UC3);  // saturating
   if (!write_image(path, out)) throw InputError(path, 0, "cannot write the PNG", "a writable output folder");
+}
+
+// The true labels to score against: --gt, else DATASET/event_labels.txt when present (not with
+// --no-gt); nullptr for none. The labels are matched by event order, so --t-start excludes them:
+// an error with --gt, and *note says why the dataset's own are not scored.
+std::unique_ptr<evaluation::EventLabelReader> open_true_labels(const SegmentArgs& args, std::string* note) {
+  std::string path = args.gt;
+  if (path.empty() && !args.no_gt) {
+    std::error_code ec;
+    const fs::path auto_path = fs::path(args.dataset) / "event_labels.txt";
+    if (fs::is_directory(args.dataset, ec) && fs::is_regular_file(auto_path, ec)) {
+      if (args.t_start_ns) *note = "not scored: --t-start skips events, so the labels cannot be matched";
+      else path = auto_path.string();
+    }
+  }
+  if (!path.empty() && args.t_start_ns)
+    throw InputError("--gt", 0, "cannot be combined with --t-start (labels are matched by event order)",
+                     "--gt without --t-start");
+  if (path.empty()) return nullptr;
+  return std::make_unique<evaluation::EventLabelReader>(path);
+}
+
+// labels.txt in input order: the events wait until their window is segmented, then each is written
+// with its cluster (-1: noise, or in no segmented window) and, with true labels, scored (each
+// window one group; windowed_label_evaluation.h).
+class LabelWriter {
+ public:
+  LabelWriter(const std::string& path, evaluation::EventLabelReader* truth) : file_(path), truth_(truth) {}
+
+  void push(const SubpixelEvent& e) { pending_.push_back(e); }
+  // A segmented window: the events before it (skipped windows) without a label, then its own.
+  void write_window(const pipeline::SegmentationWindow& w) {
+    flush_until(w.input_begin, nullptr);
+    flush_until(w.input_end, &w);
+  }
+  // The events after the last window, without a label.
+  void finish() {
+    flush_until(pending_first_ + static_cast<int64_t>(pending_.size()), nullptr);
+    file_.close();
+  }
+
+  int64_t unsegmented() const { return unsegmented_; }  // events in no segmented window
+  const evaluation::WindowedLabelScore& score() const { return score_; }
+
+ private:
+  // Writes the pending events up to stream index `end` (exclusive), labels from the window.
+  void flush_until(int64_t end, const pipeline::SegmentationWindow* w) {
+    size_t wi = 0;
+    while (pending_first_ < end && !pending_.empty()) {
+      int label = -1;
+      if (w) {
+        while (wi < w->input_index.size() && w->input_index[wi] < pending_first_) ++wi;
+        if (wi < w->input_index.size() && w->input_index[wi] == pending_first_) label = w->labels[wi];
+      }
+      const bool outside = !w || pending_first_ < w->input_begin;
+      if (outside) ++unsegmented_;
+      if (truth_) {
+        const uint16_t t = truth_->next();
+        if (outside) score_.add_outside(t);
+        else score_.add(label, t);
+      }
+      write_line(pending_.front(), label);
+      pending_.pop_front();
+      ++pending_first_;
+    }
+    score_.end_window();
+  }
+
+  void write_line(const SubpixelEvent& e, int label) {
+    char t[32];
+    *format_seconds(e.t_ns, t) = '\0';
+    const bool integer = e.x == std::floor(e.x) && e.y == std::floor(e.y);
+    if (integer) {
+      std::fprintf(file_.get(), "%s %d %d %d %d\n", t, static_cast<int>(e.x), static_cast<int>(e.y), e.polarity > 0 ? 1 : 0, label);
+    } else {
+      std::fprintf(file_.get(), "%s %.6f %.6f %d %d\n", t, e.x, e.y, e.polarity > 0 ? 1 : 0, label);
+    }
+  }
+
+  TextOut file_;
+  evaluation::EventLabelReader* truth_;
+  std::deque<SubpixelEvent> pending_;
+  int64_t pending_first_ = 0;  // stream index of pending_.front()
+  int64_t unsegmented_ = 0;
+  evaluation::WindowedLabelScore score_;
+};
+
+// One cluster of segments.json: its motion, events, objectives and the models tried.
+std::string cluster_json(const mapping::SegmentCluster& k) {
+  const std::vector<std::string> names = mapping::warp_parameter_names(k.model);
+  JsonObject params(9);
+  for (size_t i = 0; i < names.size(); ++i) params.number(names[i], k.params[static_cast<Eigen::Index>(i)]);
+  std::vector<std::string> tried;
+  for (const mapping::ModelTrial& m : k.models)
+    tried.push_back(JsonObject(9)
+                        .string("model", mapping::warp_model_name(m.model))
+                        .number("objective", m.objective)
+                        .number("gain_over_simplest", m.gain)
+                        .boolean("chosen", m.chosen)
+                        .str());
+  return JsonObject(9)
+      .integer("id", k.id)
+      .string("model", mapping::warp_model_name(k.model))
+      .raw("params", params.str())
+      .number("events", k.events)
+      .number("objective", k.objective)
+      .number("objective_best_other", k.objective_other)
+      .number("gain", k.gain)
+      .raw("centroid_px", json_numbers(k.centroid, 9))
+      .raw("models_tried", json_array(tried))
+      .str();
+}
+
+// segments.json, one window per line group, the images (--png, every png_every-th window), and
+// the counts of stats.json's model block: windows per cluster count, clusters per warp model, and
+// the gains that decided the count (accepted: the smallest gain of the clusters kept; removed: of
+// those merged).
+class SegmentsWriter {
+ public:
+  SegmentsWriter(const std::string& path, const std::string& img_dir, bool png, int png_every)
+      : file_(path), img_dir_(img_dir), png_(png), png_every_(png_every) {
+    std::fputs("{\n  \"windows\": [", file_.get());
+  }
+
+  void write(const pipeline::SegmentationWindow& w) {
+    ++count_windows_[static_cast<int>(w.clusters.size())];
+    for (const mapping::SegmentCluster& k : w.clusters) ++model_clusters_[mapping::warp_model_name(k.model)];
+    for (const mapping::CountStep& cs : w.count_steps) (cs.removed ? removed_gains_ : kept_gains_).push_back(cs.smallest_gain);
+    window_ms_.push_back(w.time_ms);
+    std::string j = std::string(windows_ ? "," : "") + "\n    {\"index\": " + std::to_string(w.index) +
+                    ", \"t_start_s\": " + json_number(w.t_start_ns * 1e-9, 9) + ", \"t_end_s\": " + json_number(w.t_end_ns * 1e-9, 9) +
+                    ", \"events\": " + std::to_string(w.events) + ", \"time_ms\": " + json_number(w.time_ms, 9) +
+                    ", \"alternations\": " + std::to_string(w.alternations) + ", \"evaluations\": " + std::to_string(w.evaluations) +
+                    ",\n     \"clusters\": [";
+    for (size_t c = 0; c < w.clusters.size(); ++c) {
+      ids_used_.insert(w.clusters[c].id);
+      j += (c ? ",\n       " : "\n       ") + cluster_json(w.clusters[c]);
+    }
+    std::vector<std::string> steps;
+    for (const mapping::CountStep& st : w.count_steps)
+      steps.push_back(JsonObject(9).integer("clusters", st.clusters).number("smallest_gain", st.smallest_gain).boolean("removed", st.removed).str());
+    j += "],\n     \"count_steps\": " + json_array(steps) + "}";
+    std::fputs(j.c_str(), file_.get());
+    if (png_ && w.index % png_every_ == 0) write_pngs(w);
+    ++windows_;
+  }
+
+  void close() {
+    std::fputs("\n  ]\n}\n", file_.get());
+    file_.close();
+  }
+
+  // stats.json's model block.
+  std::string model_json(const mapping::SegmentationOptions& so, int64_t windows) const;
+  const std::vector<double>& window_ms() const { return window_ms_; }
+  size_t labels_used() const { return ids_used_.size(); }
+  int64_t pngs() const { return pngs_; }
+
+ private:
+  void write_pngs(const pipeline::SegmentationWindow& w) {
+    char name[80];
+    std::snprintf(name, sizeof(name), "window_%06lld.png", static_cast<long long>(w.index));
+    write_colour_iwe((fs::path(img_dir_) / name).string(), w);
+    ++pngs_;
+    for (size_t c = 0; c < w.clusters.size(); ++c) {
+      std::snprintf(name, sizeof(name), "window_%06lld_cluster_%d.png", static_cast<long long>(w.index), w.clusters[c].id);
+      write_iwe_png((fs::path(img_dir_) / name).string(), w.iwe[c], robust_scale(w.iwe[c]), false);
+      ++pngs_;
+    }
+  }
+
+  TextOut file_;
+  const std::string img_dir_;
+  const bool png_;
+  const int png_every_;
+  int64_t windows_ = 0, pngs_ = 0;
+  std::vector<double> window_ms_;
+  std::set<int> ids_used_;
+  std::map<int, int64_t> count_windows_;
+  std::map<std::string, int64_t> model_clusters_;
+  std::vector<double> kept_gains_, removed_gains_;
+};
+
+std::string SegmentsWriter::model_json(const mapping::SegmentationOptions& so, int64_t windows) const {
+  int modal = 0;
+  int64_t modal_n = -1;
+  for (const auto& [c, n] : count_windows_)
+    if (n > modal_n) modal = c, modal_n = n;
+  auto mean = [](const std::vector<double>& v) {
+    double m = 0;
+    for (double x : v) m += x;
+    return v.empty() ? NAN : m / static_cast<double>(v.size());
+  };
+  std::ostringstream summary;
+  summary << (so.clusters > 0 ? "fixed " : "auto ") << modal << " clusters in " << modal_n << " of " << windows << " windows;";
+  for (const auto& [m, n] : model_clusters_) summary << " " << m << " " << n;
+  summary << " clusters";
+  JsonObject per_count(9), per_model(9);
+  for (const auto& [c, n] : count_windows_) per_count.integer(std::to_string(c), n);
+  for (const auto& [m, n] : model_clusters_) per_model.integer(m, n);
+  std::vector<std::string> candidates;
+  for (mapping::WarpModel m : so.models) candidates.push_back(mapping::warp_model_name(m));
+  return JsonObject(9)
+      .string("summary", summary.str())
+      .raw("count", JsonObject(9)
+                        .string("selection", so.clusters > 0 ? "fixed" : "auto")
+                        .integer("clusters", so.clusters)
+                        .integer("max_clusters", so.max_clusters)
+                        .number("min_cluster_gain", so.min_cluster_gain)
+                        .integer("modal", modal)
+                        .raw("windows_per_count", per_count.str())
+                        .number("accepted_smallest_gain_mean", mean(kept_gains_))
+                        .integer("removed", static_cast<int64_t>(removed_gains_.size()))
+                        .number("removed_gain_mean", mean(removed_gains_))
+                        .str())
+      .raw("warp", JsonObject(9)
+                       .raw("candidates", json_strings(candidates))
+                       .number("gain_per_parameter", so.model_gain_per_parameter)
+                       .raw("clusters_per_model", per_model.str())
+                       .str())
+      .string("per_window", "segments.json")
+      .str();
+}
+
+// eval.json: the labels' accuracy over all true-labelled events and inside segmented windows, per
+// true label. Throws evio::InputError when the file has more labels than the stream had events
+// (unless --t-end cut the stream).
+void write_label_eval(const SegmentArgs& args, evaluation::EventLabelReader* truth, const evaluation::WindowedLabelScore& s,
+                      int64_t events, std::ostream& out) {
+  if (!args.t_end_ns && truth->more())
+    throw InputError(truth->path(), 0, "more labels than the " + std::to_string(events) + " events",
+                     "one label per event of the dataset, in event order");
+  const evaluation::LabelAgreement& in = s.in_windows();
+  JsonObject per_label(9);
+  for (const auto& [l, c] : in.scored_per_label) {
+    const auto it = in.correct_per_label.find(l);
+    const int64_t ok = it == in.correct_per_label.end() ? 0 : it->second;
+    per_label.raw(std::to_string(l), JsonObject(9)
+                                         .integer("events_in_windows", c)
+                                         .number("accuracy_in_windows", static_cast<double>(ok) / static_cast<double>(c))
+                                         .str());
+  }
+  JsonObject j(9, JsonObject::Layout::kLines);
+  j.string("labels", truth->path())
+      .string("protocol", evaluation::kWindowedLabelProtocol)
+      .integer("events_scored", s.scored())
+      .integer("events_correct", s.correct())
+      .number("accuracy", s.accuracy())
+      .number("label_error", 1.0 - s.accuracy())
+      .integer("events_in_windows_scored", in.scored)
+      .number("accuracy_in_windows", s.accuracy_in_windows())
+      .raw("per_label", per_label.str());
+  write_text_file((fs::path(args.out) / "eval.json").string(), j.str() + "\n");
+  out << "evio segment: labels against " << truth->path() << ": accuracy " << json_number(s.accuracy(), 9) << " over "
+      << s.scored() << " events (" << json_number(s.accuracy_in_windows(), 9) << " inside segmented windows); wrote eval.json\n";
+}
+
+// The median window time as stats.json gives it (the upper middle of the sorted times; 0 for none).
+double median_window_ms(std::vector<double> ms) {
+  std::sort(ms.begin(), ms.end());
+  return ms.empty() ? 0.0 : ms[ms.size() / 2];
 }
 
 }  // namespace
@@ -198,256 +425,81 @@ int run_segment(const SegmentArgs& args, std::ostream& out) {
     throw InputError("--t-end", 0, "--t-end must be after --t-start", "--t-start S --t-end S with S in seconds");
   if (args.png_every < 1) throw InputError("--png-every", 0, "must be >= 1", "a positive window count");
 
+  // ---- inputs: the dataset and its camera ----------------------------------------------------------
   CmaxInput input = open_cmax_input(args.dataset, args.dataset_options, args.calib, cfg.segmentation.models);
-  DatasetReader* reader = input.reader.get();
-  const std::optional<calib::PinholeCamera>& camera = input.camera;
-  const SensorSize sensor = input.sensor;
 
+  // ---- the pipeline, and the resolved config --------------------------------------------------------
   cfg.keep_iwe = args.png;
-  pipeline::SegmentationPipeline pipe(cfg, sensor.width, sensor.height, camera);
+  pipeline::SegmentationPipeline pipe(cfg, input.sensor.width, input.sensor.height, input.camera);
   SegmentConfig resolved = cfg;
   resolved.segmentation = pipe.segmentation_options();
   fs::create_directories(args.out);
-  {
-    TextOut f((fs::path(args.out) / "segment_config.yaml").string());
-    std::fputs(segment_config_text(resolved).c_str(), f.get());
-    f.close();
-  }
+  write_text_file((fs::path(args.out) / "segment_config.yaml").string(), segment_config_text(resolved));
   const std::string img_dir = (fs::path(args.out) / "images").string();
   if (args.png) fs::create_directories(img_dir);
 
-  // --gt (or DATASET/event_labels.txt): the true labels, scored per window (label_evaluation.h).
-  std::string gt_path = args.gt;
+  // ---- the true labels (--gt or DATASET/event_labels.txt), scored per window -----------------------
   std::string gt_note;
-  if (gt_path.empty() && !args.no_gt) {
-    std::error_code ec;
-    const fs::path auto_path = fs::path(args.dataset) / "event_labels.txt";
-    if (fs::is_directory(args.dataset, ec) && fs::is_regular_file(auto_path, ec)) {
-      if (args.t_start_ns) gt_note = "not scored: --t-start skips events, so the labels cannot be matched";
-      else gt_path = auto_path.string();
-    }
-  }
-  if (!gt_path.empty() && args.t_start_ns)
-    throw InputError("--gt", 0, "cannot be combined with --t-start (labels are matched by event order)",
-                     "--gt without --t-start");
-  std::unique_ptr<TrueLabels> truth;
-  if (!gt_path.empty()) truth = std::make_unique<TrueLabels>(gt_path);
-  evaluation::LabelAgreement in_windows;
-  int64_t unsegmented_scored = 0;  // true-labelled events in no segmented window (wrong)
-  std::vector<int> group_pred;
-  std::vector<uint16_t> group_truth;
+  const std::unique_ptr<evaluation::EventLabelReader> truth = open_true_labels(args, &gt_note);
 
-  // labels.txt in input order: the events wait in `pending` until their window is segmented.
-  TextOut labels_file((fs::path(args.out) / "labels.txt").string());
-  std::deque<SubpixelEvent> pending;
-  int64_t pending_first = 0;  // stream index of pending.front()
-  int64_t noise_written = 0, unsegmented = 0;
-  std::map<int, int64_t> per_label;
-  auto write_line = [&](const SubpixelEvent& e, int label) {
-    char t[32];
-    *format_seconds(e.t_ns, t) = '\0';
-    const bool integer = e.x == std::floor(e.x) && e.y == std::floor(e.y);
-    if (integer) {
-      std::fprintf(labels_file.get(), "%s %d %d %d %d\n", t, static_cast<int>(e.x), static_cast<int>(e.y), e.polarity > 0 ? 1 : 0, label);
-    } else {
-      std::fprintf(labels_file.get(), "%s %.6f %.6f %d %d\n", t, e.x, e.y, e.polarity > 0 ? 1 : 0, label);
-    }
-    if (label < 0) ++noise_written;
-    ++per_label[label];
-  };
-  // Writes the pending events up to stream index `end` (exclusive), labels from the window.
-  auto flush_until = [&](int64_t end, const pipeline::SegmentationWindow* w) {
-    size_t wi = 0;
-    while (pending_first < end && !pending.empty()) {
-      int label = -1;
-      if (w) {
-        while (wi < w->input_index.size() && w->input_index[wi] < pending_first) ++wi;
-        if (wi < w->input_index.size() && w->input_index[wi] == pending_first) label = w->labels[wi];
-      }
-      const bool outside = !w || pending_first < w->input_begin;
-      if (outside) ++unsegmented;
-      if (truth) {
-        const uint16_t t = truth->next();
-        if (outside) {
-          unsegmented_scored += t != evaluation::kNoiseLabel;
-        } else {
-          group_pred.push_back(label);
-          group_truth.push_back(t);
-        }
-      }
-      write_line(pending.front(), label);
-      pending.pop_front();
-      ++pending_first;
-    }
-    if (!group_pred.empty()) {  // one window: one majority mapping of its clusters
-      in_windows.add(evaluation::score_labels(group_pred, group_truth));
-      group_pred.clear();
-      group_truth.clear();
-    }
-  };
-
-  TextOut seg_json((fs::path(args.out) / "segments.json").string());
-  std::fputs("{\n  \"windows\": [", seg_json.get());
-  int64_t windows = 0, pngs = 0;
-  std::vector<double> window_ms;
-  std::set<int> ids_used;
-  // The model block: windows per cluster count, clusters per warp model, and the gains that
-  // decided the count (accepted: the smallest gain of the clusters kept; removed: of those merged).
-  std::map<int, int64_t> count_windows;
-  std::map<std::string, int64_t> model_clusters;
-  std::vector<double> kept_gains, removed_gains;
-  auto handle = [&](std::vector<pipeline::SegmentationWindow> ws) {
-    for (const pipeline::SegmentationWindow& w : ws) {
-      ++count_windows[static_cast<int>(w.clusters.size())];
-      for (const mapping::SegmentCluster& k : w.clusters) ++model_clusters[mapping::warp_model_name(k.model)];
-      for (const mapping::CountStep& cs : w.count_steps) (cs.removed ? removed_gains : kept_gains).push_back(cs.smallest_gain);
-      flush_until(w.input_begin, nullptr);  // skipped windows before this one: no label
-      flush_until(w.input_end, &w);
-      window_ms.push_back(w.time_ms);
-      std::ostringstream j;
-      j << (windows ? "," : "") << "\n    {\"index\": " << w.index << ", \"t_start_s\": " << json_number(w.t_start_ns * 1e-9, 9)
-        << ", \"t_end_s\": " << json_number(w.t_end_ns * 1e-9, 9) << ", \"events\": " << w.events << ", \"time_ms\": " << json_number(w.time_ms, 9)
-        << ", \"alternations\": " << w.alternations << ", \"evaluations\": " << w.evaluations << ",\n     \"clusters\": [";
-      for (size_t c = 0; c < w.clusters.size(); ++c) {
-        const mapping::SegmentCluster& k = w.clusters[c];
-        ids_used.insert(k.id);
-        const std::vector<std::string> names = mapping::warp_parameter_names(k.model);
-        j << (c ? "," : "") << "\n       {\"id\": " << k.id << ", \"model\": " << json_string(mapping::warp_model_name(k.model))
-          << ", \"params\": {";
-        for (size_t i = 0; i < names.size(); ++i) j << (i ? ", " : "") << json_string(names[i]) << ": " << json_number(k.params[static_cast<Eigen::Index>(i)], 9);
-        j << "}, \"events\": " << json_number(k.events, 9) << ", \"objective\": " << json_number(k.objective, 9)
-          << ", \"objective_best_other\": " << json_number(k.objective_other, 9) << ", \"gain\": " << json_number(k.gain, 9)
-          << ", \"centroid_px\": [" << json_number(k.centroid.x(), 9) << ", " << json_number(k.centroid.y(), 9) << "], \"models_tried\": [";
-        for (size_t m = 0; m < k.models.size(); ++m)
-          j << (m ? ", " : "") << "{\"model\": " << json_string(mapping::warp_model_name(k.models[m].model))
-            << ", \"objective\": " << json_number(k.models[m].objective, 9) << ", \"gain_over_simplest\": " << json_number(k.models[m].gain, 9)
-            << ", \"chosen\": " << (k.models[m].chosen ? "true" : "false") << "}";
-        j << "]}";
-      }
-      j << "],\n     \"count_steps\": [";
-      for (size_t s = 0; s < w.count_steps.size(); ++s) {
-        const mapping::CountStep& st = w.count_steps[s];
-        j << (s ? ", " : "") << "{\"clusters\": " << st.clusters << ", \"smallest_gain\": " << json_number(st.smallest_gain, 9)
-          << ", \"removed\": " << (st.removed ? "true" : "false") << "}";
-      }
-      j << "]}";
-      std::fputs(j.str().c_str(), seg_json.get());
-      if (args.png && w.index % args.png_every == 0) {
-        char name[80];
-        std::snprintf(name, sizeof(name), "window_%06lld.png", static_cast<long long>(w.index));
-        write_colour_iwe((fs::path(img_dir) / name).string(), w);
-        ++pngs;
-        for (size_t c = 0; c < w.clusters.size(); ++c) {
-          std::snprintf(name, sizeof(name), "window_%06lld_cluster_%d.png", static_cast<long long>(w.index), w.clusters[c].id);
-          write_iwe_png((fs::path(img_dir) / name).string(), w.iwe[c], robust_scale(w.iwe[c]), false);
-          ++pngs;
-        }
-      }
-      ++windows;
-    }
-  };
-
+  // ---- the event stream: labels.txt in input order, segments.json and images per window ----------
+  LabelWriter labels((fs::path(args.out) / "labels.txt").string(), truth.get());
+  SegmentsWriter segments((fs::path(args.out) / "segments.json").string(), img_dir, args.png, args.png_every);
   const CmaxStreamTotals totals = stream_cmax_events(
-      reader, args.t_start_ns, args.t_end_ns, "evio segment", args.progress,
+      input.reader.get(), args.t_start_ns, args.t_end_ns, "evio segment", args.progress,
       [&](const SubpixelEvent& e) {
-        pending.push_back(e);
+        labels.push(e);
         return pipe.process(e);
       },
-      [&pipe] { pipe.finish(); }, [&] { handle(pipe.take_windows()); },
+      [&pipe] { pipe.finish(); },
+      [&] {
+        for (const pipeline::SegmentationWindow& w : pipe.take_windows()) {
+          labels.write_window(w);
+          segments.write(w);
+        }
+      },
       [&pipe] { return std::to_string(pipe.stats().windows) + " windows"; });
-  const int64_t events = totals.events;
-  const double process_s = totals.process_s;
-  flush_until(pending_first + static_cast<int64_t>(pending.size()), nullptr);
-  labels_file.close();
-  std::fputs("\n  ]\n}\n", seg_json.get());
-  seg_json.close();
+  labels.finish();
+  segments.close();
 
-  if (truth) {
-    if (!args.t_end_ns && truth->more())
-      throw InputError(truth->path(), 0, "more labels than the " + std::to_string(events) + " events",
-                       "one label per event of the dataset, in event order");
-    const int64_t scored = in_windows.scored + unsegmented_scored;
-    const double accuracy = scored > 0 ? static_cast<double>(in_windows.correct) / static_cast<double>(scored) : NAN;
-    TextOut f((fs::path(args.out) / "eval.json").string());
-    std::ostringstream j;
-    j << "{\n  \"labels\": " << json_string(truth->path())
-      << ",\n  \"protocol\": \"per window, each cluster mapped to the true label most of its events carry; accuracy over "
-         "events with a true object label (not noise); events labelled -1 or in no segmented window count as wrong\""
-      << ",\n  \"events_scored\": " << scored << ",\n  \"events_correct\": " << in_windows.correct
-      << ",\n  \"accuracy\": " << json_number(accuracy, 9) << ",\n  \"label_error\": " << json_number(1.0 - accuracy, 9)
-      << ",\n  \"events_in_windows_scored\": " << in_windows.scored
-      << ",\n  \"accuracy_in_windows\": " << json_number(in_windows.scored ? in_windows.accuracy() : NAN, 9)
-      << ",\n  \"per_label\": {";
-    bool first = true;
-    for (const auto& [l, c] : in_windows.scored_per_label) {
-      const auto it = in_windows.correct_per_label.find(l);
-      const int64_t ok = it == in_windows.correct_per_label.end() ? 0 : it->second;
-      j << (first ? "" : ", ") << "\"" << l << "\": {\"events_in_windows\": " << c
-        << ", \"accuracy_in_windows\": " << json_number(static_cast<double>(ok) / static_cast<double>(c), 9) << "}";
-      first = false;
-    }
-    j << "}\n}\n";
-    std::fputs(j.str().c_str(), f.get());
-    f.close();
-    out << "evio segment: labels against " << truth->path() << ": accuracy " << json_number(accuracy, 9) << " over " << scored
-        << " events (" << json_number(in_windows.scored ? in_windows.accuracy() : NAN, 9) << " inside segmented windows); wrote eval.json\n";
-  } else if (!gt_note.empty()) {
-    out << "evio segment: event_labels.txt " << gt_note << "\n";
-  }
+  // ---- eval.json, stats.json and the summary -------------------------------------------------------
+  if (truth) write_label_eval(args, truth.get(), labels.score(), totals.events, out);
+  else if (!gt_note.empty()) out << "evio segment: event_labels.txt " << gt_note << "\n";
 
   const pipeline::SegmentationStats& st = pipe.stats();
   const pipeline::CmaxWindowStats& ws = pipe.windows().stats();
-  std::sort(window_ms.begin(), window_ms.end());
-  const double median_ms = window_ms.empty() ? 0.0 : window_ms[window_ms.size() / 2];
-  {
-    TextOut f((fs::path(args.out) / "stats.json").string());
-    std::ostringstream j;
-    const mapping::SegmentationOptions& so = pipe.segmentation_options();
-    int modal = 0;
-    int64_t modal_n = -1;
-    for (const auto& [c, n] : count_windows)
-      if (n > modal_n) modal = c, modal_n = n;
-    auto mean = [](const std::vector<double>& v) {
-      double m = 0;
-      for (double x : v) m += x;
-      return v.empty() ? NAN : m / static_cast<double>(v.size());
-    };
-    std::ostringstream summary;
-    summary << (so.clusters > 0 ? "fixed " : "auto ") << modal << " clusters in " << modal_n << " of " << st.windows << " windows;";
-    for (const auto& [m, n] : model_clusters) summary << " " << m << " " << n;
-    summary << " clusters";
-    j << "{\n  \"model\": {\"summary\": " << json_string(summary.str()) << ", \"count\": {\"selection\": "
-      << json_string(so.clusters > 0 ? "fixed" : "auto") << ", \"clusters\": " << so.clusters << ", \"max_clusters\": " << so.max_clusters
-      << ", \"min_cluster_gain\": " << json_number(so.min_cluster_gain, 9) << ", \"modal\": " << modal << ", \"windows_per_count\": {";
-    bool first = true;
-    for (const auto& [c, n] : count_windows) j << (first ? "" : ", ") << "\"" << c << "\": " << n, first = false;
-    j << "}, \"accepted_smallest_gain_mean\": " << json_number(mean(kept_gains), 9) << ", \"removed\": " << removed_gains.size()
-      << ", \"removed_gain_mean\": " << json_number(mean(removed_gains), 9) << "}, \"warp\": {\"candidates\": [";
-    for (size_t i = 0; i < so.models.size(); ++i) j << (i ? ", " : "") << json_string(mapping::warp_model_name(so.models[i]));
-    j << "], \"gain_per_parameter\": " << json_number(so.model_gain_per_parameter, 9) << ", \"clusters_per_model\": {";
-    first = true;
-    for (const auto& [m, n] : model_clusters) j << (first ? "" : ", ") << json_string(m) << ": " << n, first = false;
-    j << "}}, \"per_window\": \"segments.json\"}";
-    j << ",\n  \"events\": " << events << ",\n  \"events_segmented\": " << ws.events_used
-      << ",\n  \"events_labelled\": " << st.events_labelled << ",\n  \"events_noise\": " << st.events_noise
-      << ",\n  \"events_in_no_window\": " << unsegmented << ",\n  \"events_dropped\": " << ws.events_dropped
-      << ",\n  \"windows\": " << st.windows << ",\n  \"windows_skipped\": " << ws.windows_skipped
-      << ",\n  \"labels_used\": " << ids_used.size() << ",\n  \"time_s\": " << json_number(process_s, 9)
-      << ",\n  \"time_per_window_ms\": {\"mean\": " << json_number(st.windows ? st.time_ms / static_cast<double>(st.windows) : 0.0, 9)
-      << ", \"median\": " << json_number(median_ms, 9) << ", \"max\": " << json_number(st.max_window_ms, 9) << "}"
-      << ",\n  \"time_per_event_us\": " << json_number(ws.events_used ? st.time_ms * 1e3 / static_cast<double>(ws.events_used) : 0.0, 9)
-      << ",\n  \"alternations\": " << st.alternations << ",\n  \"evaluations\": " << st.evaluations
-      << ",\n  \"undistortion\": " << json_string(pipeline::cmax_undistortion_name(pipe.windows().undistortion()))
-      << ",\n  \"undistortion_reason\": " << json_string(pipe.windows().undistortion_reason())
-      << ",\n  \"dithered\": " << (pipe.windows().dithered() ? "true" : "false")
-      << ",\n  \"objective\": " << json_string(mapping::cmax_objective_name(pipe.objective()))
-      << ",\n  \"pngs\": " << pngs << "\n}\n";
-    std::fputs(j.str().c_str(), f.get());
-    f.close();
-  }
-  out << "evio segment: " << events << " events, " << st.windows << " windows (" << ws.windows_skipped
-      << " skipped), " << ids_used.size() << " labels; " << json_number(median_ms, 9) << " ms per window (median), "
-      << json_number(ws.events_used ? st.time_ms * 1e3 / static_cast<double>(ws.events_used) : 0.0, 9) << " us per event\n"
+  const double median_ms = median_window_ms(segments.window_ms());
+  const double us_per_event = ws.events_used ? st.time_ms * 1e3 / static_cast<double>(ws.events_used) : 0.0;
+  JsonObject j(9, JsonObject::Layout::kLines);
+  j.raw("model", segments.model_json(pipe.segmentation_options(), st.windows))
+      .integer("events", totals.events)
+      .integer("events_segmented", ws.events_used)
+      .integer("events_labelled", st.events_labelled)
+      .integer("events_noise", st.events_noise)
+      .integer("events_in_no_window", labels.unsegmented())
+      .integer("events_dropped", ws.events_dropped)
+      .integer("windows", st.windows)
+      .integer("windows_skipped", ws.windows_skipped)
+      .integer("labels_used", static_cast<int64_t>(segments.labels_used()))
+      .number("time_s", totals.process_s)
+      .raw("time_per_window_ms", JsonObject(9)
+                                     .number("mean", st.windows ? st.time_ms / static_cast<double>(st.windows) : 0.0)
+                                     .number("median", median_ms)
+                                     .number("max", st.max_window_ms)
+                                     .str())
+      .number("time_per_event_us", us_per_event)
+      .integer("alternations", st.alternations)
+      .integer("evaluations", st.evaluations)
+      .string("undistortion", pipeline::cmax_undistortion_name(pipe.windows().undistortion()))
+      .string("undistortion_reason", pipe.windows().undistortion_reason())
+      .boolean("dithered", pipe.windows().dithered())
+      .string("objective", mapping::cmax_objective_name(pipe.objective()))
+      .integer("pngs", segments.pngs());
+  write_text_file((fs::path(args.out) / "stats.json").string(), j.str() + "\n");
+
+  out << "evio segment: " << totals.events << " events, " << st.windows << " windows (" << ws.windows_skipped
+      << " skipped), " << segments.labels_used() << " labels; " << json_number(median_ms, 9) << " ms per window (median), "
+      << json_number(us_per_event, 9) << " us per event\n"
       << "undistortion: " << pipeline::cmax_undistortion_name(pipe.windows().undistortion()) << " ("
       << pipe.windows().undistortion_reason() << ")\n"
       << "wrote " << args.out << "/labels.txt, segments.json, stats.json, segment_config.yaml"

@@ -14,7 +14,7 @@
 //                  labels used, the undistortion choice
 //   segment_config.yaml  the resolved config
 //   eval.json      with true labels (--gt FILE, or DATASET/event_labels.txt of `evio simulate`):
-//                  per-event label accuracy (evaluation/label_evaluation.h), per window
+//                  per-event label accuracy, per window (evaluation/windowed_label_evaluation.h)
 #pragma once
 
 #include <cstdint>

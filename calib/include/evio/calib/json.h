@@ -54,6 +54,26 @@ std::string json_numbers(const Range& values, int digits = 17) {
   return out + "]";
 }
 
+// A JSON array of strings (json_string each): ["a", "b"].
+template <class Range>
+std::string json_strings(const Range& values) {
+  std::string out = "[";
+  bool first = true;
+  for (const auto& v : values) {
+    out += first ? "" : ", ";
+    out += json_string(v);
+    first = false;
+  }
+  return out + "]";
+}
+
+// A JSON array of values already encoded (objects, arrays, json_* results): [a, b].
+inline std::string json_array(const std::vector<std::string>& encoded) {
+  std::string out = "[";
+  for (size_t i = 0; i < encoded.size(); ++i) out += (i ? ", " : "") + encoded[i];
+  return out + "]";
+}
+
 // A JSON object written member by member, in order. Inline: {"a": 1, "b": 2}. Lines (a file's top
 // level): "{\n  \"a\": 1,\n  \"b\": 2\n}". Values are encoded by the json_* functions above;
 // raw() takes one already encoded (a nested object or array).
