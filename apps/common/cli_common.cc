@@ -44,6 +44,15 @@ void CommandLine::add_print_config(bool* flag, const std::vector<CLI::Option*>& 
   });
 }
 
+void CommandLine::add_set(std::vector<std::string>* sets, const std::string& example) {
+  app_.add_option("--set", *sets,
+                  "Change one config value: key.sub=value (dotted key of the --config YAML, value in YAML syntax), "
+                  "applied after --config, e.g. --set " + example + "; repeatable. The output folder's resolved "
+                  "config lists every key")
+      ->expected(1)
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+}
+
 int CommandLine::run(int argc, char** argv, const std::function<int()>& body) {
   try {
     app_.parse(argc, argv);

@@ -28,6 +28,9 @@ class CommandLine {
   // --print-config: print the resolved config (the defaults with --config and --set applied, every
   // key with its unit and range) and exit; the options in `needed` are required only without it.
   void add_print_config(bool* flag, const std::vector<CLI::Option*>& needed);
+  // --set key.sub=value (repeatable, applied after --config, in order) into *sets; example: a
+  // key=value of this command's config for the help.
+  void add_set(std::vector<std::string>* sets, const std::string& example);
 
   // Parses argv (the dispatcher passes everything after `evio` except the subcommand's name) and
   // runs body; returns the process exit code.

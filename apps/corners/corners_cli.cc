@@ -32,12 +32,7 @@ int main(int argc, char** argv) try {
       "events against the grid nodes projected through the true pose: precision (within 2 px), (corner, 50 ms bin) "
       "recall, F = harmonic mean of the two, f_error = 1 - F");
   cli->add_flag("--no-gt", corners.no_gt, "Do not score against DATASET/scene_resolved.yaml")->excludes(gt_opt);
-  cli->add_option("--set", corners.set,
-                  "Change one config value: key.sub=value (dotted key of the --config YAML, value in YAML "
-                  "syntax), applied after --config, e.g. --set efast.filter_sae=true; repeatable. The "
-                  "output folder's resolved config lists every key")
-      ->expected(1)
-      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+  cli.add_set(&corners.set, "efast.filter_sae=true");
   evio::apps::add_dataset_options(&cli.app(), &corners.dataset_options);
   bool print_config = false;
   cli.add_print_config(&print_config, {dataset_opt, out_opt});

@@ -60,12 +60,7 @@ int main(int argc, char** argv) try {
                   "motion_eval.csv and its RMS in stats.json (default: the dataset's ground truth)");
   cli->add_flag("--png", flow.png, "Write each window's IWE before and after warping to DIR/iwe/ (8-bit, robust scale)");
   cli->add_option("--png-every", flow.png_every, "With --png: every this many windows")->check(CLI::PositiveNumber);
-  cli->add_option("--set", flow.set,
-                  "Change one config value: key.sub=value (dotted key of the --config YAML, value in YAML syntax), "
-                  "applied after --config, e.g. --set cmax.blur_sigma_px=0.7; repeatable. The output folder's "
-                  "flow_config.yaml lists every key")
-      ->expected(1)
-      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+  cli.add_set(&flow.set, "cmax.blur_sigma_px=0.7");
   evio::apps::add_dataset_options(&cli.app(), &flow.dataset_options);
   bool print_config = false;
   cli.add_print_config(&print_config, {dataset_opt, out_opt});

@@ -422,7 +422,7 @@ JsonObject flow_stats(const FlowArgs& args, const FlowConfig& cfg, mapping::Warp
 
 FlowConfig load_flow_config(const std::string& path, const std::vector<std::string>& sets) {
   return yaml_config::read_config(flow_config_table(), FlowConfig{}, path, sets,
-                                  "a flow config YAML (see README.md, `evio flow`)");
+                                  "a flow config YAML (see docs/commands/flow.md)");
 }
 
 std::string flow_config_text(const FlowConfig& c) {

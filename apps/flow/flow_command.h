@@ -31,7 +31,7 @@
 
 namespace evio::apps {
 
-// Everything `--config FILE` sets (YAML sections window, cmax and the key undistortion; README.md,
+// Everything `--config FILE` sets (YAML sections window, cmax and the key undistortion; docs/commands/flow.md,
 // `evio flow --print-config`): the pipeline's options. cmax.width/height/fx/fy/cx/cy come from
 // the camera calibration and are not config keys.
 struct FlowConfig : pipeline::CmaxMotionPipelineOptions {

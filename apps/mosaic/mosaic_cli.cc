@@ -41,12 +41,7 @@ int main(int argc, char** argv) try {
                 "Diagnostic: the tracker weighs its particles against the true panorama (a dataset written by evio "
                 "simulate with a panorama scene, rendered in the mosaic frame by the --gt start pose) instead of the "
                 "mosaic's reconstructions; no map error (needs --gt)");
-  cli->add_option("--set", mosaic.set,
-                  "Change one config value: key.sub=value (dotted key of the --config YAML, value in YAML "
-                  "syntax), applied after --config, e.g. --set tracker.particles=200; repeatable. The "
-                  "output folder's resolved config lists every key")
-      ->expected(1)
-      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+  cli.add_set(&mosaic.set, "tracker.particles=200");
   evio::apps::add_dataset_options(&cli.app(), &mosaic.dataset_options);
   bool print_config = false;
   cli.add_print_config(&print_config, {dataset_opt, out_opt});

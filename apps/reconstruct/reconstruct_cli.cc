@@ -66,11 +66,7 @@ int main(int argc, char** argv) try {
   cli->add_flag("--video", rec.video, "Also write video.mp4 (OpenCV VideoWriter, mp4v; reported when unavailable)");
   cli->add_option("--config", rec.config, "Reconstruct config YAML: method, cf, akf, frames, display (--print-config lists every key)");
   cli->add_option("--calib", rec.calib, "Calibration (Kalibr camchain .yaml or ECD calib.txt) for the sensor size; default: the dataset's");
-  cli->add_option("--set", rec.set,
-                  "Change one config value: key.sub=value (dotted key of the --config YAML, value in YAML syntax), "
-                  "applied after --config, e.g. --set frames.gamma=2.2; repeatable")
-      ->expected(1)
-      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+  cli.add_set(&rec.set, "frames.gamma=2.2");
   evio::apps::add_dataset_options(&cli.app(), &rec.dataset_options);
   bool print_config = false;
   cli.add_print_config(&print_config, {dataset_opt, out_opt});

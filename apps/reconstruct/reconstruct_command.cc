@@ -493,7 +493,7 @@ bool ReconstructConfig::Validate(std::string* why) const {
 
 ReconstructConfig load_reconstruct_config(const std::string& path, const std::vector<std::string>& sets) {
   return yaml_config::read_config(reconstruct_config_table(), ReconstructConfig{}, path, sets,
-                                  "a reconstruct config YAML (see README.md, `evio reconstruct`)");
+                                  "a reconstruct config YAML (see docs/commands/reconstruct.md)");
 }
 
 std::string reconstruct_config_text(const ReconstructConfig& c) {

@@ -31,7 +31,7 @@
 
 namespace evio::apps {
 
-// Everything `--config FILE` sets (README.md, `evio reconstruct --print-config`).
+// Everything `--config FILE` sets (docs/commands/reconstruct.md, `evio reconstruct --print-config`).
 struct ReconstructConfig {
   mapping::ReconstructionMethod method = mapping::ReconstructionMethod::kComplementary;
   bool use_frames = false;

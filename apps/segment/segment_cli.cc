@@ -48,12 +48,7 @@ int main(int argc, char** argv) try {
   cli->add_flag("--no-gt", seg.no_gt, "Do not score against DATASET/event_labels.txt")->excludes(gt_opt);
   cli->add_flag("--png,!--no-png", seg.png, "Coloured IWE PNGs per window to DIR/images/ (default on)");
   cli->add_option("--png-every", seg.png_every, "PNGs of every this many windows")->check(CLI::PositiveNumber);
-  cli->add_option("--set", seg.set,
-                  "Change one config value: key.sub=value (dotted key of the --config YAML, value in YAML syntax), "
-                  "applied after --config, e.g. --set segmentation.max_clusters=6; repeatable. The output folder's "
-                  "segment_config.yaml lists every key")
-      ->expected(1)
-      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+  cli.add_set(&seg.set, "segmentation.max_clusters=6");
   evio::apps::add_dataset_options(&cli.app(), &seg.dataset_options);
   bool print_config = false;
   cli.add_print_config(&print_config, {dataset_opt, out_opt});

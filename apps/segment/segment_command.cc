@@ -371,7 +371,7 @@ double median_window_ms(std::vector<double> ms) {
 
 SegmentConfig load_segment_config(const std::string& path, const std::vector<std::string>& sets) {
   return yaml_config::read_config(segment_config_table(), SegmentConfig{}, path, sets,
-                                  "a segment config YAML (see README.md, `evio segment`)");
+                                  "a segment config YAML (see docs/commands/segment.md)");
 }
 
 std::string segment_config_text(const SegmentConfig& c) {

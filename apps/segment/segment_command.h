@@ -28,7 +28,7 @@
 
 namespace evio::apps {
 
-// Everything `--config FILE` sets (sections window, segmentation, cmax; README.md,
+// Everything `--config FILE` sets (sections window, segmentation, cmax; docs/commands/segment.md,
 // `evio segment --print-config`). cmax width/height/fx/fy/cx/cy come from the camera.
 struct SegmentConfig : pipeline::SegmentationPipelineOptions {};
 

@@ -20,7 +20,7 @@ int main(int argc, char** argv) try {
   evio::apps::CommandLine cli("sweep");
   evio::apps::SweepArgs sweep;
   cli->footer(
-      "Spec (README, section `evio sweep`): datasets (recordings by path, or simulator scenes generated once into\n"
+      "Spec (docs/commands/sweep.md): datasets (recordings by path, or simulator scenes generated once into\n"
       "DIR/data/), algorithms (vio, mosaic, corners, flow, segment, reconstruct) with fixed args and parameter grids\n"
       "of config keys (passed as --set key=value). Each cell runs as `evio <algorithm>` in DIR/cells/<cell>/ (logs,\n"
       "command.txt, out/). DIR/results.jsonl: one JSON line per finished cell (cell, algorithm, dataset, params,\n"
@@ -44,7 +44,7 @@ int main(int argc, char** argv) try {
   cli->add_option("--hosts", sweep.hosts,
                   "--engine parallel: GNU parallel --sshloginfile (one ssh login a line, [N/]user@host or a Host of "
                   "~/.ssh/config, ':' for this machine); the programs and the data the cells read are sent once per host, "
-                  "each cell's folder is returned (README, section `evio sweep`)")
+                  "each cell's folder is returned (docs/commands/sweep.md)")
       ->check(CLI::ExistingFile);
   cli->add_option("--slurm-partition", sweep.slurm_partition, "--engine slurm: sbatch --partition (default: the cluster's)");
   cli->add_option("--slurm-args", sweep.slurm_args,

@@ -46,12 +46,7 @@ int main(int argc, char** argv) try {
                   "With --oracle-error real or independent: drop observations whose own error is larger (px; 0 = keep "
                   "all)")
       ->check(CLI::NonNegativeNumber);
-  cli->add_option("--set", vio.set,
-                  "Change one config value: key.sub=value (dotted key of the --config YAML, value in YAML "
-                  "syntax), applied after --config, e.g. --set frames.events_per_frame=20000; repeatable. The "
-                  "output folder's resolved config lists every key")
-      ->expected(1)
-      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+  cli.add_set(&vio.set, "frames.events_per_frame=20000");
   evio::apps::add_dataset_options(&cli.app(), &vio.dataset_options);
   bool print_config = false;
   cli.add_print_config(&print_config, {dataset_opt, out_opt});

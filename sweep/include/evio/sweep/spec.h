@@ -1,6 +1,6 @@
 // evio sweep: the spec (datasets x algorithms x parameter grids, YAML) and its expansion into cells,
 // one `evio <algorithm>` run each. Parsed with yaml-cpp; errors name the spec file, the line and the
-// expected form (evio::InputError). The format is documented in the README, section `evio sweep`.
+// expected form (evio::InputError). The format is documented in docs/commands/sweep.md.
 #pragma once
 
 #include <string>
