@@ -26,6 +26,7 @@
 #include "progress.h"
 #include "evio/sensors/config_table.h"
 #include "evio/sensors/dataset_calibration.h"
+#include "evio/frontend/option_tables.h"
 #include "option_tables.h"
 #include "output_files.h"
 
@@ -90,7 +91,7 @@ const yaml_config::Table<C>& corners_config_table() {
     Table<C> tracker("tracker settings");
     tracker.boolean("enabled", &C::tracks)
         .boolean("descriptors", &C::descriptors)
-        .include(corner_tracker_table(), &C::tracker);
+        .include(frontend::corner_tracker_table(), &C::tracker);
     Table<C> frames("overlay settings");
     frames.duration_ms("every_ms", &C::frames_every_ns, Range::kNonNegative)
         .duration_ms("window_ms", &C::frame_window_ns, Range::kPositive)
@@ -99,9 +100,9 @@ const yaml_config::Table<C>& corners_config_table() {
     Table<C> top("corners settings");
     top.section("refractory", refractory_section<C>(), self)
         .section("background_activity", background_activity_section<C>(), self)
-        .section("efast", efast_table(), &C::efast)
+        .section("efast", frontend::efast_table(), &C::efast)
         .section("tracker", tracker, self)
-        .section("dart", dart_table(), &C::dart)
+        .section("dart", frontend::dart_table(), &C::dart)
         .section("frames", frames, self)
         .ignored("description");
     return top;

@@ -16,6 +16,7 @@
 #include "evio/sensors/time.h"
 #include "evio/sensors/trajectory.h"
 #include "cmax_input.h"
+#include "evio/mapping/option_tables.h"
 #include "option_tables.h"
 #include "output_files.h"
 
@@ -38,11 +39,11 @@ const Table<C>& flow_config_table() {
         .integer("warm_pyramid_levels", &C::warm_pyramid_levels, 0, 8)
         .note("warm_pyramid_levels", "0: cmax.pyramid_levels");
     Table<C> cmax("contrast maximisation settings");
-    cmax.include(cmax_table(), &C::cmax, {"width", "height", "fx", "fy", "cx", "cy"});  // those: the camera's
+    cmax.include(mapping::cmax_table(), &C::cmax, {"width", "height", "fx", "fy", "cx", "cy"});  // those: the camera's
     Table<C> top("flow settings");
     top.boolean("model_selection", &C::model_selection)
         .note("model_selection", "choose the model per window among candidates (--model auto); false: cmax.model")
-        .choice_list("candidates", &C::candidates, warp_model_choices())
+        .choice_list("candidates", &C::candidates, mapping::warp_model_choices())
         .note("candidates", "model_selection's; rotation and 6dof only with a calibrated camera")
         .number("model_gain_per_parameter", &C::model_gain_per_parameter, Range::kNonNegative, "")
         .note("model_gain_per_parameter", "relative objective gain a richer model needs per extra parameter")

@@ -24,7 +24,8 @@
 
 #include "evio/simulator/scene_config.h"
 #include "evio/sensors/config_table.h"
-#include "option_tables.h"
+#include "evio/frontend/option_tables.h"
+#include "evio/mapping/option_tables.h"
 #include "mosaic_outputs.h"
 
 namespace evio::apps {
@@ -53,12 +54,12 @@ using C = MosaicConfig;
 
 // The table of `--config` and `--set` (one declaration per key: reading, validation, the resolved
 // config); the mosaic, particle filter, contrast maximisation, relocalisation and display options
-// come with their own tables (option_tables.h).
+// come with their own tables (evio/frontend/option_tables.h, evio/mapping/option_tables.h).
 const Table<C>& mosaic_config_table() {
   static const Table<C> table = [] {
     auto self = [](C& c) -> C& { return c; };
     Table<C> mosaic("mosaic settings");
-    mosaic.include(gradient_mosaic_table(), &C::mosaic)
+    mosaic.include(mapping::gradient_mosaic_table(), &C::mosaic)
         .integer("reconstruct_events", &C::reconstruct_events, 1, 1000000000)
         .duration_ms("reconstruct_ms", &C::reconstruct_period_ns, Range::kPositive)
         .integer("reconstruct_latency_events", &C::reconstruct_latency_events, 0, 1000000000)
@@ -72,7 +73,8 @@ const Table<C>& mosaic_config_table() {
         });
     // event_stride 0 and min_particles -1: chosen by input at run time (mosaic_command.h).
     Table<C> tracker("tracker settings");
-    tracker.include(rotation_particle_filter_table(), &C::tracker, {"event_stride", "min_particles"})
+    tracker.include(frontend::rotation_particle_filter_table(), &C::tracker,
+                    {"event_stride", "min_particles", "probe_every_batches", "probe_offset_rad"})
         .integer("event_stride", &C::event_stride, 0, 1000000)
         .integer("min_particles", &C::min_particles, -1, 1000000)
         .note("event_stride", "0: by input, 4 with --use-imu, 1 without")
@@ -81,7 +83,7 @@ const Table<C>& mosaic_config_table() {
     bootstrap.duration_ms("duration_ms", &C::bootstrap_ns, Range::kNonNegative)
         .duration_ms("window_ms", &C::bootstrap_window_ns, Range::kPositive)
         .integer("window_events", &C::bootstrap_window_events, 1000, 100000000)
-        .include(rotational_cmax_table(), &C::cmax, {"width", "height", "focal_px"})  // those: the camera's
+        .include(mapping::rotational_cmax_table(), &C::cmax, {"width", "height", "focal_px"})  // those: the camera's
         .boolean("calibrate_contrast", &C::calibrate_contrast)
         .number("min_contrast_ratio", &C::min_contrast_ratio, Range::kUnit, "")
         .integer("calibration_sample_stride", &C::calibration_sample_stride, 1, 1000000)
@@ -90,8 +92,7 @@ const Table<C>& mosaic_config_table() {
         .duration_ms("gyro_window_ms", &C::gyro_bootstrap_window_ns, Range::kPositive)
         .duration_ms("gyro_step_ms", &C::gyro_integration_step_ns, Range::kPositive);
     Table<C> failure("failure settings");
-    failure.integer("probe_every_batches", [](C& c) -> int& { return c.tracker.probe_every_batches; }, 0, 1000000)
-        .number("probe_offset_rad", [](C& c) -> double& { return c.tracker.probe_offset_rad; }, Range::kPositive, "rad")
+    failure.include(frontend::rotation_probe_table(), &C::tracker)
         .duration_ms("window_ms", &C::failure_window_ns, Range::kPositive)
         .integer("min_events", &C::failure_min_events, 0, 1000000000)
         .number("min_rate_ratio", &C::failure_min_rate_ratio, Range::kNonNegative, "")
@@ -106,11 +107,11 @@ const Table<C>& mosaic_config_table() {
         .boolean("global_relocalize", &C::failure_global_relocalize)
         .duration_ms("global_period_ms", &C::failure_global_period_ns, Range::kPositive)
         .number("global_min_gain", &C::failure_global_min_gain, Range::kPositive, "ratio")
-        .include(relocalization_table(), &C::relocalization, {}, "global_");
+        .include(mapping::relocalization_table(), &C::relocalization, {}, "global_");
     Table<C> output("output settings");
     output.duration_ms("trajectory_ms", &C::trajectory_period_ns, Range::kPositive)
         .duration_ms("snapshot_ms", &C::snapshot_period_ns, Range::kNonNegative)
-        .include(log_image_display_table(), &C::display);
+        .include(mapping::log_image_display_table(), &C::display);
     Table<C> imu("IMU settings");
     imu.duration_ms("wait_ms", &C::imu_wait_ns, Range::kNonNegative);
     Table<C> top("mosaic pipeline settings");

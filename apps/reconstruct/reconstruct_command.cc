@@ -22,7 +22,7 @@
 #include "evio/simulator/scene_config.h"
 #include "evio/simulator/simulator.h"
 #include "cmax_input.h"
-#include "option_tables.h"
+#include "evio/mapping/option_tables.h"
 #include "output_files.h"
 #include "progress.h"
 #include "video_out.h"
@@ -111,7 +111,7 @@ const Table<C>& reconstruct_config_table() {
         .note("gradient_sobel", "method gradient: Sobel 3x3 gradients (forward differences otherwise: exactly the cf image)")
         .section("harris", harris, &C::harris)
         .section("frames", frames, &C::frames)
-        .section("display", log_image_display_table(), &C::display)
+        .section("display", mapping::log_image_display_table(), &C::display)
         .ignored("description")
         .validate();
     return top;

@@ -20,6 +20,7 @@
 #include "evio/sensors/image_io.h"
 #include "evio/sensors/time.h"
 #include "cmax_input.h"
+#include "evio/mapping/option_tables.h"
 #include "option_tables.h"
 #include "output_files.h"
 
@@ -43,7 +44,7 @@ const Table<C>& segment_config_table() {
     seg.integer("clusters", &S::clusters, 0, 16)
         .note("clusters", "0: automatic, up to max_clusters")
         .integer("max_clusters", &S::max_clusters, 1, 16)
-        .choice_list("models", &S::models, warp_model_choices())
+        .choice_list("models", &S::models, mapping::warp_model_choices())
         .note("models", "the count is decided on the richest; each cluster takes the simplest good enough")
         .choice("init", &S::init, {{"kmeans", mapping::SegmentationInit::kKmeans}, {"greedy", mapping::SegmentationInit::kGreedy}})
         .integer("tile_px", &S::tile_px, 8, 10000)
@@ -64,7 +65,7 @@ const Table<C>& segment_config_table() {
         .seed("seed", &S::seed)
         .validate();
     Table<mapping::CmaxOptions> cmax("contrast maximisation settings");
-    cmax.include(cmax_table(), [](mapping::CmaxOptions& o) -> mapping::CmaxOptions& { return o; },
+    cmax.include(mapping::cmax_table(), [](mapping::CmaxOptions& o) -> mapping::CmaxOptions& { return o; },
                  {"model", "width", "height", "fx", "fy", "cx", "cy", "pyramid_levels"});
     Table<C> top("segment settings");
     top.section("window", window, self)

@@ -34,6 +34,7 @@
 #include "progress.h"
 #include "evio/simulator/scene_config.h"
 #include "evio/sensors/config_table.h"
+#include "evio/frontend/option_tables.h"
 #include "option_tables.h"
 #include "vio_stats.h"
 
@@ -54,7 +55,8 @@ using pipeline::VioInputs;
 using C = VioConfig;
 
 // The table of `--config` and `--set` (one declaration per key: reading, validation, the resolved
-// config). The library's options structs come with their own tables (option_tables.h).
+// config). The library's options structs come with their own tables (evio/frontend/option_tables.h;
+// the back-end's in option_tables.h).
 const Table<C>& vio_config_table() {
   static const Table<C> table = [] {
     auto self = [](C& c) -> C& { return c; };
@@ -63,7 +65,7 @@ const Table<C>& vio_config_table() {
         .section("background_activity", background_activity_section<C>(), self);
 
     Table<C> frames("frame settings");
-    frames.include(event_frame_table(), &C::frames).boolean("velocity_at_reference", &C::frame_velocity_at_reference);
+    frames.include(frontend::event_frame_table(), &C::frames).boolean("velocity_at_reference", &C::frame_velocity_at_reference);
 
     Table<C> recon("reconstruction settings");
     using CF = mapping::ComplementaryFilterOptions;
@@ -80,7 +82,7 @@ const Table<C>& vio_config_table() {
         .duration_ms("max_gap_ms", &C::aps_max_gap_ns, Range::kPositive);
 
     Table<C> corner_tracker("corner tracker settings");
-    corner_tracker.include(corner_tracker_table(), &C::corner_tracker)
+    corner_tracker.include(frontend::corner_tracker_table(), &C::corner_tracker)
         .duration_ms("observation_period_ms", &C::observation_period_ns, Range::kPositive)
         .duration_ms("min_track_age_ms", &C::min_track_age_ns, Range::kNonNegative)
         .number("min_bearing_z", &C::corner_min_bearing_z, Range::kUnit, "cos of the angle to the optical axis, < 1");
@@ -122,11 +124,11 @@ const Table<C>& vio_config_table() {
                 {{"event_frame", pipeline::VioTrackingImage::kEventFrame},
                  {"reconstruction", pipeline::VioTrackingImage::kReconstruction}})
         .section("reconstruction", recon, self)
-        .section("reconstruction_tracker", feature_tracker_table(), &C::reconstruction_tracker)
-        .section("tracker", feature_tracker_table(), &C::tracker)
-        .section("aps_tracker", feature_tracker_table(), &C::aps_tracker)
+        .section("reconstruction_tracker", frontend::feature_tracker_table(), &C::reconstruction_tracker)
+        .section("tracker", frontend::feature_tracker_table(), &C::tracker)
+        .section("aps_tracker", frontend::feature_tracker_table(), &C::aps_tracker)
         .section("aps", aps, self)
-        .section("efast", efast_table(), &C::efast)
+        .section("efast", frontend::efast_table(), &C::efast)
         .section("corner_tracker", corner_tracker, self)
         .section("window", sliding_window_table(), &C::window)
         .boolean("keyframe_chaining", &C::keyframe_chaining)

@@ -1,4 +1,5 @@
 #include "evio/frontend/corner_tracker.h"
+#include "evio/frontend/option_tables.h"
 
 #include <algorithm>
 #include <cmath>
@@ -8,23 +9,11 @@
 namespace evio::frontend {
 
 bool CornerTrackerOptions::Validate(std::string* why) const {
-  auto fail = [why](const std::string& m) {
-    if (why) *why = m;
-    return false;
-  };
-  if (!(max_distance_px > 0) || !std::isfinite(max_distance_px) || max_distance_px > 64)
-    return fail("max_distance_px " + std::to_string(max_distance_px) + " (expected 0 < d <= 64 px)");
-  if (max_gap_ns <= 0) return fail("max_gap_ns " + std::to_string(max_gap_ns) + " (expected > 0 ns)");
-  if (!(position_gain > 0 && position_gain <= 1))
-    return fail("position_gain " + std::to_string(position_gain) + " (expected 0 < gain <= 1)");
-  if (velocity_window_ns <= 0) return fail("velocity_window_ns " + std::to_string(velocity_window_ns) + " (expected > 0 ns)");
-  if (min_velocity_span_ns <= 0 || min_velocity_span_ns > velocity_window_ns)
-    return fail("min_velocity_span_ns " + std::to_string(min_velocity_span_ns) + " (expected 0 < span <= velocity_window_ns)");
-  if (min_length < 1) return fail("min_length 0 (expected >= 1 corner events)");
-  if (!(max_descriptor_distance >= 0))
-    return fail("max_descriptor_distance " + std::to_string(max_descriptor_distance) + " (expected >= 0, or infinity)");
-  if (!(descriptor_ratio > 0 && descriptor_ratio <= 1))
-    return fail("descriptor_ratio " + std::to_string(descriptor_ratio) + " (expected 0 < ratio <= 1)");
+  if (!corner_tracker_table().check(*this, why)) return false;
+  if (min_velocity_span_ns > velocity_window_ns) {
+    return validation_failed(why, "min_velocity_span_ms " + yaml_config::yaml_number(min_velocity_span_ns * 1e-6) +
+                                      " is longer than velocity_window_ms " + yaml_config::yaml_number(velocity_window_ns * 1e-6));
+  }
   return true;
 }
 

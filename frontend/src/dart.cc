@@ -5,6 +5,7 @@
 // grid's 90-degree symmetric pixels land on wedge boundaries consistently). compute() walks the
 // table once; neighbourhoods fully inside the sensor skip the bounds check.
 #include "evio/frontend/dart.h"
+#include "evio/frontend/option_tables.h"
 
 #include <algorithm>
 #include <cmath>
@@ -23,35 +24,16 @@ double DartOptions::ring_radius(int i) const {
 }
 
 bool DartOptions::Validate(std::string* why) const {
-  const auto fail = [why](const std::string& m) {
-    if (why) *why = m;
-    return false;
-  };
-  if (rings < 1 || rings > kDartMaxRings)
-    return fail("rings " + std::to_string(rings) + " (expected 1.." + std::to_string(kDartMaxRings) + ")");
-  if (wedges < 1 || wedges > kDartMaxWedges)
-    return fail("wedges " + std::to_string(wedges) + " (expected 1.." + std::to_string(kDartMaxWedges) + ")");
+  if (!dart_table().check(*this, why)) return false;
   if (rings * wedges > kDartMaxBins)
-    return fail("rings * wedges = " + std::to_string(rings * wedges) + " (expected <= " +
-                std::to_string(kDartMaxBins) + " bins)");
-  if (!(inner_radius_px > 0.0) || !std::isfinite(inner_radius_px))
-    return fail("inner_radius_px " + std::to_string(inner_radius_px) + " (expected a finite radius > 0 px)");
-  if (!(outer_radius_px > inner_radius_px) || !(outer_radius_px <= 64.0))
-    return fail("outer_radius_px " + std::to_string(outer_radius_px) + " (expected inner_radius_px " +
-                std::to_string(inner_radius_px) + " < outer_radius_px <= 64 px)");
-  if (window_ns < 0) return fail("window_ns " + std::to_string(window_ns) + " (expected >= 0 ns)");
-  if (max_ring_shift < 0 || max_ring_shift >= rings)
-    return fail("max_ring_shift " + std::to_string(max_ring_shift) + " (expected 0..rings-1 = 0.." +
-                std::to_string(rings - 1) + ")");
-  if (polarity != DartPolarity::kBoth && polarity != DartPolarity::kSame)
-    return fail("polarity " + std::to_string(static_cast<int>(polarity)) + " (expected DartPolarity::kBoth or kSame)");
-  if (normalisation != DartNormalisation::kNone && normalisation != DartNormalisation::kL1 &&
-      normalisation != DartNormalisation::kL2)
-    return fail("normalisation " + std::to_string(static_cast<int>(normalisation)) + " (expected kNone, kL1 or kL2)");
-  if (binning != DartBinning::kHard && binning != DartBinning::kSoft)
-    return fail("binning " + std::to_string(static_cast<int>(binning)) + " (expected kHard or kSoft)");
-  if (weighting != DartWeighting::kCount && weighting != DartWeighting::kDensity)
-    return fail("weighting " + std::to_string(static_cast<int>(weighting)) + " (expected kCount or kDensity)");
+    return validation_failed(why, "rings * wedges = " + std::to_string(rings * wedges) + " (expected <= " +
+                                      std::to_string(kDartMaxBins) + " bins)");
+  if (!(outer_radius_px > inner_radius_px))
+    return validation_failed(why, "outer_radius_px " + yaml_config::yaml_number(outer_radius_px) +
+                                      " (expected above inner_radius_px " + yaml_config::yaml_number(inner_radius_px) + ")");
+  if (max_ring_shift >= rings)
+    return validation_failed(why, "max_ring_shift " + std::to_string(max_ring_shift) + " (expected below rings " +
+                                      std::to_string(rings) + ")");
   return true;
 }
 

@@ -7,6 +7,7 @@
 // that every other pixel is strictly older than its oldest pixel. Same decisions as the
 // exhaustive scan, including ties (a tie across the arc boundary is never valid).
 #include "evio/frontend/efast.h"
+#include "evio/frontend/option_tables.h"
 
 #include <algorithm>
 #include <stdexcept>
@@ -65,13 +66,7 @@ inline bool arc_test(const int64_t* t) {
 bool efast_arc_test_16(const int64_t t[16]) { return arc_test<16, 3, 6>(t); }
 bool efast_arc_test_20(const int64_t t[20]) { return arc_test<20, 4, 8>(t); }
 
-bool EfastOptions::Validate(std::string* why) const {
-  if (filter_window_ns < 0) {
-    if (why) *why = "filter_window_ns " + std::to_string(filter_window_ns) + " (expected >= 0 ns)";
-    return false;
-  }
-  return true;
-}
+bool EfastOptions::Validate(std::string* why) const { return efast_table().check(*this, why); }
 
 EfastDetector::EfastDetector(int width, int height, const EfastOptions& options)
     : options_(options), sae_(width, height), latest_(options.filter_sae ? width : 1, options.filter_sae ? height : 1) {

@@ -1,4 +1,5 @@
 #include "evio/frontend/event_filters.h"
+#include "evio/frontend/option_tables.h"
 
 #include <limits>
 #include <stdexcept>
@@ -20,27 +21,14 @@ inline bool older_than(int64_t t, int64_t last, int64_t window) { return last ==
 
 }  // namespace
 
-bool RefractoryFilterOptions::Validate(std::string* why) const {
-  if (period_ns < 0) {
-    if (why) *why = "period_ns " + std::to_string(period_ns) + " (expected >= 0 ns)";
-    return false;
-  }
-  return true;
-}
+bool RefractoryFilterOptions::Validate(std::string* why) const { return refractory_table().check(*this, why); }
 
 bool BackgroundActivityFilterOptions::Validate(std::string* why) const {
-  if (window_ns <= 0) {
-    if (why) *why = "window_ns " + std::to_string(window_ns) + " (expected > 0 ns)";
-    return false;
-  }
-  if (radius < 1 || radius > 3) {
-    if (why) *why = "radius " + std::to_string(radius) + " (expected 1..3 pixels)";
-    return false;
-  }
+  if (!background_activity_table().check(*this, why)) return false;
   const int n = (2 * radius + 1) * (2 * radius + 1) - 1;
-  if (min_support < 1 || min_support > n) {
-    if (why) *why = "min_support " + std::to_string(min_support) + " (expected 1.." + std::to_string(n) + " neighbours)";
-    return false;
+  if (min_support > n) {
+    return validation_failed(why, "min_support " + std::to_string(min_support) + " is more than the " +
+                                      std::to_string(n) + " neighbours within radius " + std::to_string(radius));
   }
   return true;
 }

@@ -1,5 +1,6 @@
 // Motion-compensated event frames: see event_frame.h.
 #include "evio/frontend/event_frame.h"
+#include "evio/frontend/option_tables.h"
 
 #include <algorithm>
 #include <cmath>
@@ -46,27 +47,14 @@ float select_positive(std::vector<float>* v, size_t m, size_t q) {
 }  // namespace
 
 bool EventFrameOptions::Validate(std::string* why) const {
-  auto fail = [why](const char* msg) {
-    if (why) *why = msg;
-    return false;
-  };
-  if (events_per_frame < 1) return fail("events_per_frame must be >= 1");
-  if (max_window_ns <= 0) return fail("max_window_ns must be > 0 ns");
-  if (min_window_ns < 0 || min_window_ns > max_window_ns) return fail("min_window_ns must be in 0..max_window_ns");
+  if (!event_frame_table().check(*this, why)) return false;
+  if (min_window_ns > max_window_ns) return validation_failed(why, "min_window_ms must be <= max_window_ms");
   if (sparse_max_window_ns != 0 && sparse_max_window_ns < max_window_ns)
-    return fail("sparse_max_window_ns must be 0 (off) or >= max_window_ns");
-  if (sparse_after_ns < 0) return fail("sparse_after_ns must be >= 0 ns");
-  if (min_events < 1 || min_events > events_per_frame) return fail("min_events must be in 1..events_per_frame");
-  if (!(overlap >= 0.0 && overlap <= 0.9)) return fail("overlap must be in [0, 0.9]");
-  if (use_depth && !motion_compensation) return fail("use_depth needs motion_compensation");
-  if (!(clip_percentile > 0.0 && clip_percentile <= 1.0)) return fail("clip_percentile must be in (0, 1]");
-  if (!(time_surface_tau_fraction >= 0.0)) return fail("time_surface_tau_fraction must be >= 0");
-  if (time_surface_tau_fraction > 0.0 && use_polarity) return fail("time_surface_tau_fraction > 0 does not go with use_polarity");
-  if (!(clip_count >= 0.0) || !std::isfinite(clip_count)) return fail("clip_count must be finite and >= 0");
-  if (knot_spacing_ns <= 0) return fail("knot_spacing_ns must be > 0 ns");
-  if (max_imu_extrapolation_ns < 0) return fail("max_imu_extrapolation_ns must be >= 0 ns");
-  if (max_imu_gap_ns <= 0) return fail("max_imu_gap_ns must be > 0 ns");
-  if (!(event_lag_px >= 0) || !std::isfinite(event_lag_px)) return fail("event_lag_px must be finite and >= 0 px");
+    return validation_failed(why, "sparse_max_window_ms must be 0 (off) or >= max_window_ms");
+  if (min_events > events_per_frame) return validation_failed(why, "min_events must be <= events_per_frame");
+  if (use_depth && !motion_compensation) return validation_failed(why, "use_depth needs motion_compensation");
+  if (time_surface_tau_fraction > 0.0 && use_polarity)
+    return validation_failed(why, "time_surface_tau_fraction > 0 does not go with use_polarity");
   return true;
 }
 

@@ -1,4 +1,5 @@
 #include "evio/frontend/feature_tracker.h"
+#include "evio/frontend/option_tables.h"
 
 #include <algorithm>
 #include <cmath>
@@ -248,39 +249,10 @@ std::vector<bool> ransac_inliers(const std::vector<Eigen::Vector3d>& bearings_pr
 }
 
 bool FeatureTrackerOptions::Validate(std::string* why) const {
-  auto fail = [why](const std::string& msg) {
-    if (why) *why = msg;
-    return false;
-  };
-  if (grid_cols < 1 || grid_rows < 1) return fail("grid_cols and grid_rows must be >= 1");
-  if (max_features < 1) return fail("max_features must be >= 1");
-  if (max_per_cell < 1) return fail("max_per_cell must be >= 1");
-  if (fast_threshold < 1 || fast_threshold > 255) return fail("fast_threshold must be in 1..255");
-  if (min_distance_px < 0) return fail("min_distance_px must be >= 0");
-  if (klt_window_px < 3 || klt_window_px % 2 == 0) return fail("klt_window_px must be odd and >= 3");
-  if (klt_pyramid_levels < 0 || klt_pyramid_levels > 8)
-    return fail("klt_pyramid_levels must be in 0..8");
-  if (klt_max_iterations < 1) return fail("klt_max_iterations must be >= 1");
-  if (!(klt_epsilon_px > 0) || !std::isfinite(klt_epsilon_px)) return fail("klt_epsilon_px must be positive and finite");
-  if (!(forward_backward_max_px > 0) || !std::isfinite(forward_backward_max_px))
-    return fail("forward_backward_max_px must be positive and finite");
-  if (ransac != RansacModel::kNone && ransac != RansacModel::kTwoPoint && ransac != RansacModel::kTwoPointTriangulating &&
-      ransac != RansacModel::kFivePoint)
-    return fail("ransac must be none, two_point, two_point_triangulating or five_point");
-  if (!(ransac_threshold_px > 0) || !std::isfinite(ransac_threshold_px))
-    return fail("ransac_threshold_px must be positive and finite");
-  if (ransac_max_iterations < 1) return fail("ransac_max_iterations must be >= 1");
-  if (min_tracks_before_detection < 0 || min_tracks_before_detection > max_features)
-    return fail("min_tracks_before_detection must be in 0..max_features");
-  if (border_px < 0) return fail("border_px must be >= 0");
-  if (template_max_age_frames < 1) return fail("template_max_age_frames must be >= 1");
-  if (!(template_max_rotation_deg >= 0) || !std::isfinite(template_max_rotation_deg))
-    return fail("template_max_rotation_deg must be finite and >= 0");
-  if (anchor_frames < 0) return fail("anchor_frames must be >= 0");
-  if (!(anchor_ransac_threshold_px > 0) || !std::isfinite(anchor_ransac_threshold_px))
-    return fail("anchor_ransac_threshold_px must be positive and finite");
-  if (!(reacquire_max_age_s >= 0) || !std::isfinite(reacquire_max_age_s)) return fail("reacquire_max_age_s must be finite and >= 0");
-  if (!(reacquire_max_px > 0) || !std::isfinite(reacquire_max_px)) return fail("reacquire_max_px must be positive and finite");
+  if (!feature_tracker_table().check(*this, why)) return false;
+  if (klt_window_px % 2 == 0) return validation_failed(why, "klt_window_px must be odd");
+  if (min_tracks_before_detection > max_features)
+    return validation_failed(why, "min_tracks_before_detection must be <= max_features");
   return true;
 }
 

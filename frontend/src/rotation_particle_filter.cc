@@ -1,4 +1,5 @@
 #include "evio/frontend/rotation_particle_filter.h"
+#include "evio/frontend/option_tables.h"
 #include "evio/calib/error.h"
 
 #include <algorithm>
@@ -86,71 +87,20 @@ const char* rotation_measurement_model_name(RotationMeasurementModel m) {
 }
 
 bool RotationParticleFilterOptions::Validate(std::string* why) const {
-  auto num = [](double v) { return std::to_string(v); };
-  if (num_particles < 1) return validation_failed(why, "num_particles " + std::to_string(num_particles) + " (expected >= 1)");
-  if (batch_size < 1) return validation_failed(why, "batch_size " + std::to_string(batch_size) + " (expected >= 1 events)");
-  if (event_stride < 1) return validation_failed(why, "event_stride " + std::to_string(event_stride) + " (expected >= 1)");
-  if (probe_every_batches < 0) return validation_failed(why, "probe_every_batches " + std::to_string(probe_every_batches) + " (expected >= 0)");
-  if (!(probe_offset_rad > 0) || !std::isfinite(probe_offset_rad))
-    return validation_failed(why, "probe_offset_rad " + num(probe_offset_rad) + " (expected > 0 rad)");
+  if (!rotation_particle_filter_table().check(*this, why)) return false;
+  auto num = [](double v) { return yaml_config::yaml_number(v); };
   if (probe_every_batches > 0 && linearize_max_spread_rad > 0 && probe_offset_rad > linearize_max_spread_rad)
     return validation_failed(why, "probe_offset_rad " + num(probe_offset_rad) + " (expected <= linearize_max_spread_rad " +
                          num(linearize_max_spread_rad) + ": probes outside it would change how batches are weighed)");
-  if (max_batch_duration_ns <= 0)
-    return validation_failed(why, "max_batch_duration_ns " + std::to_string(max_batch_duration_ns) + " (expected > 0 ns)");
-  if (motion_model != RotationMotionModel::kRandomWalk && motion_model != RotationMotionModel::kConstantVelocity &&
-      motion_model != RotationMotionModel::kParticleVelocity)
-    return validation_failed(why, "motion_model (expected random_walk, constant_velocity or particle_velocity)");
-  if (!(velocity_noise_rad_s_per_sqrt_s > 0) || !std::isfinite(velocity_noise_rad_s_per_sqrt_s))
-    return validation_failed(why, "velocity_noise_rad_s_per_sqrt_s " + num(velocity_noise_rad_s_per_sqrt_s) +
-                         " (expected > 0 rad/s/sqrt(s))");
-  if (!(velocity_rotation_noise_rad_per_sqrt_s > 0) || !std::isfinite(velocity_rotation_noise_rad_per_sqrt_s))
-    return validation_failed(why, "velocity_rotation_noise_rad_per_sqrt_s " + num(velocity_rotation_noise_rad_per_sqrt_s) +
-                         " (expected > 0 rad/sqrt(s))");
-  if (!(initial_velocity_spread_rad_s >= 0) || !std::isfinite(initial_velocity_spread_rad_s))
-    return validation_failed(why, "initial_velocity_spread_rad_s " + num(initial_velocity_spread_rad_s) + " (expected >= 0 rad/s)");
-  if (relative_max_interval_ns <= 0)
-    return validation_failed(why, "relative_max_interval_ns " + std::to_string(relative_max_interval_ns) + " (expected > 0 ns)");
-  if (!(relative_max_path_rad > 0) || !std::isfinite(relative_max_path_rad))
-    return validation_failed(why, "relative_max_path_rad " + num(relative_max_path_rad) + " (expected > 0 rad)");
-  if (measurement_model != RotationMeasurementModel::kPreviousMean &&
-      measurement_model != RotationMeasurementModel::kRelativeMotion && measurement_model != RotationMeasurementModel::kAuto)
-    return validation_failed(why, "measurement_model (expected previous_mean, relative_motion or auto)");
-  if (!(motion_noise_rad_per_sqrt_s > 0) || !std::isfinite(motion_noise_rad_per_sqrt_s))
-    return validation_failed(why, "motion_noise_rad_per_sqrt_s " + num(motion_noise_rad_per_sqrt_s) + " (expected > 0 rad/sqrt(s))");
-  if (!(gyro_noise_rad_per_sqrt_s > 0) || !std::isfinite(gyro_noise_rad_per_sqrt_s))
-    return validation_failed(why, "gyro_noise_rad_per_sqrt_s " + num(gyro_noise_rad_per_sqrt_s) + " (expected > 0 rad/sqrt(s))");
-  if (gyro_max_age_ns <= 0) return validation_failed(why, "gyro_max_age_ns " + std::to_string(gyro_max_age_ns) + " (expected > 0 ns)");
-  if (!(contrast_threshold > 0) || !std::isfinite(contrast_threshold))
-    return validation_failed(why, "contrast_threshold " + num(contrast_threshold) + " (expected > 0, log intensity)");
-  if (!(likelihood_std > 0) || !std::isfinite(likelihood_std))
-    return validation_failed(why, "likelihood_std " + num(likelihood_std) + " (expected > 0, log intensity)");
-  if (!(outlier_probability > 0 && outlier_probability < 1))
-    return validation_failed(why, "outlier_probability " + num(outlier_probability) + " (expected in (0, 1))");
-  if (!(outlier_range > 0) || !std::isfinite(outlier_range))
-    return validation_failed(why, "outlier_range " + num(outlier_range) + " (expected > 0, log intensity)");
   const double peak = std::log((1.0 - outlier_probability) / (std::sqrt(2.0 * kPi) * likelihood_std));
   const double floor = std::log(outlier_probability / outlier_range);
   if (!(floor < peak))
     return validation_failed(why, "outlier density eps/outlier_range " + num(outlier_probability / outlier_range) +
                          " is not below the Gaussian peak (1-eps)/(sqrt(2 pi) likelihood_std) " + num(std::exp(peak)) +
                          ": every event would be an outlier");
-  if (min_particles < 0 || min_particles > num_particles)
-    return validation_failed(why, "min_particles " + std::to_string(min_particles) + " (expected 0..num_particles " +
+  if (min_particles > num_particles)
+    return validation_failed(why, "min_particles " + std::to_string(min_particles) + " (expected 0..particles " +
                          std::to_string(num_particles) + ")");
-  if (!(kld_bin_rad > 0) || !std::isfinite(kld_bin_rad)) return validation_failed(why, "kld_bin_rad " + num(kld_bin_rad) + " (expected > 0 rad)");
-  if (!(kld_epsilon > 0) || !std::isfinite(kld_epsilon)) return validation_failed(why, "kld_epsilon " + num(kld_epsilon) + " (expected > 0)");
-  if (!(kld_z > 0) || !std::isfinite(kld_z)) return validation_failed(why, "kld_z " + num(kld_z) + " (expected > 0)");
-  if (!(resample_ess_fraction >= 0 && resample_ess_fraction <= 1))
-    return validation_failed(why, "resample_ess_fraction " + num(resample_ess_fraction) + " (expected in [0, 1])");
-  if (!(initial_spread_rad >= 0) || !std::isfinite(initial_spread_rad))
-    return validation_failed(why, "initial_spread_rad " + num(initial_spread_rad) + " (expected >= 0 rad)");
-  if (!(linearize_max_spread_rad >= 0) || !std::isfinite(linearize_max_spread_rad))
-    return validation_failed(why, "linearize_max_spread_rad " + num(linearize_max_spread_rad) + " (expected >= 0 rad; 0 = exact)");
-  if (velocity_window_ns <= 0)
-    return validation_failed(why, "velocity_window_ns " + std::to_string(velocity_window_ns) + " (expected > 0 ns)");
-  if (!(velocity_smoothing > 0 && velocity_smoothing <= 1))
-    return validation_failed(why, "velocity_smoothing " + num(velocity_smoothing) + " (expected in (0, 1])");
   return true;
 }
 

@@ -1,5 +1,6 @@
 // Contrast maximisation: warps, IWE, objectives with adjoint gradients, coarse-to-fine BFGS.
 #include "evio/mapping/cmax.h"
+#include "evio/mapping/option_tables.h"
 
 #include <algorithm>
 #include <cmath>
@@ -365,16 +366,8 @@ std::optional<CmaxObjective> cmax_objective_from_name(const std::string& name) {
 }
 
 bool WarpGeometry::Validate(std::string* why) const {
-  auto fail = [&](const std::string& m) {
-    if (why) *why = m;
-    return false;
-  };
-  if (!(fx > 0 && fy > 0 && finite(fx) && finite(fy))) return fail("fx and fy must be positive and finite (px)");
-  if (!finite(cx) || !finite(cy)) return fail("cx and cy must be finite (px)");
-  if (!(depth_m > 0 && finite(depth_m))) return fail("depth_m must be positive and finite (m)");
-  if (!plane_normal_c.allFinite() || !finite(plane_distance_m) || plane_distance_m < 0)
-    return fail("plane_normal_c must be finite and plane_distance_m >= 0 (m)");
-  if (plane_distance_m > 0 && plane_normal_c.norm() < 1e-12) return fail("plane_normal_c must be non-zero");
+  if (!warp_geometry_table().check(*this, why)) return false;
+  if (plane_distance_m > 0 && plane_normal_c.norm() < 1e-12) return validation_failed(why, "plane_normal must be non-zero");
   return true;
 }
 
@@ -494,18 +487,8 @@ void sample_at_warped(const ImageF& img, WarpModel m, const CmaxEvents& ev, cons
 }
 
 bool CmaxOptions::Validate(std::string* why) const {
-  auto fail = [&](const std::string& m) {
-    if (why) *why = m;
-    return false;
-  };
-  if (width <= 0 || height <= 0 || width > 100000 || height > 100000) return fail("width and height must be in [1, 100000] px");
-  if (!(blur_sigma_px >= 0 && blur_sigma_px <= 50)) return fail("blur_sigma_px must be in [0, 50] px");
-  if (pyramid_levels < 1 || pyramid_levels > 8) return fail("pyramid_levels must be in [1, 8]");
-  if (max_iterations < 1) return fail("max_iterations must be >= 1");
-  if (!(tolerance_px > 0 && finite(tolerance_px))) return fail("tolerance_px must be positive (px)");
-  if (!(coarse_tolerance_px > 0 && finite(coarse_tolerance_px))) return fail("coarse_tolerance_px must be positive (px)");
-  if (max_events_coarse < 0) return fail("max_events_coarse must be >= 0 (0 = all)");
-  return geometry.Validate(why);
+  // The table's check covers the geometry's keys; its Validate adds the conditions between them.
+  return cmax_table().check(*this, why) && geometry.Validate(why);
 }
 
 ContrastMaximizer::ContrastMaximizer(const CmaxOptions& options) : options_(options) {

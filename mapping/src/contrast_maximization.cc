@@ -1,4 +1,5 @@
 #include "evio/mapping/contrast_maximization.h"
+#include "evio/mapping/option_tables.h"
 
 #include <algorithm>
 #include <cmath>
@@ -11,18 +12,8 @@
 namespace evio::mapping {
 
 bool RotationalCmaxOptions::Validate(std::string* why) const {
-  auto fail = [why](const std::string& m) {
-    if (why) *why = m;
-    return false;
-  };
-  if (width <= 0 || height <= 0) return fail("IWE width and height must be > 0 px");
-  if (!(focal_px > 0) || !std::isfinite(focal_px)) return fail("focal_px must be finite and > 0");
-  if (!(blur_sigma_px > 0) || !std::isfinite(blur_sigma_px)) return fail("blur_sigma_px must be finite and > 0");
-  if (!(coarse_blur_factor >= 1) || !std::isfinite(coarse_blur_factor)) return fail("coarse_blur_factor must be >= 1");
-  if (!(initial_step_radps > 0) || !std::isfinite(initial_step_radps)) return fail("initial_step_radps must be > 0");
-  if (!(min_step_radps > 0) || !(min_step_radps <= initial_step_radps))
-    return fail("min_step_radps must be > 0 and <= initial_step_radps");
-  if (max_evaluations < 10) return fail("max_evaluations must be >= 10");
+  if (!rotational_cmax_table().check(*this, why)) return false;
+  if (min_step_radps > initial_step_radps) return validation_failed(why, "min_step_radps must be <= initial_step_radps");
   return true;
 }
 

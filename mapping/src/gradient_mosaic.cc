@@ -1,5 +1,6 @@
 // Pixel-wise gradient EKF mosaic and its Poisson reconstruction. Model in gradient_mosaic.h.
 #include "evio/mapping/gradient_mosaic.h"
+#include "evio/mapping/option_tables.h"
 
 #include <algorithm>
 #include <cmath>
@@ -11,33 +12,14 @@
 namespace evio::mapping {
 
 bool GradientMosaicOptions::Validate(std::string* why) const {
-  auto fail = [&](const std::string& m) {
-    if (why) *why = m;
-    return false;
-  };
-  auto pos = [](double x) { return std::isfinite(x) && x > 0.0; };
-  auto nonneg = [](double x) { return std::isfinite(x) && x >= 0.0; };
-  if (width < 3 || height < 2) return fail("width must be >= 3 px and height >= 2 px");
-  if (!pos(contrast_threshold)) return fail("contrast_threshold must be > 0 (log units)");
-  if (!pos(initial_gradient_std)) return fail("initial_gradient_std must be > 0 (log units/px)");
-  if (!nonneg(measurement_std_abs) || !nonneg(measurement_relative_std))
-    return fail("measurement_std_abs (1/s) and measurement_relative_std must be >= 0");
+  // The table holds the Poisson solvers' keys too.
+  if (!gradient_mosaic_table().check(*this, why)) return false;
   if (measurement_std_abs == 0.0 && measurement_relative_std == 0.0)
-    return fail("measurement_std_abs and measurement_relative_std must not both be 0");
-  if (!pos(min_tau_s)) return fail("min_tau_s must be > 0 (s)");
-  if (!nonneg(min_speed_px_s)) return fail("min_speed_px_s must be >= 0 (px/s)");
-  if (!pos(min_gradient_std) || min_gradient_std >= initial_gradient_std)
-    return fail("min_gradient_std must be > 0 and < initial_gradient_std (log units/px)");
-  if (seen_min_observations < 1) return fail("seen_min_observations must be >= 1");
-  if (!pos(max_path_px)) return fail("max_path_px must be > 0 (mosaic px)");
-  if (!(seen_max_gradient_std >= 0) || !std::isfinite(seen_max_gradient_std))
-    return fail("seen_max_gradient_std must be >= 0 (0 = no covariance test)");
-  std::string w;
-  if (!poisson.Validate(&w)) return fail("poisson: " + w);
-  if (!(viewed_edge_weight >= 0.0 && viewed_edge_weight <= 1.0)) return fail("viewed_edge_weight must be in [0, 1]");
-  if (!(std::isfinite(weight_reference_std) && weight_reference_std >= min_gradient_std))
-    return fail("weight_reference_std must be >= min_gradient_std (log units/px)");
-  if (!weighted_poisson.Validate(&w)) return fail("weighted_poisson: " + w);
+    return validation_failed(why, "measurement_std_abs and measurement_relative_std must not both be 0");
+  if (min_gradient_std >= initial_gradient_std)
+    return validation_failed(why, "min_gradient_std must be < initial_gradient_std");
+  if (weight_reference_std < min_gradient_std)
+    return validation_failed(why, "weight_reference_std must be >= min_gradient_std");
   return true;
 }
 

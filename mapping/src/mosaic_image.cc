@@ -1,6 +1,7 @@
 // Display mapping, image files and PSNR / SSIM for log-intensity images. Conventions in
 // mosaic_image.h.
 #include "evio/mapping/mosaic_image.h"
+#include "evio/mapping/option_tables.h"
 
 #include <algorithm>
 #include <cmath>
@@ -41,14 +42,8 @@ void write_image_or_throw(const std::string& path, const cv::Mat& img, const std
 }  // namespace
 
 bool LogImageDisplayOptions::Validate(std::string* why) const {
-  auto fail = [&](const std::string& m) {
-    if (why) *why = m;
-    return false;
-  };
-  if (!(low_percentile >= 0.0 && low_percentile < 100.0)) return fail("low_percentile must be in [0, 100) %");
-  if (!(high_percentile > low_percentile && high_percentile <= 100.0))
-    return fail("high_percentile must be in (low_percentile, 100] %");
-  if (!(gamma > 0.0 && std::isfinite(gamma))) return fail("gamma must be > 0");
+  if (!log_image_display_table().check(*this, why)) return false;
+  if (!(high_percentile > low_percentile)) return validation_failed(why, "high_percentile must be > low_percentile");
   return true;
 }
 

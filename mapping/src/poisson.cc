@@ -1,6 +1,7 @@
 // Poisson reconstruction: spectral full solve (OpenCV DCT / DFT) and the separable-eigenbasis
 // region solve. Conventions in poisson.h.
 #include "evio/mapping/poisson.h"
+#include "evio/mapping/option_tables.h"
 
 #include <algorithm>
 #include <map>
@@ -209,16 +210,7 @@ void full_solve(int width, int height, const PoissonOptions& o, const Image<T>& 
 
 }  // namespace
 
-bool PoissonOptions::Validate(std::string* why) const {
-  auto fail = [&](const std::string& m) {
-    if (why) *why = m;
-    return false;
-  };
-  if (boundary != PoissonBoundary::kNeumann && boundary != PoissonBoundary::kPeriodicU)
-    return fail("boundary must be kNeumann or kPeriodicU");
-  if (max_region_side < 1) return fail("max_region_side must be >= 1 px");
-  return true;
-}
+bool PoissonOptions::Validate(std::string* why) const { return poisson_table().check(*this, why); }
 
 void forward_gradient(const ImageD& L, PoissonBoundary boundary, ImageD* gx, ImageD* gy) {
   const Eigen::Index H = L.rows(), W = L.cols();

@@ -1,4 +1,5 @@
 #include "evio/mapping/rotation_relocalization.h"
+#include "evio/mapping/option_tables.h"
 
 #include <algorithm>
 #include <cmath>
@@ -10,20 +11,9 @@
 namespace evio::mapping {
 
 bool RotationRelocalizationOptions::Validate(std::string* why) const {
-  auto fail = [why](const std::string& m) {
-    if (why) *why = m;
-    return false;
-  };
-  auto pos = [](double v) { return std::isfinite(v) && v > 0; };
-  if (!pos(axis_spacing_deg)) return fail("axis_spacing_deg must be > 0 deg");
-  if (!pos(roll_step_deg)) return fail("roll_step_deg must be > 0 deg");
-  if (coarse_bearings < 1 || fine_bearings < 1) return fail("coarse_bearings and fine_bearings must be >= 1");
-  if (!(coarse_blur_texels >= 0) || !std::isfinite(coarse_blur_texels) || !(fine_blur_texels >= 0) ||
-      !std::isfinite(fine_blur_texels))
-    return fail("coarse_blur_texels and fine_blur_texels must be finite and >= 0 texels");
-  if (refine_candidates < 1) return fail("refine_candidates must be >= 1");
-  if (!pos(refine_initial_step_deg) || !pos(refine_final_step_deg) || refine_final_step_deg > refine_initial_step_deg)
-    return fail("refine steps must be > 0 deg with refine_final_step_deg <= refine_initial_step_deg");
+  if (!relocalization_table().check(*this, why)) return false;
+  if (refine_final_step_deg > refine_initial_step_deg)
+    return validation_failed(why, "refine_final_step_deg must be <= refine_initial_step_deg");
   return true;
 }
 

@@ -1,6 +1,7 @@
 // Weighted least-squares Poisson reconstruction by preconditioned conjugate gradients; model and
 // conventions in weighted_poisson.h.
 #include "evio/mapping/weighted_poisson.h"
+#include "evio/mapping/option_tables.h"
 
 #include <algorithm>
 #include <cmath>
@@ -86,23 +87,7 @@ const char* poisson_preconditioner_name(PoissonPreconditioner p) {
   return "?";
 }
 
-bool WeightedPoissonOptions::Validate(std::string* why) const {
-  auto fail = [&](const std::string& m) {
-    if (why) *why = m;
-    return false;
-  };
-  if (!(weight_floor > 0.0 && weight_floor <= 1.0)) return fail("weight_floor must be in (0, 1]");
-  if (!(tolerance > 0.0 && tolerance < 1.0)) return fail("tolerance must be in (0, 1)");
-  if (max_iterations < 0) return fail("max_iterations must be >= 0");
-  switch (preconditioner) {
-    case PoissonPreconditioner::kNone:
-    case PoissonPreconditioner::kJacobi:
-    case PoissonPreconditioner::kSpectral:
-    case PoissonPreconditioner::kScaledSpectral:
-      return true;
-  }
-  return fail("preconditioner must be kNone, kJacobi, kSpectral or kScaledSpectral");
-}
+bool WeightedPoissonOptions::Validate(std::string* why) const { return weighted_poisson_table().check(*this, why); }
 
 WeightedPoissonSolver::WeightedPoissonSolver(int width, int height, const WeightedPoissonOptions& options,
                                              const PoissonOptions& poisson)

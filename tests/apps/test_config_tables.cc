@@ -1,6 +1,8 @@
-// The config tables (sensors/config_table.h, apps/option_tables.h): one declaration per key drives
+// The config tables (sensors/config_table.h; the library's in evio/frontend/option_tables.h and
+// evio/mapping/option_tables.h, the rest in apps/option_tables.h): one declaration per key drives
 // reading, validation, --set overrides and the resolved config of `evio vio`, `evio mosaic` and
-// `evio corners`; the resolved config lists every key and reads back to the same config.
+// `evio corners`; the resolved config lists every key and reads back to the same config; the
+// options structs' Validate and the YAML reader reject the same out-of-range values.
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -11,6 +13,8 @@
 
 #include "corners_command.h"
 #include "evio/calib/error.h"
+#include "evio/frontend/option_tables.h"
+#include "evio/mapping/option_tables.h"
 #include "evio/sensors/config_table.h"
 #include "evio_test/temp_dir.h"
 #include "mosaic_command.h"
@@ -165,6 +169,79 @@ TEST(ConfigTable, ShippedConfigsLoadAndReadBackFromTheirResolvedForm) {
     ++n;
   }
   EXPECT_GE(n, 3);
+}
+
+// For every numeric key of `table` and each finite end of its range: a value just outside (the
+// bound itself when the end is open, one step beyond when closed) is rejected by the YAML reader
+// and by O::Validate, both naming the key; the bound itself, when closed, passes the table's
+// check. The library defaults pass Validate. This keeps the ranges in one place: Validate has no
+// range of its own that the table could drift from.
+template <class O>
+void expect_one_range_per_key(const yaml_config::Table<O>& table, const std::string& name) {
+  SCOPED_TRACE(name);
+  std::string why;
+  EXPECT_TRUE(O{}.Validate(&why)) << why;
+  const auto keys = table.numeric_keys();
+  EXPECT_FALSE(keys.empty());
+  int probed = 0;
+  for (const auto& k : keys) {
+    for (const int side : {-1, +1}) {
+      const double bound = side < 0 ? k.range.lo() : k.range.hi();
+      if (!std::isfinite(bound)) continue;
+      const bool open = side < 0 ? k.range.lo_open() : k.range.hi_open();
+      const double step = k.step > 0 ? k.step : (std::abs(bound) + 1) * 1e-9;
+      const double outside = open ? bound : bound + side * step;
+      const std::string text = yaml_config::yaml_number(outside);
+      SCOPED_TRACE(k.key + " = " + text);
+
+      const std::string e = error_of([&] { yaml_config::read_config(table, O{}, "", {k.key + "=" + text}, "test"); });
+      EXPECT_NE(e.find(k.key + ": "), std::string::npos) << e;
+
+      O o;
+      ASSERT_TRUE(k.set(o, outside));
+      why.clear();
+      EXPECT_FALSE(o.Validate(&why));
+      EXPECT_NE(why.find(k.key + ": is out of range"), std::string::npos) << why;
+
+      if (!open) {
+        O at;
+        ASSERT_TRUE(k.set(at, bound));
+        EXPECT_TRUE(table.check(at, &why)) << why;
+      }
+      ++probed;
+    }
+  }
+  EXPECT_GT(probed, 0);
+}
+
+TEST(ConfigTable, ValidateAndTheReaderRejectTheSameValues) {
+  expect_one_range_per_key(frontend::refractory_table(), "refractory");
+  expect_one_range_per_key(frontend::background_activity_table(), "background_activity");
+  expect_one_range_per_key(frontend::efast_table(), "efast");
+  expect_one_range_per_key(frontend::corner_tracker_table(), "corner_tracker");
+  expect_one_range_per_key(frontend::dart_table(), "dart");
+  expect_one_range_per_key(frontend::event_frame_table(), "event_frame");
+  expect_one_range_per_key(frontend::feature_tracker_table(), "feature_tracker");
+  expect_one_range_per_key(frontend::rotation_particle_filter_table(), "rotation_particle_filter");
+  expect_one_range_per_key(mapping::poisson_table(), "poisson");
+  expect_one_range_per_key(mapping::weighted_poisson_table(), "weighted_poisson");
+  expect_one_range_per_key(mapping::gradient_mosaic_table(), "gradient_mosaic");
+  expect_one_range_per_key(mapping::rotational_cmax_table(), "rotational_cmax");
+  expect_one_range_per_key(mapping::warp_geometry_table(), "warp_geometry");
+  expect_one_range_per_key(mapping::cmax_table(), "cmax");
+  expect_one_range_per_key(mapping::relocalization_table(), "relocalization");
+  expect_one_range_per_key(mapping::log_image_display_table(), "log_image_display");
+}
+
+TEST(ConfigTable, ValidateNamesTheKeyAsTheReaderDoes) {
+  frontend::FeatureTrackerOptions o;
+  o.grid_cols = 101;  // the table's cap, which Validate did not have before
+  std::string why;
+  EXPECT_FALSE(o.Validate(&why));
+  EXPECT_EQ(why, "grid_cols: is out of range (101) (expected: an integer in [1, 100])");
+  const std::string e = error_of([] { load_vio_config("", nullptr, {"tracker.grid_cols=101"}); });
+  EXPECT_NE(e.find("tracker.grid_cols: "), std::string::npos) << e;
+  EXPECT_NE(e.find("(expected: an integer in [1, 100])"), std::string::npos) << e;
 }
 
 TEST(ConfigTable, MosaicDerivedDefaults) {

@@ -131,7 +131,7 @@ TEST(CornersCommand, ConfigErrorsNameFileLineAndExpectedForm) {
   expect_error("tracker:\n  max_distance_px: -1\n", "tracker.max_distance_px");
   expect_error("background_activity:\n  radius: 9\n", "background_activity.radius");
   expect_error("frames: [1, 2]\n", "frames");
-  expect_error("tracker:\n  velocity_window_ms: 2\n  min_velocity_span_ms: 5\n", "min_velocity_span_ns");
+  expect_error("tracker:\n  velocity_window_ms: 2\n  min_velocity_span_ms: 5\n", "min_velocity_span_ms");
   const CornersConfig c = load_corners_config(dir.write("ok.yaml",
       "refractory: {period_ms: 2}\nbackground_activity: {window_ms: 5, radius: 2, min_support: 3}\n"
       "efast: {filter_sae: true, filter_window_ms: 30}\nframes: {every_ms: 25}\n"));

@@ -406,7 +406,7 @@ TEST(DartOptions, ValidationNamesTheFieldAndTheExpectedRange) {
   bad([](DartOptions* o) { o->inner_radius_px = std::nan(""); }, "inner_radius_px");
   bad([](DartOptions* o) { o->outer_radius_px = 0.5; }, "outer_radius_px");
   bad([](DartOptions* o) { o->outer_radius_px = 65.0; }, "outer_radius_px");
-  bad([](DartOptions* o) { o->window_ns = -1; }, "window_ns");
+  bad([](DartOptions* o) { o->window_ns = -1; }, "window_ms");  // named by its YAML key
   bad([](DartOptions* o) { o->max_ring_shift = -1; }, "max_ring_shift");
   bad([](DartOptions* o) { o->max_ring_shift = 7; }, "max_ring_shift");
   bad([](DartOptions* o) { o->polarity = static_cast<DartPolarity>(7); }, "polarity");

@@ -553,7 +553,7 @@ TEST(EventFrame, MinimumWindowBoundsTheFrameRate) {
   bad.min_window_ns = bad.max_window_ns + 1;
   std::string why;
   EXPECT_FALSE(bad.Validate(&why));
-  EXPECT_NE(why.find("min_window_ns"), std::string::npos);
+  EXPECT_NE(why.find("min_window_ms"), std::string::npos);  // named by its YAML key
 }
 
 // overlap: each frame starts with the latest fraction of the previous frame's events, so frames

@@ -68,8 +68,8 @@ TEST(MosaicPipelineOptions, DefaultsAreValidAndBadValuesAreRejectedWithAReason) 
   o.output_weighting = static_cast<mapping::PoissonWeighting>(7);
   rejected(o, "output_weighting");
   o = {};
-  o.mosaic.weighted_poisson.weight_floor = 0;  // the weighted solver's own check
-  rejected(o, "mosaic: weighted_poisson: weight_floor");
+  o.mosaic.weighted_poisson.weight_floor = 0;  // the weighted solver's key in the mosaic's table
+  rejected(o, "mosaic: weight_floor");
   o = {};
   o.tracker.num_particles = 0;  // a nested option struct's own check
   rejected(o, "tracker: ");

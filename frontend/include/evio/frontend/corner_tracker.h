@@ -30,14 +30,14 @@ namespace evio::frontend {
 struct CornerTrackerOptions {
   double max_distance_px = 4.0;        // association gate around the predicted position, px
   int64_t max_gap_ns = 30'000'000;     // a track with no corner event for this long ends, ns
-  double position_gain = 0.1;          // weight of a new corner event in the smoothed position, (0, 1]
+  double position_gain = 0.1;          // weight of a new corner event in the smoothed position
   int64_t velocity_window_ns = 20'000'000;  // velocity from the smoothed positions over this span, ns
-  int64_t min_velocity_span_ns = 3'000'000;  // no velocity (zero) until a track spans this long, ns
+  int64_t min_velocity_span_ns = 3'000'000;  // no velocity (zero) until a track spans this long, ns (<= velocity_window_ns)
   size_t min_length = 10;              // tracks with fewer corner events are not reported
   double descriptor_ratio = 0.8;       // ratio test between the two best tracks' descriptor distances
   // With descriptors: tracks whose descriptor is farther than this are not candidates (a corner
-  // that looks different starts its own track). dart_distance_aligned units, [0, sqrt(2)];
-  // infinity: off.
+  // that looks different starts its own track). dart_distance_aligned units (distances lie in
+  // [0, sqrt(2)]); infinity: off.
   double max_descriptor_distance = std::numeric_limits<double>::infinity();
   bool Validate(std::string* why) const;
 };

@@ -89,17 +89,17 @@ enum class DartWeighting {
 };
 
 struct DartOptions {
-  int rings = 7;                        // number of log-spaced rings, 1..kDartMaxRings
-  int wedges = 12;                      // number of angular wedges, 1..kDartMaxWedges
-  double inner_radius_px = 0.8838834764831844;  // inner radius of ring 0, px (10 / sqrt(2)^7), > 0
-  double outer_radius_px = 10.0;        // outer radius of the last ring, px, > inner, <= 64
+  int rings = 7;                        // number of log-spaced rings (rings * wedges <= kDartMaxBins)
+  int wedges = 12;                      // number of angular wedges
+  double inner_radius_px = 0.8838834764831844;  // inner radius of ring 0, px (10 / sqrt(2)^7)
+  double outer_radius_px = 10.0;        // outer radius of the last ring, px, > inner_radius_px
   int64_t window_ns = 30'000'000;       // a pixel is recent when its latest event is in
-                                        // [t - window_ns, t], ns (default 30 ms), >= 0
+                                        // [t - window_ns, t], ns (default 30 ms)
   DartPolarity polarity = DartPolarity::kBoth;
   DartNormalisation normalisation = DartNormalisation::kL2;
   DartWeighting weighting = DartWeighting::kCount;
   DartBinning binning = DartBinning::kSoft;
-  int max_ring_shift = 2;               // dart_distance searches ring shifts -S..S, 0..rings-1
+  int max_ring_shift = 2;               // dart_distance searches ring shifts -S..S, S < rings
   bool half_wedge_shifts = true;        // dart_distance also tries rotations by k + 1/2 wedges
   bool Validate(std::string* why) const;
 

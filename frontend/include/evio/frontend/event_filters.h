@@ -30,8 +30,8 @@ struct RefractoryFilterOptions {
 // neighbours; events on moving edges do.
 struct BackgroundActivityFilterOptions {
   int64_t window_ns = 10'000'000;  // correlation window, ns (default 10 ms)
-  int radius = 1;                  // neighbourhood radius, pixels (1: the 8-neighbourhood), 1..3
-  int min_support = 1;             // neighbours needed, 1 .. (2r+1)^2-1
+  int radius = 1;                  // neighbourhood radius, pixels (1: the 8-neighbourhood)
+  int min_support = 1;             // neighbours needed, at most (2r+1)^2-1
   bool Validate(std::string* why) const;
 };
 

@@ -23,13 +23,13 @@
 namespace evio::frontend {
 
 struct EventFrameOptions {
-  // Events per frame, >= 1. Default 15000: about a third of the 43,200 pixels of a DAVIS240
+  // Events per frame. Default 15000: about a third of the 43,200 pixels of a DAVIS240
   // (240x180), enough to draw every textured edge of a typical ECD scene (shapes, poster, boxes)
   // once or twice without smearing; at the 0.5-3 M events/s of those sequences a frame spans
   // 5-30 ms. This is evio's choice for DAVIS240-sized sensors (scale it with the pixel count for
   // others), not a number taken from the paper.
   int events_per_frame = 15000;
-  // Longest frame window, ns, > 0 (default 50 ms). When the next event is this late after the
+  // Longest frame window, ns (default 50 ms). When the next event is this late after the
   // frame's first event the frame is closed with the events it has (event-rate drops, a still
   // camera), so frames keep coming at >= 1 / max_window_ns.
   int64_t max_window_ns = 50'000'000;
@@ -39,22 +39,22 @@ struct EventFrameOptions {
   // carries the longer window: slow motion is what makes the rate low (VioPipeline turns them on
   // once initialised).
   int64_t sparse_max_window_ns = 500'000'000;
-  // ... only after this long without a frame (ns, >= 0): a short dip of the rate (a velocity
+  // ... only after this long without a frame (ns): a short dip of the rate (a velocity
   // reversal) drops its sparse frames, and only a real starvation gets the long ones,
   // whose compensation over 0.1-0.5 s is less precise than a 50 ms frame's.
   int64_t sparse_after_ns = 200'000'000;
-  // Shortest frame window, ns, 0..max_window_ns (default 0: N events decide). At high event rates
+  // Shortest frame window, ns, at most max_window_ns (default 0: N events decide). At high event rates
   // a frame then holds more than events_per_frame events (every event until min_window_ns), which
   // bounds the frame rate at 1 / min_window_ns: adaptive to the event rate.
   int64_t min_window_ns = 0;
   // Overlapping windows: this fraction of each emitted frame's events (its latest ones) starts the
-  // next frame, [0, 0.9] (default 0: disjoint windows). Frames then come 1 / (1 - overlap) times
+  // next frame (default 0: disjoint windows). Frames then come 1 / (1 - overlap) times
   // as often, each still holding events_per_frame events (at least min_window_ns). max_window_ns
   // and min_events count only the events a frame adds: carried events alone never make a frame,
   // and they are discarded once max_window_ns older than the next event (a still camera).
   double overlap = 0.0;
   // Frames with fewer events (closed by max_window_ns or flush) are dropped and counted in
-  // EventFrameStats::frames_dropped_sparse; 1 <= min_events <= events_per_frame. Default 1000.
+  // EventFrameStats::frames_dropped_sparse; min_events <= events_per_frame. Default 1000.
   int min_events = 1000;
   // Warp every event to the frame's reference time with the rotation from the gyroscope.
   bool motion_compensation = true;
@@ -69,24 +69,24 @@ struct EventFrameOptions {
   // polarity, c is that quantile of |a| and image = round(127.5 + 127.5 * clamp(a / c, -1, 1)).
   // false: image = saturate_cast<uint8>(round(a)) (counts) or 128 + a (polarity), no scaling.
   bool normalize = true;
-  double clip_percentile = 0.99;  // fraction in (0, 1]; 1 = the maximum
+  double clip_percentile = 0.99;  // fraction; 1 = the maximum
   // Fixed clip instead of the percentile: c = clip_count (events per pixel, accumulator units),
   // the same for every frame whatever its content (0: the clip_percentile quantile).
   double clip_count = 0.0;
   // Rotation knots: the gyro is integrated (bias removed, midpoint rule on the linearly
-  // interpolated rate) into camera-frame rotation matrices every knot_spacing_ns, ns, > 0
+  // interpolated rate) into camera-frame rotation matrices every knot_spacing_ns, ns
   // (default 0.5 ms); each event's rotation is the linear blend of the two neighbouring knot
   // matrices applied to its bearing. The blend's error is below theta^2 / 8 rad for a knot step of
   // theta rad: 2.6 mrad at 300 deg/s and 0.5 ms, so below 1e-6 rad (2e-4 px at f = 200 px).
   int64_t knot_spacing_ns = 500'000;
   // IMU coverage: the samples must bracket [t_begin, t_ref] on the IMU clock (t_imu = t_cam +
-  // time_shift_ns), up to max_imu_extrapolation_ns at either end (ns, >= 0, default 0: the gyro
+  // time_shift_ns), up to max_imu_extrapolation_ns at either end (ns, default 0: the gyro
   // rate is held constant over that gap), and no two consecutive samples inside may be more than
-  // max_imu_gap_ns apart (ns, > 0, default 20 ms). Otherwise the frame is built without
+  // max_imu_gap_ns apart (ns, default 20 ms). Otherwise the frame is built without
   // compensation and counted in EventFrameStats::frames_uncompensated.
   int64_t max_imu_extrapolation_ns = 0;
   int64_t max_imu_gap_ns = 20'000'000;
-  // Event lag, px along the image motion (>= 0; default 0: none). An event fires once the log
+  // Event lag, px along the image motion (default 0: none). An event fires once the log
   // intensity at its pixel has changed by the contrast threshold since the pixel's previous event,
   // i.e. after the edge that caused it has moved C / |grad log I| onward; frames warped with the
   // true motion then lie behind the edges along the flow, by about the same distance at every

@@ -67,14 +67,14 @@ struct FeatureTrackerOptions {
   // contiguous arc of the Bresenham circle, on the 8-bit event frame (e.g. scaled event counts).
   int fast_threshold = 20;
   int min_distance_px = 8;  // minimum distance of a new feature to any other feature (px)
-  int klt_window_px = 21;     // KLT search window side (px, odd, >= 3)
+  int klt_window_px = 21;     // KLT search window side (px, odd)
   int klt_pyramid_levels = 3; // pyramid levels above full resolution (OpenCV maxLevel; 0 = none)
   int klt_max_iterations = 30;  // per pyramid level (count); also stops at klt_epsilon_px updates
-  double klt_epsilon_px = 0.01;  // KLT stops when an update moves the feature less than this (px, > 0)
+  double klt_epsilon_px = 0.01;  // KLT stops when an update moves the feature less than this (px)
   // Forward-backward check: a track is dropped when tracking the new position back into the
   // previous frame lands farther than this from where it started (px).
   double forward_backward_max_px = 1.0;
-  // Reference template (frames, >= 1). 1 tracks every feature from the previous frame (chained
+  // Reference template (frames). 1 tracks every feature from the previous frame (chained
   // KLT: each frame's alignment error adds to the track, a random walk). N > 1 aligns each feature
   // against the frame where its reference was taken (the patch of its detection frame, refreshed
   // every N frames), with the previous position as the initial guess: errors add once per N frames
@@ -86,13 +86,13 @@ struct FeatureTrackerOptions {
   // event frames age quickly (edges change with the motion direction), and tracks live shorter.
   bool template_fallback = false;
   // With template_max_age_frames > 1: a template whose frame is turned by more than this against
-  // the current one (deg, from the chained IMU rotation priors; >= 0, 0 = no limit) is not used:
+  // the current one (deg, from the chained IMU rotation priors; 0 = no limit) is not used:
   // the track goes from the previous frame and its template restarts. Translation-only KLT
   // against a turned template is biased (an in-plane turn of ten degrees or more shifts it by
   // more than a pixel, and the forward-backward check still passes). A frame without the IMU
   // rotation restarts every template.
   double template_max_rotation_deg = 0;
-  // Long-baseline verification (frames, >= 0; 0 = off): besides the RANSAC between consecutive
+  // Long-baseline verification (frames; 0 = off): besides the RANSAC between consecutive
   // frames, the tracks that existed at an anchor frame are verified by a second 2-point RANSAC
   // between their anchor positions and the current ones (rotation from the chained IMU priors);
   // the anchor moves to the current frame every anchor_frames frames. A track sliding slowly
@@ -107,18 +107,18 @@ struct FeatureTrackerOptions {
   // f = sqrt(fx fy), passed to OpenGV as 1 - cos(angle).
   double ransac_threshold_px = 1.0;
   int ransac_max_iterations = 200;  // count
-  // New features are detected when fewer tracks than this survive a frame (count, 0..max_features;
+  // New features are detected when fewer tracks than this survive a frame (count, at most max_features;
   // the first frame always detects).
   int min_tracks_before_detection = 100;
   // Features closer than this to the image border are not detected, and tracks that move closer
   // are dropped as KLT losses (px).
   int border_px = 4;
   uint64_t seed = 1;  // RANSAC seed (each frame's RANSAC seed is derived from it and the frame id)
-  // Re-acquisition: a lost track's template (its reference patch) is kept this long (s, >= 0; 0:
+  // Re-acquisition: a lost track's template (its reference patch) is kept this long (s; 0:
   // off); track() looks for it again where its caller predicts it (e.g. its landmark projected with
   // the IMU-propagated pose after an event-rate drop), and on success the track continues under
   // its id. The KLT result must pass the forward-backward check and lie within reacquire_max_px
-  // of the prediction (px, > 0), and the template must not have turned by more than
+  // of the prediction (px), and the template must not have turned by more than
   // 2 x template_max_rotation_deg (when that is set).
   double reacquire_max_age_s = 3.0;
   double reacquire_max_px = 6.0;

@@ -108,19 +108,19 @@ enum class RotationMeasurementModel {
 const char* rotation_measurement_model_name(RotationMeasurementModel m);  // "previous_mean", "relative_motion", "auto"
 
 struct RotationParticleFilterOptions {
-  // Particles, >= 1. Default 100: beyond that the error stops falling (it is set by the
+  // Particles. Default 100: beyond that the error stops falling (it is set by the
   // measurement, not by the sampling; without gyro the likelihood compares with the filter's own
   // past estimates, so the error behaves like odometry drift), while the cost grows linearly
   // (docs/results/mosaic.md, the filter alone on a known map).
   int num_particles = 100;
   // Adaptive particle count (KLD-sampling, Fox, IJRR 2003): at each resampling the rotation
   // offsets from the mean of the predicted cloud (the particles before resampling, weight above
-  // 0.1 / n) are binned in cubes of kld_bin_rad (rad, > 0) per axis, and with k occupied bins the
+  // 0.1 / n) are binned in cubes of kld_bin_rad (rad) per axis, and with k occupied bins the
   // new count is Fox's bound
   //   n = (k - 1) / (2 kld_epsilon) * (1 - 2 / (9 (k - 1)) + sqrt(2 / (9 (k - 1))) * kld_z)^3
-  // (enough particles for a KL divergence below kld_epsilon, dimensionless > 0, with probability
-  // Phi(kld_z), kld_z > 0) clamped to [min_particles, num_particles] (a systematic subsample of
-  // the resampled set). min_particles (>= 1, <= num_particles; 0 = num_particles = fixed count).
+  // (enough particles for a KL divergence below kld_epsilon, dimensionless, with probability
+  // Phi(kld_z)) clamped to [min_particles, num_particles] (a systematic subsample of
+  // the resampled set). min_particles (<= num_particles; 0 = num_particles = fixed count).
   // A tight cloud (gyro-driven) needs few particles, a wide one keeps up to num_particles.
   // Defaults: bins of 2 mrad (about a third of a texel at 1024 texels per turn) and epsilon 0.5
   // (k = 10 bins: 22 particles); Fox's usual 0.05 asks for at least 66 particles from k = 2 on,
@@ -132,10 +132,10 @@ struct RotationParticleFilterOptions {
   double kld_bin_rad = 0.002;
   double kld_epsilon = 0.5;
   double kld_z = 2.326;  // Phi(2.326) = 0.99
-  // Events per measurement update, >= 1 (default 10). Particles are predicted once per batch, to
+  // Events per measurement update (default 10). Particles are predicted once per batch, to
   // the time of its last event; larger batches amortise prediction, weighting and resampling.
   int batch_size = 10;
-  // One event in every event_stride weighs the particles (>= 1, default 1 = all); the others only
+  // One event in every event_stride weighs the particles (default 1 = all); the others only
   // record their pixel's previous event. At millions of events per second neighbouring events
   // carry nearly the same information, so a stride trades little accuracy for speed (the
   // particles' cost is linear in the events used).
@@ -145,47 +145,47 @@ struct RotationParticleFilterOptions {
   // this angle of the mean, rad (default 0.02: second-order error below 0.03 texel at 1024 px
   // width); 0 = always project exactly per particle. Directions near the poles use the exact path.
   double linearize_max_spread_rad = 0.02;
-  // A batch is closed early when the next event is more than this after its first event, ns, > 0
+  // A batch is closed early when the next event is more than this after its first event, ns
   // (default 1 ms), so sparse streams are not held back.
   int64_t max_batch_duration_ns = 1'000'000;
   // Motion model when no gyro sample is available.
   RotationMotionModel motion_model = RotationMotionModel::kRandomWalk;
   RotationMeasurementModel measurement_model = RotationMeasurementModel::kAuto;
-  // Random-walk noise density without gyro, rad/sqrt(s), > 0 (default 0.3: 1 mrad of spread per
+  // Random-walk noise density without gyro, rad/sqrt(s) (default 0.3: 1 mrad of spread per
   // 10 us batch; chosen on the known-map scenario, docs/results/mosaic.md).
   double motion_noise_rad_per_sqrt_s = 0.3;
-  // Noise density with gyro-driven prediction, rad/sqrt(s), > 0 (default 0.03; a wider prediction
+  // Noise density with gyro-driven prediction, rad/sqrt(s) (default 0.03; a wider prediction
   // only spreads the cloud and raises the error, docs/results/mosaic.md). Covers the gyro's white
   // noise, residual bias and the camera-IMU time alignment, so it is far above a real gyro's noise
   // density (~0.003 rad/s/sqrt(Hz)).
   double gyro_noise_rad_per_sqrt_s = 0.03;
-  // Gyro samples older than this (relative to the prediction time) are not used, ns, > 0 (default
+  // Gyro samples older than this (relative to the prediction time) are not used, ns (default
   // 20 ms): the filter falls back to motion_model.
   int64_t gyro_max_age_ns = 20'000'000;
-  // Event contrast threshold C, log-intensity units, > 0 (default 0.2).
+  // Event contrast threshold C, log-intensity units (default 0.2).
   double contrast_threshold = 0.2;
-  // Standard deviation sigma_C of z around p*C, log-intensity units, > 0 (default 0.1): event
+  // Standard deviation sigma_C of z around p*C, log-intensity units (default 0.1): event
   // generation noise plus mosaic and interpolation error.
   double likelihood_std = 0.1;
-  // Outlier probability eps, in (0, 1) (default 0.1), and the width of the uniform outlier
-  // density, log-intensity units, > 0 (default 2.0). The outlier floor must lie below the
+  // Outlier probability eps (default 0.1), and the width of the uniform outlier density,
+  // log-intensity units (default 2.0). The outlier floor must lie below the
   // Gaussian's peak (checked by Validate).
   double outlier_probability = 0.1;
   double outlier_range = 2.0;
-  // Resample when ESS < fraction * N; fraction in [0, 1] (default 0.5; 0 never, 1 always).
+  // Resample when ESS < fraction * N (default 0.5; 0 never, 1 always).
   double resample_ess_fraction = 0.5;
-  // Standard deviation of the initial spread around reset()'s rotation, rad, >= 0 (default 0: all
+  // Standard deviation of the initial spread around reset()'s rotation, rad (default 0: all
   // particles at the given rotation).
   double initial_spread_rad = 0.0;
   // Angular velocity from the mean rotation: w = Log(R(t0)^T R(t1)) / (t1 - t0) over windows of at
-  // least velocity_window_ns (ns, > 0, default 2 ms), smoothed exponentially with weight
-  // velocity_smoothing (in (0, 1], default 0.5) on each new window.
+  // least velocity_window_ns (ns, default 2 ms), smoothed exponentially with weight
+  // velocity_smoothing (default 0.5) on each new window.
   int64_t velocity_window_ns = 2'000'000;
   double velocity_smoothing = 0.5;
   // kParticleVelocity: white angular-acceleration noise density on each particle's velocity,
-  // rad/s/sqrt(s), > 0 (default 2), the rotation's own noise density on top of the velocity
-  // (replaces motion_noise_rad_per_sqrt_s), rad/sqrt(s), > 0 (default 0.03), and the standard
-  // deviation of the velocities set by set_velocity() around the given one, rad/s, >= 0 (default
+  // rad/s/sqrt(s) (default 2), the rotation's own noise density on top of the velocity
+  // (replaces motion_noise_rad_per_sqrt_s), rad/sqrt(s) (default 0.03), and the standard
+  // deviation of the velocities set by set_velocity() around the given one, rad/s (default
   // 0.5). The velocity noise must let the cloud follow the fastest motion (too little loses it at
   // high speed) without widening it at slow speed; the rotation noise on top is small, since too
   // little loses fast motion and more loses tracking elsewhere. Chosen on the known-map scenario
@@ -194,8 +194,8 @@ struct RotationParticleFilterOptions {
   double velocity_rotation_noise_rad_per_sqrt_s = 0.03;
   double initial_velocity_spread_rad_s = 0.5;
   // kRelativeMotion with particle velocities: an event whose pixel's previous event is more than
-  // relative_max_interval_ns before the batch time (ns, > 0, default 100 ms), or whose path under
-  // the mean velocity since then is longer than relative_max_path_rad (rad, > 0, default 0.1:
+  // relative_max_interval_ns before the batch time (ns, default 100 ms), or whose path under
+  // the mean velocity since then is longer than relative_max_path_rad (rad, default 0.1:
   // about 16 texels at 1024 per turn), is not used (a constant velocity over a long path is a poor
   // model). The time cap must leave slow motion enough events (a short cap alone starves a slow
   // pan); the path cap bounds the constant-velocity error at high speed. Chosen on the known-map
@@ -204,7 +204,7 @@ struct RotationParticleFilterOptions {
   double relative_max_path_rad = 0.1;
   uint64_t seed = 1;  // seed of every random choice (process noise, resampling)
   // Tracking-quality probes: every probe_every_batches-th weighted batch (0: never) is also
-  // weighed under six rotations of the mean turned by +-probe_offset_rad (rad, > 0, default 0.01;
+  // weighed under six rotations of the mean turned by +-probe_offset_rad (rad, default 0.01;
   // at most linearize_max_spread_rad when that is on, so linearised batches stay linearised) about each camera axis,
   // with the mean velocity; they never enter the filter. last_probe_contrast() is the cloud's
   // weighted mean log-likelihood per event minus the probes' mean: clearly positive while the

@@ -60,9 +60,9 @@ Eigen::VectorXd warp_params_at(WarpModel m, const Eigen::VectorXd& p, double dt_
 
 // The pinhole of the (undistorted) event coordinates, and the depth model of the 6-DoF warp.
 struct WarpGeometry {
-  double fx = 200.0, fy = 200.0;  // focal lengths, px (> 0)
+  double fx = 200.0, fy = 200.0;  // focal lengths, px
   double cx = 120.0, cy = 90.0;   // principal point, px; also the similarity warp's centre
-  double depth_m = 1.0;           // 6dof: scene depth along the optical axis, m (> 0), when no plane
+  double depth_m = 1.0;           // 6dof: scene depth along the optical axis, m, when no plane
   // 6dof plane n.X = plane_distance_m in the camera frame at t_ref (n need not be unit; it is
   // normalised). Used when plane_distance_m > 0; events whose ray misses the plane's front side
   // get rho = 0 (at infinity).
@@ -147,19 +147,19 @@ std::optional<CmaxObjective> cmax_objective_from_name(const std::string& name);
 struct CmaxOptions {
   WarpModel model = WarpModel::kFlow;
   CmaxObjective objective = CmaxObjective::kAuto;
-  int width = 240;              // IWE columns at level 0, px (> 0): the sensor's width
-  int height = 180;             // IWE rows at level 0, px (> 0)
-  double blur_sigma_px = 1.0;   // Gaussian smoothing of the IWE, in each level's own pixels (>= 0; 0 = none)
+  int width = 240;              // IWE columns at level 0, px: the sensor's width
+  int height = 180;             // IWE rows at level 0, px
+  double blur_sigma_px = 1.0;   // Gaussian smoothing of the IWE, in each level's own pixels (0 = none)
   bool use_polarity = false;    // IWE sums polarities (signed) instead of counts
   // Coarse-to-fine: level L votes into an IWE 2^L times smaller, so a blur of blur_sigma_px there
   // spans 2^L level-0 pixels and the objective sees displacements that large from zero. The
-  // optimiser runs levels pyramid_levels-1 .. 0, each warm-started from the last (>= 1, <= 8).
+  // optimiser runs levels pyramid_levels-1 .. 0, each warm-started from the last.
   int pyramid_levels = 3;
-  int max_iterations = 40;      // BFGS iterations per level (>= 1)
+  int max_iterations = 40;      // BFGS iterations per level
   // Level 0 ends when a step (taken, or the next one proposed) moves the events by less than this,
-  // RMS in px (> 0).
+  // RMS in px.
   double tolerance_px = 0.005;
-  // The same for the coarse levels, in that level's pixels (> 0). A coarse level only has to bring
+  // The same for the coarse levels, in that level's pixels. A coarse level only has to bring
   // the estimate into the next finer level's basin (about its blur, one pixel there), and its own
   // optimum differs from the finer level's by more than this, so tightening it further buys
   // nothing but evaluations.

@@ -24,14 +24,14 @@
 namespace evio::mapping {
 
 struct RotationalCmaxOptions {
-  int width = 240;                   // IWE columns, px (> 0); the sensor's size is the natural choice
-  int height = 180;                  // IWE rows, px (> 0)
-  double focal_px = 200.0;           // focal length of the IWE's ideal pinhole, px (> 0)
-  double blur_sigma_px = 1.0;        // Gaussian smoothing of the IWE at the fine stage, px (> 0)
-  double coarse_blur_factor = 3.0;   // the coarse stage blurs by blur_sigma_px times this (>= 1)
-  double initial_step_radps = 1.0;   // first pattern-search step per axis, rad/s (> 0)
-  double min_step_radps = 0.002;     // the search stops when the step falls below this, rad/s (> 0)
-  int max_evaluations = 600;         // objective evaluations over both stages (>= 10)
+  int width = 240;                   // IWE columns, px; the sensor's size is the natural choice
+  int height = 180;                  // IWE rows, px
+  double focal_px = 200.0;           // focal length of the IWE's ideal pinhole, px
+  double blur_sigma_px = 1.0;        // Gaussian smoothing of the IWE at the fine stage, px
+  double coarse_blur_factor = 3.0;   // the coarse stage blurs by blur_sigma_px times this
+  double initial_step_radps = 1.0;   // first pattern-search step per axis, rad/s
+  double min_step_radps = 0.002;     // the search stops when the step falls below this, rad/s (<= initial)
+  int max_evaluations = 600;         // objective evaluations over both stages
   bool Validate(std::string* why) const;
 };
 

@@ -44,26 +44,26 @@ struct GradientMosaicPixelState {
 struct GradientMosaicOptions {
   int width = 1024;                   // px, mosaic columns (u, longitude; wraps)
   int height = 512;                   // px, mosaic rows (v, latitude; row 0 = up)
-  double contrast_threshold = 0.2;    // C, log-intensity units per event (> 0)
-  double initial_gradient_std = 1.0;  // sigma0 of each gradient component, log units / mosaic px (> 0)
-  double measurement_std_abs = 10.0;  // absolute std of z = 1/tau, 1/s (>= 0)
-  double measurement_relative_std = 0.2;  // std of z relative to z, dimensionless (>= 0; not both 0)
+  double contrast_threshold = 0.2;    // C, log-intensity units per event
+  double initial_gradient_std = 1.0;  // sigma0 of each gradient component, log units / mosaic px
+  double measurement_std_abs = 10.0;  // absolute std of z = 1/tau, 1/s
+  double measurement_relative_std = 0.2;  // std of z relative to z, dimensionless (not both 0)
   // Events with tau below this are skipped (bursts, refractory artefacts; their z = 1/tau would
-  // claim |g . v| > C / min_tau_s, i.e. > 2e4 log units/s at the defaults), s (> 0).
+  // claim |g . v| > C / min_tau_s, i.e. > 2e4 log units/s at the defaults), s.
   double min_tau_s = 1e-5;
   // Events whose mosaic velocity is slower than this carry no gradient information: skipped,
-  // mosaic px/s (>= 0).
+  // mosaic px/s.
   double min_speed_px_s = 1.0;
-  // Floor on the std of P along any direction, log units / mosaic px (> 0, < initial_gradient_std).
+  // Floor on the std of P along any direction, log units / mosaic px (< initial_gradient_std).
   double min_gradient_std = 1e-3;
   // A pixel counts as "seen" (reconstructed, used by the tracker; unseen pixels' gradients are 0 in
-  // the Poisson solve) once it has this many accepted updates (>= 1) and, when
+  // the Poisson solve) once it has this many accepted updates and, when
   // seen_max_gradient_std > 0, the std of its gradient along every direction (sqrt of P's largest
-  // eigenvalue) is at most seen_max_gradient_std, log units / mosaic px (>= 0; 0 = no such test).
+  // eigenvalue) is at most seen_max_gradient_std, log units / mosaic px (0 = no such test).
   // The covariance test leaves out pixels observed along one direction only.
   int seen_min_observations = 1;
   double seen_max_gradient_std = 0.0;
-  // update_segment: longest path between a pixel's two events that is still used, mosaic px (> 0).
+  // update_segment: longest path between a pixel's two events that is still used, mosaic px.
   double max_path_px = 8.0;
   // Poisson solver for reconstruct(): kPeriodicU is the equirectangular mosaic's boundary;
   // poisson.max_region_side bounds the incremental solve.
@@ -80,7 +80,7 @@ struct GradientMosaicOptions {
   double weight_reference_std = 3e-2;
   // Weight of an edge between two texels that are not seen but were in the camera's view
   // (mark_viewed): no events there is evidence of a small gradient, which the EKF (updated by
-  // events only) does not record; the edge's gradient is 0, dimensionless (in [0, 1]). Never-viewed
+  // events only) does not record; the edge's gradient is 0, dimensionless. Never-viewed
   // edges keep the prior's weight (raised to weighted_poisson.weight_floor).
   double viewed_edge_weight = 1.0;
   // reconstruct_map (the tracker's map): texels that were in the camera's view (mark_viewed) but

@@ -22,9 +22,9 @@ namespace evio::mapping {
 // Percentiles use the nearest rank, index round(p / 100 * (n - 1)) of the sorted values. When the
 // two percentiles coincide (a flat image) every seen pixel maps to 0.5.
 struct LogImageDisplayOptions {
-  double low_percentile = 1.0;    // %, in [0, 100), mapped to black
-  double high_percentile = 99.0;  // %, in (low_percentile, 100], mapped to white
-  double gamma = 1.0;             // display gamma (> 0): value = t^(1/gamma); 2.2 for linear_intensity
+  double low_percentile = 1.0;    // %, mapped to black
+  double high_percentile = 99.0;  // %, above low_percentile, mapped to white
+  double gamma = 1.0;             // display gamma: value = t^(1/gamma); 2.2 for linear_intensity
   bool linear_intensity = false;  // map linear intensity exp(L) instead of log intensity
   // PNG writers: grey plus alpha (4 channels, R = G = B = the display value) with alpha 0 where a
   // pixel is unseen or non-finite and full alpha elsewhere, so unseen pixels stand apart from dark

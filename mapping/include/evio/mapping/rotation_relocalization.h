@@ -19,19 +19,19 @@ namespace evio::mapping {
 
 struct RotationRelocalizationOptions {
   // Optical-axis candidates: a grid of about this spacing on the sphere, kept where the mosaic is
-  // known at the grid point, deg (> 0).
+  // known at the grid point, deg.
   double axis_spacing_deg = 3.0;
-  // Roll candidates about each axis over a full turn, deg (> 0).
+  // Roll candidates about each axis over a full turn, deg.
   double roll_step_deg = 10.0;
-  // Events scored in the coarse search and in the refinement (evenly subsampled), count (>= 1).
+  // Events scored in the coarse search and in the refinement (evenly subsampled), count.
   int coarse_bearings = 300;
   int fine_bearings = 3000;
-  // Gradient-magnitude blur of the coarse search and of the refinement, mosaic texels (>= 0).
+  // Gradient-magnitude blur of the coarse search and of the refinement, mosaic texels.
   double coarse_blur_texels = 3.0;
   double fine_blur_texels = 1.0;
-  // Best coarse candidates (more than max(axis spacing, roll step) apart) refined, count (>= 1).
+  // Best coarse candidates (more than max(axis spacing, roll step) apart) refined, count.
   int refine_candidates = 8;
-  // Pattern search on the rotation vector: first and last step, deg (> 0, last <= first).
+  // Pattern search on the rotation vector: first and last step, deg (last <= first).
   double refine_initial_step_deg = 2.0;
   double refine_final_step_deg = 0.05;
   bool Validate(std::string* why) const;

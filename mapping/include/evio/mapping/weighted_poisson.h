@@ -38,16 +38,16 @@ enum class PoissonPreconditioner {
 const char* poisson_preconditioner_name(PoissonPreconditioner p);
 
 struct WeightedPoissonOptions {
-  // Edge weights below this are raised to it, dimensionless (in (0, 1]; weights are information
-  // relative to a fully known gradient, 1). Makes A positive definite on zero-mean images; smaller
+  // Edge weights below this are raised to it, dimensionless (weights are information relative to a
+  // fully known gradient, 1). Makes A positive definite on zero-mean images; smaller
   // values let unseen texels pull less on seen ones (on exact gradients the seen error is about
   // 0.45 x the floor) but need more iterations. Default 0.03: over 1e-3..3e-2 the mosaic quality
   // does not change, and the larger floor needs the fewest iterations (docs/results/mosaic.md).
   double weight_floor = 3e-2;
-  // Converged when ||b - A L||_2 <= tolerance * ||b||_2, dimensionless (> 0, < 1).
+  // Converged when ||b - A L||_2 <= tolerance * ||b||_2, dimensionless.
   double tolerance = 1e-4;
   // At most this many PCG iterations (one A product and one preconditioner application each),
-  // count (>= 0; 0 returns the warm start).
+  // count (0 returns the warm start).
   int max_iterations = 200;
   PoissonPreconditioner preconditioner = PoissonPreconditioner::kSpectral;
   bool Validate(std::string* why) const;

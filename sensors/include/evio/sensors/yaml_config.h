@@ -9,8 +9,10 @@
 #include <cerrno>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <limits>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -205,31 +207,80 @@ class Parser {
 
 enum class Range { kAny, kPositive, kNonNegative, kUnit };  // kUnit: [0, 1]
 
-inline const char* range_text(Range r) {
-  switch (r) {
-    case Range::kPositive:
-      return "a number > 0";
-    case Range::kNonNegative:
-      return "a number >= 0";
-    case Range::kUnit:
-      return "a number in [0, 1]";
-    default:
-      return "a number";
+// Shortest decimal text that reads back to exactly v ("0.1", not "0.10000000000000001");
+// ".inf" / "-.inf" / ".nan" as YAML spells them.
+inline std::string yaml_number(double v) {
+  if (std::isnan(v)) return ".nan";
+  if (std::isinf(v)) return v > 0 ? ".inf" : "-.inf";
+  char buf[64];
+  for (int precision = 1; precision <= 17; ++precision) {
+    std::snprintf(buf, sizeof(buf), "%.*g", precision, v);
+    if (std::strtod(buf, nullptr) == v) break;
   }
+  // Plain decimals for ordinary magnitudes ("10", not "1e+01").
+  if (std::string(buf).find('e') != std::string::npos && std::abs(v) >= 1e-4 && std::abs(v) < 1e15) {
+    char fixed[64];
+    for (int decimals = 0; decimals <= 20; ++decimals) {
+      std::snprintf(fixed, sizeof(fixed), "%.*f", decimals, v);
+      if (std::strtod(fixed, nullptr) == v) return fixed;
+    }
+  }
+  return buf;
 }
 
-inline bool in_range(double v, Range r) {
-  switch (r) {
-    case Range::kPositive:
-      return v > 0;
-    case Range::kNonNegative:
-      return v >= 0;
-    case Range::kUnit:
-      return v >= 0 && v <= 1;
-    default:
-      return true;
+// The values a number may take: an interval of the real line, each end open or closed (an
+// infinite end is open). The Range cases are intervals: kAny (-inf, inf), kPositive (0, inf),
+// kNonNegative [0, inf), kUnit [0, 1]. Readers take finite numbers only, whatever the interval.
+class Interval {
+ public:
+  Interval(Range r) {  // NOLINT(google-explicit-constructor): every Range is an interval
+    switch (r) {
+      case Range::kPositive: *this = above(0); break;
+      case Range::kNonNegative: *this = at_least(0); break;
+      case Range::kUnit: *this = closed(0, 1); break;
+      default: break;
+    }
   }
-}
+  static Interval closed(double lo, double hi) { return {lo, false, hi, false}; }       // [lo, hi]
+  static Interval open_closed(double lo, double hi) { return {lo, true, hi, false}; }   // (lo, hi]
+  static Interval closed_open(double lo, double hi) { return {lo, false, hi, true}; }   // [lo, hi)
+  static Interval open(double lo, double hi) { return {lo, true, hi, true}; }           // (lo, hi)
+  static Interval at_least(double lo) { return {lo, false, kInf, true}; }               // [lo, inf)
+  static Interval above(double lo) { return {lo, true, kInf, true}; }                   // (lo, inf)
+
+  double lo() const { return lo_; }
+  double hi() const { return hi_; }
+  bool lo_open() const { return lo_open_; }
+  bool hi_open() const { return hi_open_; }
+
+  bool contains(double v) const {
+    return (lo_open_ ? v > lo_ : v >= lo_) && (hi_open_ ? v < hi_ : v <= hi_);
+  }
+  // "> 0", ">= 0", "<= 1", "in [0, 1]", "in (0, 64]"; empty for the whole line.
+  std::string text() const {
+    const bool has_lo = std::isfinite(lo_), has_hi = std::isfinite(hi_);
+    if (has_lo && has_hi) {
+      return std::string("in ") + (lo_open_ ? "(" : "[") + yaml_number(lo_) + ", " + yaml_number(hi_) +
+             (hi_open_ ? ")" : "]");
+    }
+    if (has_lo) return (lo_open_ ? "> " : ">= ") + yaml_number(lo_);
+    if (has_hi) return (hi_open_ ? "< " : "<= ") + yaml_number(hi_);
+    return {};
+  }
+  // The expected form in messages: "a number > 0", "a number in (0, 1]", "a number".
+  std::string number_text() const {
+    const std::string t = text();
+    return t.empty() ? "a number" : "a number " + t;
+  }
+
+ private:
+  static constexpr double kInf = std::numeric_limits<double>::infinity();
+  Interval(double lo, bool lo_open, double hi, bool hi_open)
+      : lo_(lo), hi_(hi), lo_open_(lo_open || !std::isfinite(lo)), hi_open_(hi_open || !std::isfinite(hi)) {}
+
+  double lo_ = -kInf, hi_ = kInf;
+  bool lo_open_ = true, hi_open_ = true;
+};
 
 inline bool parse_finite(const std::string& s, double* v) {
   if (s.empty()) return false;
@@ -299,13 +350,13 @@ class Section {
     if (!has(key)) return def;
     return number_of(get(key), key_path(key), r, unit);
   }
-  double number_of(const YAML::Node& n, const std::string& kp, Range r, const std::string& unit) const {
-    const std::string expected = std::string(range_text(r)) + (unit.empty() ? "" : " (" + unit + ")");
+  double number_of(const YAML::Node& n, const std::string& kp, const Interval& r, const std::string& unit) const {
+    const std::string expected = r.number_text() + (unit.empty() ? "" : " (" + unit + ")");
     double v = 0;
     if (!n.IsScalar() || !parse_finite(n.Scalar(), &v)) {
       p_->fail(n, kp, "is not a finite number" + (n.IsScalar() ? " ('" + n.Scalar() + "')" : std::string()), expected);
     }
-    if (!in_range(v, r)) p_->fail(n, kp, "is out of range (" + n.Scalar() + ")", expected);
+    if (!r.contains(v)) p_->fail(n, kp, "is out of range (" + n.Scalar() + ")", expected);
     return v;
   }
 

@@ -1,15 +1,39 @@
 // Config tables of the mapping module's options structs (option_tables.h).
-#include "option_tables.h"
+#include "evio/mapping/option_tables.h"
 
-namespace evio::apps {
+namespace evio::mapping {
 
+using yaml_config::Interval;
 using yaml_config::Range;
 using yaml_config::Table;
 
-const Table<mapping::GradientMosaicOptions>& gradient_mosaic_table() {
-  using O = mapping::GradientMosaicOptions;
-  using mapping::PoissonBoundary;
-  using mapping::PoissonPreconditioner;
+// The solver tables have no validate(): they are read as part of the gradient mosaic's, whose
+// Validate covers them.
+const Table<PoissonOptions>& poisson_table() {
+  using O = PoissonOptions;
+  static const Table<O> t = Table<O>("Poisson settings")
+                                .choice("boundary", &O::boundary,
+                                        {{"periodic_u", PoissonBoundary::kPeriodicU}, {"neumann", PoissonBoundary::kNeumann}})
+                                .integer("max_region_side", &O::max_region_side, 1, 1 << 15);
+  return t;
+}
+
+const Table<WeightedPoissonOptions>& weighted_poisson_table() {
+  using O = WeightedPoissonOptions;
+  static const Table<O> t = Table<O>("weighted Poisson settings")
+                                .number("weight_floor", &O::weight_floor, Interval::open_closed(0, 1), "")
+                                .number("tolerance", &O::tolerance, Interval::open(0, 1), "")
+                                .integer("max_iterations", &O::max_iterations, 0, 1000000)
+                                .choice("preconditioner", &O::preconditioner,
+                                        {{"none", PoissonPreconditioner::kNone},
+                                         {"jacobi", PoissonPreconditioner::kJacobi},
+                                         {"spectral", PoissonPreconditioner::kSpectral},
+                                         {"scaled_spectral", PoissonPreconditioner::kScaledSpectral}});
+  return t;
+}
+
+const Table<GradientMosaicOptions>& gradient_mosaic_table() {
+  using O = GradientMosaicOptions;
   static const Table<O> t =
       Table<O>("mosaic settings")
           .integer("width", &O::width, 8, 1 << 15)
@@ -27,29 +51,21 @@ const Table<mapping::GradientMosaicOptions>& gradient_mosaic_table() {
           .boolean("map_viewed_texels", &O::map_viewed_texels)
           .number("weight_reference_std", &O::weight_reference_std, Range::kPositive, "log units/px")
           .number("viewed_edge_weight", &O::viewed_edge_weight, Range::kUnit, "")
-          .choice("poisson_boundary", [](O& o) -> PoissonBoundary& { return o.poisson.boundary; },
-                  {{"periodic_u", PoissonBoundary::kPeriodicU}, {"neumann", PoissonBoundary::kNeumann}})
-          .integer("poisson_max_region_side", [](O& o) -> int& { return o.poisson.max_region_side; }, 1, 1 << 15)
-          .number("weight_floor", [](O& o) -> double& { return o.weighted_poisson.weight_floor; }, Range::kUnit, "")
-          .number("pcg_tolerance", [](O& o) -> double& { return o.weighted_poisson.tolerance; }, Range::kUnit, "")
-          .integer("pcg_max_iterations", [](O& o) -> int& { return o.weighted_poisson.max_iterations; }, 0, 1000000)
-          .choice("pcg_preconditioner", [](O& o) -> PoissonPreconditioner& { return o.weighted_poisson.preconditioner; },
-                  {{"none", PoissonPreconditioner::kNone},
-                   {"jacobi", PoissonPreconditioner::kJacobi},
-                   {"spectral", PoissonPreconditioner::kSpectral},
-                   {"scaled_spectral", PoissonPreconditioner::kScaledSpectral}})
+          .include(poisson_table(), &O::poisson, {}, "poisson_")
+          .include(weighted_poisson_table(), &O::weighted_poisson, {"tolerance", "max_iterations", "preconditioner"})
+          .include(weighted_poisson_table(), &O::weighted_poisson, {"weight_floor"}, "pcg_")
           .validate();
   return t;
 }
 
-const Table<mapping::RotationalCmaxOptions>& rotational_cmax_table() {
-  using O = mapping::RotationalCmaxOptions;
+const Table<RotationalCmaxOptions>& rotational_cmax_table() {
+  using O = RotationalCmaxOptions;
   static const Table<O> t = Table<O>("contrast maximisation settings")
                                 .integer("width", &O::width, 1, 1 << 15)
                                 .integer("height", &O::height, 1, 1 << 15)
                                 .number("focal_px", &O::focal_px, Range::kPositive, "px")
                                 .number("blur_px", &O::blur_sigma_px, Range::kPositive, "px")
-                                .number("coarse_blur_factor", &O::coarse_blur_factor, Range::kPositive, ">= 1")
+                                .number("coarse_blur_factor", &O::coarse_blur_factor, Interval::at_least(1), "")
                                 .number("initial_step_radps", &O::initial_step_radps, Range::kPositive, "rad/s")
                                 .number("min_step_radps", &O::min_step_radps, Range::kPositive, "rad/s")
                                 .integer("max_evaluations", &O::max_evaluations, 10, 100000000)
@@ -57,15 +73,30 @@ const Table<mapping::RotationalCmaxOptions>& rotational_cmax_table() {
   return t;
 }
 
-std::vector<std::pair<std::string, mapping::WarpModel>> warp_model_choices() {
-  std::vector<std::pair<std::string, mapping::WarpModel>> out;
-  for (mapping::WarpModel m : mapping::warp_models()) out.emplace_back(mapping::warp_model_name(m), m);
+std::vector<std::pair<std::string, WarpModel>> warp_model_choices() {
+  std::vector<std::pair<std::string, WarpModel>> out;
+  for (WarpModel m : warp_models()) out.emplace_back(warp_model_name(m), m);
   return out;
 }
 
-const Table<mapping::CmaxOptions>& cmax_table() {
-  using O = mapping::CmaxOptions;
-  using mapping::CmaxObjective;
+const Table<WarpGeometry>& warp_geometry_table() {
+  using O = WarpGeometry;
+  // No validate(): read as part of the contrast maximisation's table, whose Validate covers it.
+  static const Table<O> t =
+      Table<O>("warp geometry settings")
+          .number("fx", &O::fx, Range::kPositive, "px")
+          .number("fy", &O::fy, Range::kPositive, "px")
+          .number("cx", &O::cx, Range::kAny, "px")
+          .number("cy", &O::cy, Range::kAny, "px")
+          .number("depth_m", &O::depth_m, Range::kPositive, "m")
+          .vector3("plane_normal", &O::plane_normal_c, "camera frame")
+          .number("plane_distance_m", &O::plane_distance_m, Range::kNonNegative, "m")
+          .note("plane_distance_m", "6dof: > 0 uses the plane n.X = distance instead of depth_m");
+  return t;
+}
+
+const Table<CmaxOptions>& cmax_table() {
+  using O = CmaxOptions;
   static const Table<O> t =
       Table<O>("contrast maximisation settings")
           .choice("model", &O::model, warp_model_choices())
@@ -78,7 +109,7 @@ const Table<mapping::CmaxOptions>& cmax_table() {
           .note("objective", "auto: variance for flow and flow_accel, gradient_magnitude for rotation, normalized_gradient_magnitude for similarity, similarity_accel and 6dof")
           .integer("width", &O::width, 1, 100000)
           .integer("height", &O::height, 1, 100000)
-          .number("blur_sigma_px", &O::blur_sigma_px, Range::kNonNegative, "px of each pyramid level")
+          .number("blur_sigma_px", &O::blur_sigma_px, Interval::closed(0, 50), "px of each pyramid level")
           .boolean("use_polarity", &O::use_polarity)
           .integer("pyramid_levels", &O::pyramid_levels, 1, 8)
           .integer("max_iterations", &O::max_iterations, 1, 1000000)
@@ -86,41 +117,13 @@ const Table<mapping::CmaxOptions>& cmax_table() {
           .number("coarse_tolerance_px", &O::coarse_tolerance_px, Range::kPositive, "px of each coarse level")
           .integer("max_events_coarse", &O::max_events_coarse, 0, 1000000000)
           .note("max_events_coarse", "0: all events on every level")
-          .number("fx", [](O& o) -> double& { return o.geometry.fx; }, Range::kPositive, "px")
-          .number("fy", [](O& o) -> double& { return o.geometry.fy; }, Range::kPositive, "px")
-          .number("cx", [](O& o) -> double& { return o.geometry.cx; }, Range::kAny, "px")
-          .number("cy", [](O& o) -> double& { return o.geometry.cy; }, Range::kAny, "px")
-          .number("depth_m", [](O& o) -> double& { return o.geometry.depth_m; }, Range::kPositive, "m")
-          .vector3("plane_normal", [](O& o) -> Eigen::Vector3d& { return o.geometry.plane_normal_c; }, "camera frame")
-          .number("plane_distance_m", [](O& o) -> double& { return o.geometry.plane_distance_m; }, Range::kNonNegative, "m")
-          .note("plane_distance_m", "6dof: > 0 uses the plane n.X = distance instead of depth_m")
+          .include(warp_geometry_table(), &O::geometry)
           .validate();
   return t;
 }
 
-const Table<pipeline::CmaxWindowOptions>& cmax_window_table() {
-  using O = pipeline::CmaxWindowOptions;
-  static const Table<O> t =
-      Table<O>("window settings")
-          .integer("events", &O::window_events, 1, 1000000000)
-          .duration_ms("duration_ms", &O::window_ns, Range::kNonNegative)
-          .note("duration_ms", "0: windows of `events` events; > 0: windows of this duration instead")
-          .duration_ms("max_duration_ms", &O::max_window_ns, Range::kNonNegative)
-          .note("max_duration_ms", "event windows also close when they span this long; 0: no limit")
-          .integer("min_events", &O::min_window_events, 1, 1000000000)
-          .choice("undistortion", &O::undistortion,
-                  {{"auto", pipeline::CmaxUndistortion::kAuto},
-                   {"none", pipeline::CmaxUndistortion::kNone},
-                   {"lut", pipeline::CmaxUndistortion::kLut}})
-          .note("undistortion", "auto: sub-pixel input as is, integer pixels of a distorted camera through the lookup table")
-          .number("dither_px", &O::dither_px, Range::kNonNegative, "px")
-          .note("dither_px", "integer-pixel input: each event moved by a deterministic offset within this square; 0: off")
-          .validate();
-  return t;
-}
-
-const Table<mapping::RotationRelocalizationOptions>& relocalization_table() {
-  using O = mapping::RotationRelocalizationOptions;
+const Table<RotationRelocalizationOptions>& relocalization_table() {
+  using O = RotationRelocalizationOptions;
   static const Table<O> t = Table<O>("relocalisation settings")
                                 .number("axis_spacing_deg", &O::axis_spacing_deg, Range::kPositive, "deg")
                                 .number("roll_step_deg", &O::roll_step_deg, Range::kPositive, "deg")
@@ -135,16 +138,16 @@ const Table<mapping::RotationRelocalizationOptions>& relocalization_table() {
   return t;
 }
 
-const Table<mapping::LogImageDisplayOptions>& log_image_display_table() {
-  using O = mapping::LogImageDisplayOptions;
+const Table<LogImageDisplayOptions>& log_image_display_table() {
+  using O = LogImageDisplayOptions;
   static const Table<O> t = Table<O>("display settings")
                                 .number("gamma", &O::gamma, Range::kPositive, "")
-                                .number("low_percentile", &O::low_percentile, Range::kNonNegative, "%")
-                                .number("high_percentile", &O::high_percentile, Range::kPositive, "%")
+                                .number("low_percentile", &O::low_percentile, Interval::closed_open(0, 100), "%")
+                                .number("high_percentile", &O::high_percentile, Interval::open_closed(0, 100), "%")
                                 .boolean("linear_intensity", &O::linear_intensity)
                                 .boolean("transparent_unseen", &O::transparent_unseen)
                                 .validate();
   return t;
 }
 
-}  // namespace evio::apps
+}  // namespace evio::mapping
