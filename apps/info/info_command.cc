@@ -105,7 +105,7 @@ void print_json(const DatasetSummary& s, std::ostream& out) {
   o << ", \"ground_truth\": {\"count\": " << s.poses << ", \"t_first_s\": " << format_seconds(s.gt_t_first_ns)
     << ", \"t_last_s\": " << format_seconds(s.gt_t_last_ns) << ", \"path_length_m\": " << s.gt_path_length_m << "}";
   o << ", \"calibration\": "
-    << (s.calibration ? "\"" + json_escape(calib::describe(*s.calibration)) + "\"" : std::string("null")) << "}\n";
+    << (s.calibration ? json_string(calib::describe(*s.calibration)) : std::string("null")) << "}\n";
   out << o.str();
 }
 
