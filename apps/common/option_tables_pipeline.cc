@@ -21,7 +21,7 @@ const Table<pipeline::CmaxWindowOptions>& cmax_window_table() {
                    {"none", pipeline::CmaxUndistortion::kNone},
                    {"lut", pipeline::CmaxUndistortion::kLut}})
           .note("undistortion", "auto: sub-pixel input as is, integer pixels of a distorted camera through the lookup table")
-          .number("dither_px", &O::dither_px, Range::kNonNegative, "px")
+          .number("dither_px", &O::dither_px, yaml_config::Interval::closed(0, 4), "px")
           .note("dither_px", "integer-pixel input: each event moved by a deterministic offset within this square; 0: off")
           .validate();
   return t;

@@ -97,15 +97,6 @@ void write_stats_json(const MosaicArgs& args, const MosaicConfig& cfg, const Mos
   f << "]\n}\n";
 }
 
-std::pair<double, double> rms_max(const double* e, size_t n) {
-  double s2 = 0, mx = 0;
-  for (size_t k = 0; k < n; ++k) {
-    s2 += e[k] * e[k];
-    mx = std::max(mx, e[k]);
-  }
-  return {n > 0 ? std::sqrt(s2 / static_cast<double>(n)) : 0.0, mx};
-}
-
 // The mosaic against the true panorama of a simulated dataset (scene_resolved.yaml), as eval.json
 // members (empty when the dataset is not a simulated panorama).
 std::string mosaic_quality_json(const MosaicArgs& args, const MosaicConfig& cfg, const mapping::MosaicReconstruction& rec,
@@ -170,10 +161,11 @@ void evaluate_mosaic(const MosaicArgs& args, const MosaicConfig& cfg, const Mosa
   const std::vector<double>& err = e.errors_deg;
   size_t boot_poses = 0;  // the first boot_poses errors are of bootstrap poses (gyro / CMax rates)
   while (boot_poses < e.t_ns.size() && e.t_ns[boot_poses] <= boot_end_ns) ++boot_poses;
-  const auto [rms, mx] = rms_max(err.data(), err.size());
+  const evaluation::Stats all = evaluation::compute_stats(err);
   // The bootstrap alone: its poses up to the tracking start, and its last one (the rotation the
   // tracker starts from: its error is baked into the bootstrap's part of the mosaic).
-  const auto [boot_rms, boot_max] = rms_max(err.data(), boot_poses);
+  const evaluation::Stats boot = evaluation::compute_stats(std::vector<double>(err.begin(), err.begin() + static_cast<std::ptrdiff_t>(boot_poses)));
+  const double rms = all.rmse, mx = all.max, boot_rms = boot.rmse, boot_max = boot.max;
   const double boot_end = boot_poses > 0 ? err[boot_poses - 1] : 0.0;
   const std::string quality_json = mosaic_quality_json(args, cfg, result.reconstruction, e.R_w_m, out);
   const double boot_s = (boot_end_ns - run.t0_ns) * 1e-9;
