@@ -138,7 +138,21 @@ void write_oracle(std::ostream& j, const VioArgs& args, const evaluation::TrackO
     << ", \"drift_px_per_frame\": " << json_number(args.oracle_drift_px, 10) << ", \"replaced\": " << oracle.stats().replaced
     << ", \"dropped\": " << oracle.stats().dropped << ", \"keep_error\": \"" << args.oracle_error
     << "\", \"common_mode_rms_px\": " << json_number(oracle.stats().common_mode_rms_px, 10)
-    << ", \"max_error_px\": " << json_number(args.oracle_max_error_px, 10) << ", \"dropped_gross\": " << oracle.stats().dropped_gross << "}";
+    << ", \"max_error_px\": " << json_number(args.oracle_max_error_px, 10) << ", \"dropped_gross\": " << oracle.stats().dropped_gross
+    << ",\n    \"error_by_track_age\": [";
+  for (int k = 0; k < evaluation::TrackOracleStats::kAgeBuckets; ++k) {
+    const auto& b = oracle.stats().by_age[k];
+    j << (k ? ",\n      " : "\n      ")
+      << JsonObject(4)
+             .integer("age_from_frames", evaluation::TrackOracleStats::kAgeBucketStart[k])
+             .integer("observations", b.count)
+             .number("error_rms_px", b.error_rms_px)
+             .number("independent_rms_px", b.independent_rms_px)
+             .number("independent_median_px", b.independent_quantile_px(0.5))
+             .number("independent_p90_px", b.independent_quantile_px(0.9))
+             .str();
+  }
+  j << "]}";
 }
 
 }  // namespace

@@ -22,6 +22,17 @@ bool TrackOracleOptions::Validate(std::string* why) const {
   return true;
 }
 
+double TrackOracleStats::AgeBucket::independent_quantile_px(double q) const {
+  if (count == 0) return 0.0;
+  const double target = std::clamp(q, 0.0, 1.0) * static_cast<double>(count);
+  int64_t below = 0;
+  for (int k = 0; k < kBins; ++k) {
+    below += independent_hist[static_cast<size_t>(k)];
+    if (static_cast<double>(below) >= target) return (k + 1) * kBinPx;
+  }
+  return kBins * kBinPx;
+}
+
 TrackOracle::TrackOracle(const Trajectory& groundtruth, const calib::CameraCalibration& camera, RayCaster cast,
                          const TrackOracleOptions& options)
     : gt_(groundtruth), camera_(camera), cast_(std::move(cast)), options_(options), rng_(options.seed) {
@@ -44,6 +55,7 @@ void TrackOracle::apply(FeatureObservations* frame) {
   std::vector<FeatureObservation> kept;
   kept.reserve(frame->observations.size());
   std::vector<Eigen::Vector2d> real_error;  // per kept observation (px), for keep_error
+  std::vector<int64_t> age;                 // per kept observation
   for (FeatureObservation o : frame->observations) {
     auto it = landmarks_.find(o.track_id);
     if (it == landmarks_.end()) {
@@ -54,8 +66,9 @@ void TrackOracle::apply(FeatureObservations* frame) {
         l.X_w = T_w_c.translation + *s * d_w;
       }
       it = landmarks_.emplace(o.track_id, l).first;
-    } else if (options_.drift_px_per_frame > 0) {
-      it->second.drift_px += Eigen::Vector2d(step(rng_), step(rng_));
+    } else {
+      ++it->second.age;
+      if (options_.drift_px_per_frame > 0) it->second.drift_px += Eigen::Vector2d(step(rng_), step(rng_));
     }
     const Landmark& l = it->second;
     const Eigen::Vector3d p_c = T_c_w * l.X_w;
@@ -70,6 +83,7 @@ void TrackOracle::apply(FeatureObservations* frame) {
       real_error.push_back(b.z() > 1e-9 ? Eigen::Vector2d(K.fx * (b.x() / b.z() - p_c.x() / p_c.z()),
                                                           K.fy * (b.y() / b.z() - p_c.y() / p_c.z()))
                                         : Eigen::Vector2d::Zero());
+      age.push_back(l.age);
     }
     const double x = p_c.x() / p_c.z() + e.x() / K.fx, y = p_c.y() / p_c.z() + e.y() / K.fy;
     o.bearing_c = Eigen::Vector3d(x, y, 1.0).normalized();
@@ -90,6 +104,19 @@ void TrackOracle::apply(FeatureObservations* frame) {
     common_mode_sq_sum_ += c.squaredNorm();
     ++stats_.frames;
     stats_.common_mode_rms_px = std::sqrt(common_mode_sq_sum_ / static_cast<double>(stats_.frames));
+    for (size_t i = 0; i < kept.size(); ++i) {
+      if (age[i] < 1) continue;
+      int k = TrackOracleStats::kAgeBuckets - 1;
+      while (k > 0 && age[i] < TrackOracleStats::kAgeBucketStart[k]) --k;
+      TrackOracleStats::AgeBucket& b = stats_.by_age[k];
+      ++b.count;
+      b.sq_sum += real_error[i].squaredNorm();
+      b.independent_sq_sum += (real_error[i] - c).squaredNorm();
+      const double bin = (real_error[i] - c).norm() / TrackOracleStats::kBinPx;
+      ++b.independent_hist[static_cast<size_t>(std::min(bin, TrackOracleStats::kBins - 1.0))];
+      b.error_rms_px = std::sqrt(b.sq_sum / static_cast<double>(b.count));
+      b.independent_rms_px = std::sqrt(b.independent_sq_sum / static_cast<double>(b.count));
+    }
     std::vector<FeatureObservation> gross_free;
     gross_free.reserve(kept.size());
     for (size_t i = 0; i < kept.size(); ++i) {

@@ -6,6 +6,7 @@
 #include "evio/evaluation/track_oracle.h"
 
 #include <cmath>
+#include <map>
 #include <algorithm>
 #include <random>
 #include <set>
@@ -201,6 +202,50 @@ TEST(TrackOracle, RandomWalkDriftGrowsLikeTheSquareRootOfAge) {
     const double expected = 1.1774 * 0.5 * std::sqrt(age);
     EXPECT_NEAR(e.by_age[static_cast<size_t>(age - 1)].median_px, expected, 0.2 * expected) << "age " << age;
   }
+}
+
+// The oracle's error by track age: tracks drifting 0.1 px per frame of age (along image y) have an
+// error of exactly 0.1 x age against their first observation's landmark; the rms of a bucket is
+// 0.1 x the rms of its ages.
+TEST(TrackOracle, ErrorByTrackAgeGrowsWithTheDrift) {
+  const Scenario s;
+  const auto frames = s.frames(40, 0.1, 1000);
+  TrackOracleOptions o;
+  o.keep_error = OracleError::kReal;
+  TrackOracleStats st;
+  through_oracle(s, frames, o, s.cast, &st);
+  // Expected per bucket from the input's own ages.
+  std::map<int64_t, int> age_of;
+  double sq[TrackOracleStats::kAgeBuckets] = {};
+  int64_t count[TrackOracleStats::kAgeBuckets] = {};
+  for (const auto& f : frames) {
+    for (const auto& ob : f.observations) {
+      const auto [it, first] = age_of.emplace(ob.track_id, 0);
+      if (first) continue;
+      const int a = ++it->second;
+      int k = TrackOracleStats::kAgeBuckets - 1;
+      while (k > 0 && a < TrackOracleStats::kAgeBucketStart[k]) --k;
+      sq[k] += 0.01 * a * a;
+      ++count[k];
+    }
+  }
+  for (int k = 0; k < TrackOracleStats::kAgeBuckets; ++k) {
+    EXPECT_EQ(st.by_age[k].count, count[k]) << k;
+    if (count[k] == 0) continue;
+    EXPECT_NEAR(st.by_age[k].error_rms_px, std::sqrt(sq[k] / static_cast<double>(count[k])), 1e-6) << k;
+  }
+  EXPECT_NEAR(st.by_age[0].error_rms_px, 0.1, 1e-6);
+  // Quantiles of |e - c| (c: the frame's median drift) within a bin of the exact ones.
+  TrackOracleStats::AgeBucket one;
+  for (double v : {0.05, 0.15, 0.25, 0.35, 1.05}) {
+    one.independent_hist[static_cast<size_t>(v / TrackOracleStats::kBinPx)] += 1;
+    ++one.count;
+  }
+  EXPECT_NEAR(one.independent_quantile_px(0.5), 0.25, TrackOracleStats::kBinPx);
+  EXPECT_NEAR(one.independent_quantile_px(0.9), 1.05, TrackOracleStats::kBinPx);
+  EXPECT_EQ(TrackOracleStats::AgeBucket().independent_quantile_px(0.5), 0.0);
+  EXPECT_GT(count[5], 0);   // ages 32..39
+  EXPECT_EQ(count[6], 0);   // no track reaches 64 frames
 }
 
 // keep_error splits the front-end's own error per frame: every observation after a track's first

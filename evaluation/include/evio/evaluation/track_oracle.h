@@ -10,6 +10,7 @@
 // clock; the true camera pose is T_w_b(t) T_c_b^-1 from the ground truth (interpolated).
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <map>
 #include <optional>
@@ -62,6 +63,27 @@ struct TrackOracleStats {
   double common_mode_rms_px = 0;  // rms over frames of the common mode c (keep_error != kNone)
   int64_t frames = 0;             // frames with a common mode (keep_error != kNone)
   int64_t dropped_gross = 0;      // observations dropped by max_error_px
+  // The front-end's own error by track age (keep_error != kNone): observations whose age (frames
+  // since the track's first observation) lies in [kAgeBucketStart[k], kAgeBucketStart[k + 1]),
+  // the last bucket open-ended. Error against the first observation's landmark, so a track that
+  // drifts shows an error growing with age and one with white error a flat one.
+  static constexpr int kAgeBuckets = 7;
+  static constexpr int kAgeBucketStart[kAgeBuckets] = {1, 2, 4, 8, 16, 32, 64};
+  // |e - c| is also binned (kBinPx wide, the last bin open-ended) for robust quantiles: the rms
+  // is dominated by the few gross errors (tracks sliding along an edge) that the back-end's robust
+  // loss and outlier test remove.
+  static constexpr double kBinPx = 0.02;
+  static constexpr int kBins = 1000;
+  struct AgeBucket {
+    int64_t count = 0;
+    double error_rms_px = 0;        // rms of |e|
+    double independent_rms_px = 0;  // rms of |e - c| (the frame's common mode removed)
+    double sq_sum = 0, independent_sq_sum = 0;
+    std::array<int64_t, kBins> independent_hist{};
+    // Quantile q in [0, 1] of |e - c| (px, the upper edge of its bin; 0 without observations).
+    double independent_quantile_px(double q) const;
+  };
+  AgeBucket by_age[kAgeBuckets];
 };
 
 // The ground-truth state at t_ns (pose interpolated; velocity by a central difference over 10 ms;
@@ -93,6 +115,7 @@ class TrackOracle {
     bool valid = false;
     Eigen::Vector3d X_w = Eigen::Vector3d::Zero();
     Eigen::Vector2d drift_px = Eigen::Vector2d::Zero();
+    int64_t age = 0;  // observations of the track before the current one
   };
   Trajectory gt_;
   calib::CameraCalibration camera_;
