@@ -130,18 +130,17 @@ struct VioPipelineOptions {
   // lag the true edges by about 0.6 px along the flow (the events' own lag); modelling it
   // (frames.event_lag_px at each scene's measured lag) gives 0.486%, still worse: off.
   bool frame_velocity_at_reference = false;
-  // KLT window 27 px on event frames (the tracker's own default, 21, stays for APS frames): event
-  // frames are sparse, and a larger window averages more events. Mean position error over six
-  // simulated scenes 1.32% -> 0.95% (better on 5 of 6; 15 px 1.33%, 31 px 0.96%, 41 px 1.20%),
-  // 59.8 s replay 0.171% -> 0.155%, median track lifetime on poster_6dof 5 -> 6 frames.
-  // Templates: each event feature is aligned against its patch of up to 10 frames ago (not the
-  // previous frame), a template turned by more than 4 deg is not used, and a track its template
-  // loses continues from the previous frame (template_fallback). Tracks drift less (boxes_6dof,
-  // error against the best-fit landmark: median 0.47 -> 0.25 px; anchored drift after 20 frames
-  // 1.19 -> 0.53 px). Mean position error, six simulated scenes x 6 RANSAC seeds: 0.505% ->
-  // 0.445% (mocap 12 s 0.74 -> 0.37%, quadrotor 0.40 -> 0.30%; boxes 0.36 -> 0.46% and room 0.31
-  // -> 0.37% worse); without the rotation limit 0.487% (room 0.52%); events+aps 0.146 -> 0.138%
-  // (3 seeds). Needs window.rotation_only_min_duration_s (see SlidingWindowOptions).
+  // Event-frame tracks: KLT on a 27 px window (the tracker's own default, 21, stays for APS
+  // frames and the reconstruction), each feature aligned against its template (its patch of up to
+  // 10 frames ago, not the previous frame's: alignment errors add once per template instead of
+  // once per frame); a template turned by more than 4 deg is not used (translation-only KLT
+  // against a turned patch is biased), and a track its template loses continues from the previous
+  // frame (template_fallback). A tracked point still drifts from its scene point by an error that
+  // grows with the track's age (the frames' look changes with the motion). A larger window
+  // averages more of a sparse event frame but mixes more structure whose look changes: the
+  // crosscheck family's dense photographs track better with 19-21 px, evio's own sparser scenes
+  // (and their orientation) with 27 px (docs/results/vio.md, "KLT window").
+  // Needs window.rotation_only_min_duration_s (see SlidingWindowOptions).
   frontend::FeatureTrackerOptions tracker = [] {
     frontend::FeatureTrackerOptions t = template_tracker_options();
     t.klt_window_px = 27;
