@@ -1,13 +1,14 @@
 // The config tables (yaml_config::Table) of the options structs that have no table in their own
-// module yet: the back-end's, the IMU noise densities and the CMax commands' event windows
+// module yet: the back-end's initialisation, the IMU noise densities and the CMax commands' event windows
 // (pipeline::CmaxWindowOptions); and the event filters' sections of a command config. The
-// front-end's and the mapping module's tables live beside their structs
-// (evio/frontend/option_tables.h, evio/mapping/option_tables.h). Each command composes these into
+// front-end's, the mapping module's and the sliding window's tables live beside their structs
+// (evio/frontend/option_tables.h, evio/mapping/option_tables.h, evio/backend/option_tables.h). Each command composes these into
 // its own config's table in <name>_command.cc. Keys are the struct's fields in YAML spelling;
 // durations held in ns (or s) are written in ms under keys ending in _ms.
 #pragma once
 
 #include "evio/backend/initialization.h"
+#include "evio/backend/option_tables.h"
 #include "evio/backend/sliding_window_estimator.h"
 #include "evio/calib/calibration_io.h"
 #include "evio/frontend/option_tables.h"
@@ -18,7 +19,7 @@ namespace evio::apps {
 
 // option_tables_backend.cc
 const yaml_config::Table<calib::ImuNoise>& imu_noise_table();  // Kalibr's imu0 densities
-const yaml_config::Table<backend::SlidingWindowOptions>& sliding_window_table();
+using backend::sliding_window_table;  // evio/backend/option_tables.h
 const yaml_config::Table<backend::StaticInitOptions>& static_init_table();
 const yaml_config::Table<backend::VisualInertialInitOptions>& visual_inertial_init_table();
 

@@ -6,68 +6,6 @@ namespace evio::apps {
 using yaml_config::Range;
 using yaml_config::Table;
 
-const Table<backend::SlidingWindowOptions>& sliding_window_table() {
-  using O = backend::SlidingWindowOptions;
-  using backend::RobustLoss;
-  using backend::TrackedLandmarkMarginalisation;
-  static const Table<O> t =
-      Table<O>("window settings")
-          .integer("size", &O::window_size, 2, 200)
-          .integer("max_iterations", &O::max_iterations, 1, 1000)
-          .number("function_tolerance", &O::function_tolerance, Range::kPositive, "relative cost change, < 1")
-          .seconds_as_ms("max_solver_time_ms", &O::max_solver_time_s, Range::kNonNegative)
-          .choice("loss", &O::loss, {{"huber", RobustLoss::kHuber}, {"cauchy", RobustLoss::kCauchy}, {"none", RobustLoss::kNone}})
-          .number("loss_scale", &O::loss_scale, Range::kPositive, "pixel sigmas")
-          .number("pixel_sigma", &O::pixel_sigma, Range::kPositive, "px")
-          .number("keyframe_min_parallax_px", &O::keyframe_min_parallax_px, Range::kPositive, "px")
-          .number("keyframe_min_tracked_ratio", &O::keyframe_min_tracked_ratio, Range::kUnit, "")
-          .seconds_as_ms("keyframe_max_interval_ms", &O::keyframe_max_interval_s, Range::kPositive)
-          .integer("keyframe_min_tracks", &O::keyframe_min_tracks, 0, 100000)
-          .seconds_as_ms("keyframe_max_interval_without_tracks_ms", &O::keyframe_max_interval_without_tracks_s, Range::kPositive)
-          .number("min_triangulation_angle_deg", &O::min_triangulation_angle_deg, Range::kNonNegative, "deg")
-          .number("max_reprojection_px", &O::max_reprojection_px, Range::kPositive, "px")
-          .number("min_depth_m", &O::min_depth_m, Range::kPositive, "m")
-          .choice("tracked_landmark_marginalisation", &O::tracked_landmark_marginalisation,
-                  {{"drop", TrackedLandmarkMarginalisation::kDrop},
-                   {"double_count", TrackedLandmarkMarginalisation::kDoubleCount},
-                   {"restart", TrackedLandmarkMarginalisation::kRestart},
-                   {"split", TrackedLandmarkMarginalisation::kSplit}})
-          .boolean("rotation_only_model", &O::rotation_only_model)
-          .boolean("rotation_only_static_centre", &O::rotation_only_static_centre)
-          .boolean("rotation_only_imu_centre", &O::rotation_only_imu_centre)
-          .number("rotation_only_gric_margin", &O::rotation_only_gric_margin, Range::kAny, "GRIC units")
-          .integer("rotation_only_min_keyframes", &O::rotation_only_min_keyframes, 1, 1000)
-          .seconds_as_ms("rotation_only_min_duration_ms", &O::rotation_only_min_duration_s, Range::kNonNegative)
-          .number("rotation_only_parallax_px", &O::rotation_only_parallax_px, Range::kNonNegative, "px")
-          .number("rotation_only_translation_px", &O::rotation_only_translation_px, Range::kPositive, "px")
-          .integer("model_selection_min_tracks", &O::model_selection_min_tracks, 6, 100000)
-          .seconds_as_ms("model_selection_min_interval_ms", &O::model_selection_min_interval_s, Range::kNonNegative)
-          .boolean("model_selection_longest_baseline", &O::model_selection_longest_baseline)
-          .number("model_selection_imu_veto_p", &O::model_selection_imu_veto_p, Range::kUnit, "probability")
-          .number("model_selection_accel_sigma_mps2", &O::model_selection_accel_sigma_mps2, Range::kPositive, "m/s^2")
-          .number("model_selection_velocity_sigma_mps", &O::model_selection_velocity_sigma_mps, Range::kPositive, "m/s")
-          .number("model_selection_velocity_drift_mps2", &O::model_selection_velocity_drift_mps2, Range::kNonNegative, "m/s^2")
-          .vector3("gravity_w", &O::gravity_w, "m/s^2, world frame")
-          .boolean("compute_covariance", &O::compute_covariance)
-          .boolean("estimate_time_offset", &O::estimate_time_offset)
-          .seconds_as_ms("time_offset_sigma_ms", &O::time_offset_sigma_s, Range::kPositive)
-          .number("init_sigma_roll_pitch_rad", &O::init_sigma_roll_pitch_rad, Range::kPositive, "rad")
-          .number("init_sigma_yaw_rad", &O::init_sigma_yaw_rad, Range::kPositive, "rad")
-          .number("init_sigma_position_m", &O::init_sigma_position_m, Range::kPositive, "m")
-          .number("init_sigma_velocity_mps", &O::init_sigma_velocity_mps, Range::kPositive, "m/s")
-          .number("init_bias_gyro_turn_on_radps", &O::init_bias_gyro_turn_on_radps, Range::kPositive, "rad/s")
-          .number("init_bias_accel_turn_on_mps2", &O::init_bias_accel_turn_on_mps2, Range::kPositive, "m/s^2")
-          .number("init_bias_horizon_s", &O::init_bias_horizon_s, Range::kNonNegative, "s")
-          .validate([](const O& o, std::string* why) {
-            if (!(o.function_tolerance < 1)) {
-              *why = "function_tolerance must be < 1";
-              return false;
-            }
-            return o.Validate(why);
-          });
-  return t;
-}
-
 const Table<backend::StaticInitOptions>& static_init_table() {
   using O = backend::StaticInitOptions;
   static const Table<O> t = Table<O>("static initialisation settings")

@@ -1,4 +1,5 @@
 #include "evio/backend/sliding_window_estimator.h"
+#include "evio/backend/option_tables.h"
 
 #include <algorithm>
 #include <chrono>
@@ -30,54 +31,11 @@ constexpr double kDegToRad = M_PI / 180.0;
 }  // namespace
 
 bool SlidingWindowOptions::Validate(std::string* why) const {
-  auto fail = [why](const std::string& m) {
-    if (why) *why = m;
+  // Every field's range is in the config table; no condition between fields.
+  if (!sliding_window_table().check(*this, why)) return false;
+  if (!gravity_w.allFinite()) {
+    if (why) *why = "gravity_w must be finite";
     return false;
-  };
-  if (window_size < 2) return fail("window_size " + std::to_string(window_size) + " (expected >= 2 keyframes)");
-  if (!(rotation_only_gric_margin >= 0) || !std::isfinite(rotation_only_gric_margin))
-    return fail("rotation_only_gric_margin must be finite and >= 0 (GRIC units)");
-  if (rotation_only_min_keyframes < 1) return fail("rotation_only_min_keyframes must be >= 1 keyframe");
-  if (!(rotation_only_min_duration_s >= 0) || !std::isfinite(rotation_only_min_duration_s))
-    return fail("rotation_only_min_duration_s must be finite and >= 0 s");
-  if (model_selection_min_tracks < 6) return fail("model_selection_min_tracks must be >= 6 tracks");
-  if (!(model_selection_imu_veto_p >= 0 && model_selection_imu_veto_p < 1))
-    return fail("model_selection_imu_veto_p must be in [0, 1)");
-  if (!(model_selection_min_interval_s >= 0) || !std::isfinite(model_selection_min_interval_s))
-    return fail("model_selection_min_interval_s must be finite and >= 0 s");
-  if (!(model_selection_accel_sigma_mps2 >= 0) || !std::isfinite(model_selection_accel_sigma_mps2))
-    return fail("model_selection_accel_sigma_mps2 must be finite and >= 0 m/s^2");
-  if (!(model_selection_velocity_sigma_mps >= 0) || !std::isfinite(model_selection_velocity_sigma_mps))
-    return fail("model_selection_velocity_sigma_mps must be finite and >= 0 m/s");
-  if (keyframe_min_tracks < 0) return fail("keyframe_min_tracks must be >= 0");
-  if (!(keyframe_max_interval_without_tracks_s > 0) || !std::isfinite(keyframe_max_interval_without_tracks_s))
-    return fail("keyframe_max_interval_without_tracks_s must be finite and > 0 s");
-  if (!(model_selection_velocity_drift_mps2 >= 0) || !std::isfinite(model_selection_velocity_drift_mps2))
-    return fail("model_selection_velocity_drift_mps2 must be finite and >= 0 m/s^2");
-  if (!(rotation_only_parallax_px >= 0) || !(rotation_only_translation_px >= 0))
-    return fail("rotation_only_parallax_px and rotation_only_translation_px (deprecated) must be >= 0 px");
-  if (max_iterations < 1) return fail("max_iterations must be >= 1");
-  if (!(function_tolerance > 0 && function_tolerance < 1)) return fail("function_tolerance must be in (0, 1)");
-  if (!(max_solver_time_s >= 0)) return fail("max_solver_time_s must be >= 0 s");
-  if (!(loss_scale > 0)) return fail("loss_scale must be > 0 (pixel sigmas)");
-  if (!(pixel_sigma > 0)) return fail("pixel_sigma must be > 0 px");
-  if (!(keyframe_min_parallax_px > 0)) return fail("keyframe_min_parallax_px must be > 0 px");
-  if (!(keyframe_min_tracked_ratio >= 0 && keyframe_min_tracked_ratio <= 1)) return fail("keyframe_min_tracked_ratio must be in [0, 1]");
-  if (!(keyframe_max_interval_s > 0)) return fail("keyframe_max_interval_s must be > 0 s");
-  if (!(min_triangulation_angle_deg >= 0 && min_triangulation_angle_deg < 90)) return fail("min_triangulation_angle_deg must be in [0, 90) deg");
-  if (!(max_reprojection_px > 0)) return fail("max_reprojection_px must be > 0 px");
-  if (!(time_offset_sigma_s > 0) || !std::isfinite(time_offset_sigma_s)) return fail("time_offset_sigma_s must be finite and > 0 s");
-  if (!(min_depth_m > 0)) return fail("min_depth_m must be > 0 m");
-  if (tracked_landmark_marginalisation != TrackedLandmarkMarginalisation::kDrop &&
-      tracked_landmark_marginalisation != TrackedLandmarkMarginalisation::kDoubleCount &&
-      tracked_landmark_marginalisation != TrackedLandmarkMarginalisation::kRestart &&
-      tracked_landmark_marginalisation != TrackedLandmarkMarginalisation::kSplit)
-    return fail("tracked_landmark_marginalisation must be drop, double_count, restart or split");
-  if (!gravity_w.allFinite()) return fail("gravity_w must be finite");
-  if (!(init_bias_horizon_s >= 0) || !std::isfinite(init_bias_horizon_s)) return fail("init_bias_horizon_s must be finite and >= 0 s");
-  for (double s : {init_sigma_roll_pitch_rad, init_sigma_yaw_rad, init_sigma_position_m, init_sigma_velocity_mps,
-                   init_bias_gyro_turn_on_radps, init_bias_accel_turn_on_mps2}) {
-    if (!(s > 0) || !std::isfinite(s)) return fail("initial sigmas must be finite and > 0");
   }
   return true;
 }

@@ -231,6 +231,7 @@ TEST(ConfigTable, ValidateAndTheReaderRejectTheSameValues) {
   expect_one_range_per_key(mapping::cmax_table(), "cmax");
   expect_one_range_per_key(mapping::relocalization_table(), "relocalization");
   expect_one_range_per_key(mapping::log_image_display_table(), "log_image_display");
+  expect_one_range_per_key(backend::sliding_window_table(), "sliding_window");
 }
 
 TEST(ConfigTable, ValidateNamesTheKeyAsTheReaderDoes) {
