@@ -1,7 +1,7 @@
 // The config tables (yaml_config::Table) of the options structs that have no table in their own
-// module yet: the back-end's initialisation, the IMU noise densities and the CMax commands' event windows
+// module yet: the IMU noise densities and the CMax commands' event windows
 // (pipeline::CmaxWindowOptions); and the event filters' sections of a command config. The
-// front-end's, the mapping module's and the sliding window's tables live beside their structs
+// front-end's, the mapping module's and the back-end's tables live beside their structs
 // (evio/frontend/option_tables.h, evio/mapping/option_tables.h, evio/backend/option_tables.h). Each command composes these into
 // its own config's table in <name>_command.cc. Keys are the struct's fields in YAML spelling;
 // durations held in ns (or s) are written in ms under keys ending in _ms.
@@ -20,8 +20,8 @@ namespace evio::apps {
 // option_tables_backend.cc
 const yaml_config::Table<calib::ImuNoise>& imu_noise_table();  // Kalibr's imu0 densities
 using backend::sliding_window_table;  // evio/backend/option_tables.h
-const yaml_config::Table<backend::StaticInitOptions>& static_init_table();
-const yaml_config::Table<backend::VisualInertialInitOptions>& visual_inertial_init_table();
+using backend::static_init_table;           // evio/backend/option_tables.h
+using backend::visual_inertial_init_table;  // evio/backend/option_tables.h
 
 // option_tables_pipeline.cc: events, duration_ms, max_duration_ms, min_events, undistortion, dither_px
 const yaml_config::Table<pipeline::CmaxWindowOptions>& cmax_window_table();

@@ -1,4 +1,5 @@
 #include "evio/backend/initialization.h"
+#include "evio/backend/option_tables.h"
 
 #include <cmath>
 #include <limits>
@@ -14,15 +15,11 @@
 namespace evio::backend {
 
 bool StaticInitOptions::Validate(std::string* why) const {
-  auto fail = [why](const std::string& m) {
-    if (why) *why = m;
+  if (!static_init_table().check(*this, why)) return false;
+  if (still_tail_ns > window_ns) {
+    if (why) *why = "still_tail_ms must be at most window_ms";
     return false;
-  };
-  if (window_ns <= 0) return fail("window_ns must be > 0 ns");
-  if (!(max_gyro_noise_ratio > 0) || !(max_accel_noise_ratio > 0)) return fail("noise ratios must be > 0");
-  if (!(gravity_mps2 > 0)) return fail("gravity_mps2 must be > 0 m/s^2");
-  if (!(max_gravity_error > 0)) return fail("max_gravity_error must be > 0 m/s^2");
-  if (still_tail_ns < 0 || still_tail_ns > window_ns) return fail("still_tail_ns must be in [0, window_ns]");
+  }
   return true;
 }
 
@@ -144,15 +141,11 @@ std::optional<VioState> static_initialization(const std::vector<ImuSample>& imu,
 namespace evio::backend {
 
 bool VisualInertialInitOptions::Validate(std::string* why) const {
-  auto fail = [why](const std::string& m) {
-    if (why) *why = m;
+  if (!visual_inertial_init_table().check(*this, why)) return false;
+  if (max_tracks < min_tracks) {
+    if (why) *why = "max_tracks must be at least min_tracks";
     return false;
-  };
-  if (min_frames < 3) return fail("min_frames must be >= 3");
-  if (min_track_frames < 2) return fail("min_track_frames must be >= 2");
-  if (min_tracks < 3 || max_tracks < min_tracks) return fail("need 3 <= min_tracks <= max_tracks");
-  if (!(gravity_mps2 > 0) || !(max_gravity_error > 0)) return fail("gravity settings must be > 0");
-  if (!(min_accel_excitation_mps2 >= 0)) return fail("min_accel_excitation_mps2 must be >= 0 m/s^2");
+  }
   return true;
 }
 

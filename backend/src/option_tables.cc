@@ -1,4 +1,4 @@
-// The config table of the sliding-window estimator's options (option_tables.h).
+// The config tables of the back-end's options structs (option_tables.h).
 #include "evio/backend/option_tables.h"
 
 namespace evio::backend {
@@ -57,6 +57,35 @@ const Table<SlidingWindowOptions>& sliding_window_table() {
           .number("init_bias_gyro_turn_on_radps", &O::init_bias_gyro_turn_on_radps, Range::kPositive, "rad/s")
           .number("init_bias_accel_turn_on_mps2", &O::init_bias_accel_turn_on_mps2, Range::kPositive, "m/s^2")
           .number("init_bias_horizon_s", &O::init_bias_horizon_s, Range::kNonNegative, "s")
+          .validate();
+  return t;
+}
+
+const Table<StaticInitOptions>& static_init_table() {
+  using O = StaticInitOptions;
+  static const Table<O> t = Table<O>("static initialisation settings")
+                                .duration_ms("window_ms", &O::window_ns, Range::kPositive)
+                                .number("max_gyro_noise_ratio", &O::max_gyro_noise_ratio, Range::kPositive, "")
+                                .number("max_accel_noise_ratio", &O::max_accel_noise_ratio, Range::kPositive, "")
+                                .number("gravity_mps2", &O::gravity_mps2, Range::kPositive, "m/s^2")
+                                .number("max_gravity_error", &O::max_gravity_error, Range::kPositive, "m/s^2")
+                                .boolean("allow_rotation", &O::allow_rotation)
+                                .duration_ms("still_tail_ms", &O::still_tail_ns, Range::kNonNegative)
+                                .validate();
+  return t;
+}
+
+const Table<VisualInertialInitOptions>& visual_inertial_init_table() {
+  using O = VisualInertialInitOptions;
+  static const Table<O> t =
+      Table<O>("visual-inertial initialisation settings")
+          .integer("min_frames", &O::min_frames, 3, 100000)
+          .integer("min_tracks", &O::min_tracks, 3, 100000)
+          .integer("min_track_frames", &O::min_track_frames, 2, 100000)
+          .integer("max_tracks", &O::max_tracks, 1, 100000)
+          .number("gravity_mps2", &O::gravity_mps2, Range::kPositive, "m/s^2")
+          .number("max_gravity_error", &O::max_gravity_error, Range::kPositive, "m/s^2")
+          .number("min_accel_excitation_mps2", &O::min_accel_excitation_mps2, Range::kNonNegative, "m/s^2")
           .validate();
   return t;
 }

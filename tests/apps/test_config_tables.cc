@@ -232,6 +232,8 @@ TEST(ConfigTable, ValidateAndTheReaderRejectTheSameValues) {
   expect_one_range_per_key(mapping::relocalization_table(), "relocalization");
   expect_one_range_per_key(mapping::log_image_display_table(), "log_image_display");
   expect_one_range_per_key(backend::sliding_window_table(), "sliding_window");
+  expect_one_range_per_key(backend::static_init_table(), "static_init");
+  expect_one_range_per_key(backend::visual_inertial_init_table(), "visual_inertial_init");
 }
 
 TEST(ConfigTable, ValidateNamesTheKeyAsTheReaderDoes) {

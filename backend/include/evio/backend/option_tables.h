@@ -1,15 +1,18 @@
-// The config table (yaml_config::Table, sensors/config_table.h) of the sliding-window estimator's
-// options: for each YAML key the field it sets, its type, range and unit, declared once.
-// SlidingWindowOptions::Validate checks the fields against it (Table::check) and adds only the
-// conditions between fields; `evio vio` reads its `window` section with it. Durations held in s are
-// written in ms under keys ending in _ms.
+// The config tables (yaml_config::Table, sensors/config_table.h) of the back-end's options
+// structs: for each YAML key the field it sets, its type, range and unit, declared once. Each
+// struct's Validate checks its fields against its table (Table::check) and adds only the
+// conditions between fields; `evio vio` reads its `window` and `init` sections with them.
+// Durations held in s or ns are written in ms under keys ending in _ms.
 #pragma once
 
+#include "evio/backend/initialization.h"
 #include "evio/backend/sliding_window_estimator.h"
 #include "evio/sensors/config_table.h"
 
 namespace evio::backend {
 
 const yaml_config::Table<SlidingWindowOptions>& sliding_window_table();
+const yaml_config::Table<StaticInitOptions>& static_init_table();
+const yaml_config::Table<VisualInertialInitOptions>& visual_inertial_init_table();
 
 }  // namespace evio::backend
