@@ -7,9 +7,7 @@
 // durations held in ns (or s) are written in ms under keys ending in _ms.
 #pragma once
 
-#include "evio/backend/initialization.h"
 #include "evio/backend/option_tables.h"
-#include "evio/backend/sliding_window_estimator.h"
 #include "evio/calib/calibration_io.h"
 #include "evio/frontend/option_tables.h"
 #include "evio/pipeline/cmax_windows.h"

@@ -31,13 +31,8 @@ constexpr double kDegToRad = M_PI / 180.0;
 }  // namespace
 
 bool SlidingWindowOptions::Validate(std::string* why) const {
-  // Every field's range is in the config table; no condition between fields.
-  if (!sliding_window_table().check(*this, why)) return false;
-  if (!gravity_w.allFinite()) {
-    if (why) *why = "gravity_w must be finite";
-    return false;
-  }
-  return true;
+  // Every field's range (gravity_w: finite) is in the config table; no condition between fields.
+  return sliding_window_table().check(*this, why);
 }
 
 SlidingWindowEstimator::SlidingWindowEstimator(const SlidingWindowOptions& options, const calib::CameraCalibration& camera,

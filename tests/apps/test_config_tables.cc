@@ -234,6 +234,21 @@ TEST(ConfigTable, ValidateAndTheReaderRejectTheSameValues) {
   expect_one_range_per_key(backend::sliding_window_table(), "sliding_window");
   expect_one_range_per_key(backend::static_init_table(), "static_init");
   expect_one_range_per_key(backend::visual_inertial_init_table(), "visual_inertial_init");
+  // The window table's non-numeric key with a range of its own, and the init tables' conditions
+  // between fields.
+  std::string why;
+  backend::SlidingWindowOptions w;
+  w.gravity_w.x() = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_FALSE(w.Validate(&why));
+  EXPECT_NE(why.find("gravity_w: is not finite"), std::string::npos) << why;
+  backend::StaticInitOptions s;
+  s.still_tail_ns = s.window_ns + 1;
+  EXPECT_FALSE(s.Validate(&why));
+  EXPECT_NE(why.find("still_tail_ms must be at most window_ms"), std::string::npos) << why;
+  backend::VisualInertialInitOptions v;
+  v.max_tracks = v.min_tracks - 1;
+  EXPECT_FALSE(v.Validate(&why));
+  EXPECT_NE(why.find("max_tracks must be at least min_tracks"), std::string::npos) << why;
 }
 
 TEST(ConfigTable, ValidateNamesTheKeyAsTheReaderDoes) {
