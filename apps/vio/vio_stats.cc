@@ -120,7 +120,7 @@ void write_frontend_stats(std::ostream& j, const VioConfig& cfg, const pipeline:
       << ", \"tracked\": " << ts.tracked << ", \"lost_klt\": " << ts.lost_klt << ", \"lost_forward_backward\": " << ts.lost_fb
       << ", \"rejected_ransac\": " << ts.rejected_ransac << ", \"template_fallbacks\": " << ts.template_fallbacks
       << ", \"rejected_anchor\": " << ts.rejected_anchor << ", \"template_rotation_refreshes\": " << ts.template_rotation_refreshes
-      << ", \"reacquired\": " << ts.reacquired;
+      << ", \"reacquired\": " << ts.reacquired << ", \"lost_rotation_warp\": " << ts.lost_warp;
   } else {
     j << "\"corner_events\": " << vs.corner_events << ", \"corner_tracks_started\": " << vs.corner_tracker.tracks_started;
   }

@@ -11,6 +11,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <opencv2/features2d.hpp>
@@ -175,7 +176,160 @@ uint64_t splitmix64(uint64_t x) {
   return x ^ (x >> 31);
 }
 
+// Bilinear interpolation of an 8-bit image at (x, y); the caller keeps (x, y) within
+// [0, cols - 1) x [0, rows - 1).
+inline double bilinear(const cv::Mat& img, double x, double y) {
+  const int x0 = static_cast<int>(std::floor(x)), y0 = static_cast<int>(std::floor(y));
+  const double ax = x - x0, ay = y - y0;
+  const uint8_t* r0 = img.ptr<uint8_t>(y0) + x0;
+  const uint8_t* r1 = img.ptr<uint8_t>(std::min(y0 + 1, img.rows - 1)) + x0;
+  const int dx = x0 + 1 < img.cols ? 1 : 0;
+  return (1 - ay) * ((1 - ax) * r0[0] + ax * r0[dx]) + ay * ((1 - ax) * r1[0] + ax * r1[dx]);
+}
+
 }  // namespace
+
+bool align_warped_patch(const cv::Mat& ref, const cv::Point2f& ref_px, const Eigen::Matrix2d& A_cur_ref,
+                        const cv::Mat& cur, int window_px, int max_iterations, double epsilon_px, cv::Point2f* cur_px,
+                        double* turn_rad, double* log_scale) {
+  if (ref.type() != CV_8UC1 || cur.type() != CV_8UC1 || window_px < 3 || window_px % 2 == 0 || !cur_px)
+    throw std::invalid_argument("align_warped_patch: 8-bit single-channel images, an odd window >= 3 and an output are required");
+  const double det = A_cur_ref.determinant();
+  if (!(std::abs(det) > 1e-6) || !A_cur_ref.allFinite() || !std::isfinite(cur_px->x) || !std::isfinite(cur_px->y)) return false;
+  const Eigen::Matrix2d A_inv = A_cur_ref.inverse();
+  const int half = window_px / 2, n = 2 * half + 1, m = n + 2;  // m: one more ring for the gradients
+  // The template, sampled on the current image's integer offsets y in [-half - 1, half + 1]^2 at
+  // ref_px + A^-1 y (the reference patch as it looks in the current frame); samples outside the
+  // reference image are missing.
+  std::vector<double> T(static_cast<size_t>(m * m));
+  std::vector<uchar> T_ok(static_cast<size_t>(m * m));
+  for (int j = 0; j < m; ++j)
+    for (int i = 0; i < m; ++i) {
+      const Eigen::Vector2d q = Eigen::Vector2d(ref_px.x, ref_px.y) + A_inv * Eigen::Vector2d(i - half - 1, j - half - 1);
+      const size_t k = static_cast<size_t>(j * m + i);
+      T_ok[k] = q.x() >= 0 && q.y() >= 0 && q.x() < ref.cols - 1 && q.y() < ref.rows - 1;
+      T[k] = T_ok[k] ? bilinear(ref, q.x(), q.y()) : 0.0;
+    }
+  // Parameters: translation (2), then the log-scale and the turn when asked for. Warp of a
+  // template offset y: x = p + exp(sigma) R(phi) y.
+  const bool scale = log_scale != nullptr, turn = turn_rad != nullptr;
+  std::vector<int> active = {0, 1};
+  if (scale) active.push_back(2);
+  if (turn) active.push_back(3);
+  const int np = static_cast<int>(active.size());
+  // The pixels used: a template sample with its 3x3 neighbours (for the gradient), whose
+  // current-image position stays inside the image while the alignment moves by up to kReach px
+  // from its start.
+  constexpr double kReach = 2.0;
+  const Eigen::Vector2d start(cur_px->x, cur_px->y);
+  std::vector<int> used;
+  std::vector<Eigen::Vector4d> sd;  // steepest-descent images: d T / d (p_x, p_y, sigma, phi)
+  std::vector<double> t;
+  used.reserve(static_cast<size_t>(n * n));
+  Eigen::Matrix4d H = Eigen::Matrix4d::Zero();
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      const size_t c = static_cast<size_t>((j + 1) * m + i + 1), mm = static_cast<size_t>(m);
+      if (!(T_ok[c - mm - 1] && T_ok[c - mm] && T_ok[c - mm + 1] && T_ok[c - 1] && T_ok[c + 1] && T_ok[c + mm - 1] && T_ok[c + mm] &&
+            T_ok[c + mm + 1]))
+        continue;
+      const double x = start.x() + i - half, y = start.y() + j - half;
+      if (!(x - kReach >= 0 && y - kReach >= 0 && x + kReach < cur.cols - 1 && y + kReach < cur.rows - 1)) continue;
+      used.push_back(j * n + i);
+      // Scharr derivatives (as OpenCV's KLT): the fixed point of the alignment weighs each
+      // residual by this gradient, and its smoothing across the derivative steadies it on the
+      // sparse, spiky event frames.
+      const double gx = (3 * (T[c - mm + 1] - T[c - mm - 1]) + 10 * (T[c + 1] - T[c - 1]) + 3 * (T[c + mm + 1] - T[c + mm - 1])) / 32.0;
+      const double gy = (3 * (T[c + mm - 1] - T[c - mm - 1]) + 10 * (T[c + mm] - T[c - mm]) + 3 * (T[c + mm + 1] - T[c - mm + 1])) / 32.0;
+      const double yx = i - half, yy = j - half;
+      sd.emplace_back(gx, gy, gx * yx + gy * yy, -gx * yy + gy * yx);
+      t.push_back(T[c]);
+      H += sd.back() * sd.back().transpose();
+    }
+  // At least half the window, with texture in both directions: the smaller eigenvalue of the
+  // mean gradient matrix, in grey levels^2 / px^2 (OpenCV's KLT rejects 1e-4 of its own
+  // normalisation, about 6.5 here).
+  if (2 * used.size() < static_cast<size_t>(n * n)) return false;
+  const Eigen::Matrix2d Ht = H.topLeftCorner<2, 2>();
+  const double tr = Ht.trace(), dt = Ht.determinant();
+  const double min_eig = 0.5 * (tr - std::sqrt(std::max(0.0, tr * tr - 4 * dt))) / static_cast<double>(used.size());
+  if (!(min_eig > 1.0)) return false;
+  Eigen::MatrixXd Ha(np, np);
+  for (int r = 0; r < np; ++r)
+    for (int c = 0; c < np; ++c) Ha(r, c) = H(active[static_cast<size_t>(r)], active[static_cast<size_t>(c)]);
+  const Eigen::LDLT<Eigen::MatrixXd> solver(Ha);
+  if (solver.info() != Eigen::Success) return false;
+  // Inverse-compositional steps; a step (dp, dsigma, dphi) composes as sigma <- sigma - dsigma,
+  // phi <- phi - dphi, p <- p - exp(sigma) R(phi) dp.
+  constexpr double kMaxTurnRad = 0.1, kMaxLogScale = 0.1;
+  Eigen::Vector2d p = start;
+  double sigma = 0, phi = 0;
+  const auto in_range = [&] { return (p - start).cwiseAbs().maxCoeff() < kReach && std::abs(phi) < kMaxTurnRad && std::abs(sigma) < kMaxLogScale; };
+  for (int it = 0; it < max_iterations; ++it) {
+    if (!in_range()) return false;
+    Eigen::VectorXd b = Eigen::VectorXd::Zero(np);
+    if (np == 2) {  // translation only: one set of bilinear weights for the whole window
+      const double x0 = p.x() - half, y0 = p.y() - half;
+      const int ix = static_cast<int>(std::floor(x0)), iy = static_cast<int>(std::floor(y0));
+      const double ax = x0 - ix, ay = y0 - iy;
+      const double w00 = (1 - ax) * (1 - ay), w01 = ax * (1 - ay), w10 = (1 - ax) * ay, w11 = ax * ay;
+      for (size_t k = 0; k < used.size(); ++k) {
+        const int j = used[k] / n, i = used[k] % n;
+        const uint8_t* r0 = cur.ptr<uint8_t>(iy + j) + ix + i;
+        const uint8_t* r1 = cur.ptr<uint8_t>(iy + j + 1) + ix + i;
+        const double e = w00 * r0[0] + w01 * r0[1] + w10 * r1[0] + w11 * r1[1] - t[k];
+        b(0) += sd[k](0) * e;
+        b(1) += sd[k](1) * e;
+      }
+    } else {
+      const double sc = std::exp(sigma), c = sc * std::cos(phi), s = sc * std::sin(phi);
+      for (size_t k = 0; k < used.size(); ++k) {
+        const double yx = used[k] % n - half, yy = used[k] / n - half;
+        const double x = p.x() + c * yx - s * yy, y = p.y() + s * yx + c * yy;
+        if (!(x >= 0 && y >= 0 && x < cur.cols - 1 && y < cur.rows - 1)) return false;
+        const double e = bilinear(cur, x, y) - t[k];
+        for (int r = 0; r < np; ++r) b(r) += sd[k](active[static_cast<size_t>(r)]) * e;
+      }
+    }
+    const Eigen::VectorXd d = solver.solve(b);
+    double dsigma = 0, dphi = 0;
+    for (int r = 2; r < np; ++r) (active[static_cast<size_t>(r)] == 2 ? dsigma : dphi) = d(r);
+    sigma -= dsigma;
+    phi -= dphi;
+    p -= std::exp(sigma) * (Eigen::Rotation2Dd(phi) * d.head<2>());
+    if (!p.allFinite() || !std::isfinite(phi) || !std::isfinite(sigma)) return false;
+    if (d.head<2>().norm() < epsilon_px && std::abs(dphi) * half < epsilon_px && std::abs(dsigma) * half < epsilon_px) break;
+  }
+  if (!in_range()) return false;
+  *cur_px = cv::Point2f(static_cast<float>(p.x()), static_cast<float>(p.y()));
+  if (turn) *turn_rad = phi;
+  if (scale) *log_scale = sigma;
+  return true;
+}
+
+Eigen::Matrix2d rotation_homography_jacobian(const calib::CameraIntrinsics& K, const Eigen::Matrix3d& R_cur_ref,
+                                             const cv::Point2f& ref_px) {
+  Eigen::Matrix3d Km;
+  Km << K.fx, 0, K.cx, 0, K.fy, K.cy, 0, 0, 1;
+  Eigen::Matrix3d Ki;
+  Ki << 1 / K.fx, 0, -K.cx / K.fx, 0, 1 / K.fy, -K.cy / K.fy, 0, 0, 1;
+  const Eigen::Matrix3d H = Km * R_cur_ref * Ki;
+  const Eigen::Vector3d h = H * Eigen::Vector3d(ref_px.x, ref_px.y, 1.0);
+  if (!(h.z() > 1e-9)) return Eigen::Matrix2d::Identity();
+  const double x = h.x() / h.z(), y = h.y() / h.z();
+  Eigen::Matrix2d J;
+  J << H(0, 0) - x * H(2, 0), H(0, 1) - x * H(2, 1), H(1, 0) - y * H(2, 0), H(1, 1) - y * H(2, 1);
+  return J / h.z();
+}
+
+const char* klt_warp_name(KltWarp warp) {
+  switch (warp) {
+    case KltWarp::kNone: return "none";
+    case KltWarp::kRotation: return "rotation";
+    case KltWarp::kRotationScale: return "rotation_scale";
+  }
+  return "unknown";
+}
 
 const char* ransac_model_name(RansacModel model) {
   switch (model) {
@@ -500,19 +654,24 @@ FeatureObservations FeatureTracker::track(int64_t t_ns, const cv::Mat& frame,
       }
       return true;
     };
-    std::vector<int64_t> refs;
+    // refs: the frame each track's KLT aligns from; templ: its template's frame. With
+    // klt_warp every track's KLT goes from the previous frame (a small turn, so a small bias and a
+    // sure convergence) and the warped refinement below aligns it to its template.
+    const bool warp = options_.klt_warp != KltWarp::kNone;
+    std::vector<int64_t> refs, templ;
     std::vector<uchar> refresh(n, 0);
     for (size_t i = 0; i < n; ++i) {
       const Track& t = tracks_[i];
       if (chained || t.ref_frame == frame_id_ - 1) {
-        refs.push_back(frame_id_ - 1);
+        templ.push_back(frame_id_ - 1);
       } else if (too_rotated(t.ref_frame)) {
-        refs.push_back(frame_id_ - 1);
+        templ.push_back(frame_id_ - 1);
         refresh[i] = 1;
         ++stats_.template_rotation_refreshes;
       } else {
-        refs.push_back(t.ref_frame);
+        templ.push_back(t.ref_frame);
       }
+      refs.push_back(warp ? frame_id_ - 1 : templ.back());
     }
     std::vector<int64_t> groups = refs;
     std::sort(groups.begin(), groups.end());
@@ -584,6 +743,41 @@ FeatureObservations FeatureTracker::track(int64_t t_ns, const cv::Mat& frame,
         stats_.template_fallbacks += static_cast<int64_t>(idx.size());
       }
     }
+    // Warped refinement (klt_warp) of the tracks KLT and the forward-backward
+    // check kept: against the track's template, or the previous frame when the template is that
+    // frame, cannot be warped (rotation unknown) or fails (template_fallback; its template then
+    // restarts); without the IMU rotation to the previous frame the KLT result stays.
+    std::vector<uchar> warp_failed(n, 0);
+    if (warp) {
+      const auto refine = [&](const cv::Mat& ref_img, const cv::Point2f& ref_pt, const Eigen::Matrix3d& R_cur_ref, size_t i) {
+        cv::Point2f q = p1[i];
+        double log_scale = 0;
+        if (!align_warped_patch(ref_img, ref_pt, rotation_homography_jacobian(K_, R_cur_ref, ref_pt), pyramid[0], options_.klt_window_px,
+                                options_.klt_max_iterations, options_.klt_epsilon_px, &q, nullptr,
+                                options_.klt_warp == KltWarp::kRotationScale ? &log_scale : nullptr))
+          return false;
+        const cv::Point2f d = q - p1[i];
+        if (d.dot(d) > fb2 || !inside(q)) return false;
+        p1[i] = q;
+        return true;
+      };
+      for (size_t i = 0; i < n; ++i) {
+        if (!passed(i)) continue;
+        if (templ[i] != frame_id_ - 1) {
+          const RefFrame* rf = nullptr;
+          for (const RefFrame& r : ref_frames_)
+            if (r.frame == templ[i]) rf = &r;
+          if (rf && rf->rotation_known && refine(rf->pyramid[0], tracks_[i].ref_px, rf->R_cur_ref, i)) continue;
+          if (!options_.template_fallback) {
+            warp_failed[i] = 1;
+            continue;
+          }
+          fell_back[i] = 1;
+          ++stats_.template_fallbacks;
+        }
+        if (R_cur_prev && !refine(prev_pyramid_[0], p0[i], *R_cur_prev, i)) warp_failed[i] = 1;
+      }
+    }
     std::vector<size_t> kept;
     kept.reserve(n);
     // A lost track keeps its template for re-acquisition (the reference it was last aligned
@@ -600,6 +794,11 @@ FeatureObservations FeatureTracker::track(int64_t t_ns, const cv::Mat& frame,
       const double dx = back[i].x - ref_px[i].x, dy = back[i].y - ref_px[i].y;
       if (!st_b[i] || !(dx * dx + dy * dy <= fb2)) {
         ++stats_.lost_fb;
+        remember(tracks_[i]);
+        continue;
+      }
+      if (warp_failed[i]) {
+        ++stats_.lost_warp;
         remember(tracks_[i]);
         continue;
       }

@@ -119,6 +119,7 @@ const Table<FeatureTrackerOptions>& feature_tracker_table() {
           .integer("template_max_age_frames", &O::template_max_age_frames, 1, 100000)
           .boolean("template_fallback", &O::template_fallback)
           .number("template_max_rotation_deg", &O::template_max_rotation_deg, Range::kNonNegative, "deg")
+          .choice("klt_warp", &O::klt_warp, {{"none", KltWarp::kNone}, {"rotation", KltWarp::kRotation}, {"rotation_scale", KltWarp::kRotationScale}})
           .integer("anchor_frames", &O::anchor_frames, 0, 100000)
           .number("anchor_ransac_threshold_px", &O::anchor_ransac_threshold_px, Range::kPositive, "px")
           .number("reacquire_max_age_s", &O::reacquire_max_age_s, Range::kNonNegative, "s")

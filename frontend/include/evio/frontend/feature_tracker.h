@@ -56,6 +56,21 @@ std::vector<bool> ransac_inliers(const std::vector<Eigen::Vector3d>& bearings_pr
                                  RansacModel model, const Eigen::Matrix3d* R_cur_prev,
                                  double threshold_rad, int max_iterations, uint64_t seed);
 
+// How FeatureTracker aligns a track to its template (FeatureTrackerOptions::klt_warp).
+// Translation-only KLT against a patch that has turned in the image is off by the turn angle times
+// the offset of the window's gradient centroid from the feature (about 4.6 px per radian with a
+// 27 px window on photographic textures), and against a patch that has grown by the scale change
+// times that offset; over a track's templates these add into a drift.
+enum class KltWarp {
+  kNone,          // OpenCV's pyramidal KLT against the template, translation only
+  kRotation,      // KLT from the previous frame, then aligned (translation) to the template warped by
+                  // the IMU rotation: the local affine map of K R_cur_ref K^-1 at the feature
+  kRotationScale  // as kRotation, and a scale change about the feature estimated with the translation
+                  // (translation along the optical axis, not in the IMU's rotation)
+};
+// "none", "rotation", "rotation_scale".
+const char* klt_warp_name(KltWarp warp);
+
 struct FeatureTrackerOptions {
   // Bucketing grid over the image (cells). Detection never fills a cell beyond max_per_cell
   // features (tracks already in the cell count).
@@ -92,6 +107,13 @@ struct FeatureTrackerOptions {
   // more than a pixel, and the forward-backward check still passes). A frame without the IMU
   // rotation restarts every template.
   double template_max_rotation_deg = 0;
+  // Warped template alignment (see KltWarp): each track's KLT result from the previous frame is
+  // refined against its template (or, chained, the previous frame's patch) warped by the camera
+  // rotation since that patch's frame. A refinement that moves the KLT result by more than
+  // forward_backward_max_px, leaves the image, or meets a flat patch fails: the track falls back to
+  // the previous frame's patch (template_fallback) or is lost. Tracks whose rotation is unknown (a
+  // frame without the IMU rotation) keep the plain KLT result.
+  KltWarp klt_warp = KltWarp::kNone;
   // Long-baseline verification (frames; 0 = off): besides the RANSAC between consecutive
   // frames, the tracks that existed at an anchor frame are verified by a second 2-point RANSAC
   // between their anchor positions and the current ones (rotation from the chained IMU priors);
@@ -126,6 +148,29 @@ struct FeatureTrackerOptions {
   bool Validate(std::string* why) const;
 };
 
+// Lucas-Kanade alignment of a patch whose warp into the current image is known up to its
+// translation (and optionally a similarity about the feature): the window (window_px x window_px,
+// odd) of `ref` around ref_px, mapped into `cur` by
+//   x_cur = cur_px + exp(log_scale) R(turn_rad) A_cur_ref (x_ref - ref_px),
+// is aligned by inverse-compositional Gauss-Newton steps (Baker and Matthews 2004; Scharr
+// derivatives of the warped template, bilinear interpolation) on cur_px (in: the initial position;
+// out: the aligned one), and on log_scale and turn_rad when those are given (out: the estimates,
+// starting from 0; nullptr: fixed at 0), until a step moves the window by less than epsilon_px or
+// after max_iterations. Template pixels that fall outside `ref` are left out (at least half the
+// window must remain). Images 8-bit single-channel. Returns false (outputs unchanged) when
+// A_cur_ref is singular, the window would leave `cur`, the patch has no texture in some direction
+// (smallest eigenvalue of its mean gradient matrix below 1 grey level^2/px^2), or the alignment
+// moves cur_px by 2 px or more per axis, the turn by 0.1 rad or the log-scale by 0.1 or more.
+bool align_warped_patch(const cv::Mat& ref, const cv::Point2f& ref_px, const Eigen::Matrix2d& A_cur_ref,
+                        const cv::Mat& cur, int window_px, int max_iterations, double epsilon_px, cv::Point2f* cur_px,
+                        double* turn_rad = nullptr, double* log_scale = nullptr);
+
+// The local affine map at pixel ref_px of the infinite homography K R_cur_ref K^-1 (pure rotation,
+// points at infinity) of an ideal pinhole: d x_cur / d x_ref (2x2). Identity when ref_px maps
+// behind the current camera.
+Eigen::Matrix2d rotation_homography_jacobian(const calib::CameraIntrinsics& K, const Eigen::Matrix3d& R_cur_ref,
+                                             const cv::Point2f& ref_px);
+
 struct FeatureTrackerStats {
   int64_t frames = 0;           // frames processed
   int64_t detected = 0;         // new tracks started
@@ -137,6 +182,7 @@ struct FeatureTrackerStats {
   int64_t template_fallbacks = 0;
   int64_t template_rotation_refreshes = 0;  // templates dropped for template_max_rotation_deg
   int64_t reacquired = 0;       // lost tracks found again at their predicted position (reacquire_*)
+  int64_t lost_warp = 0;        // klt_warp refinements that failed without a fallback (see that option)
 };
 
 // A lost track's predicted position in the frame given to FeatureTracker::track (px, ideal pinhole).
