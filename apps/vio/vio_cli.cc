@@ -42,6 +42,10 @@ int main(int argc, char** argv) try {
                   "Write every N-th image the frames front-end tracks (event frame or reconstruction, undistorted) to "
                   "OUT/tracking_images/ as PNG (0: none)")
       ->check(CLI::NonNegativeNumber);
+  cli->add_flag("--oracle-observations", vio.oracle_observations,
+                "With --oracle-error real, independent or common_mode: write every observation's own error, its frame's "
+                "common mode and the truth it is measured against to OUT/oracle_observations.csv (one row per observation; "
+                "columns in the file's header)");
   cli->add_option("--oracle-max-error-px", vio.oracle_max_error_px,
                   "With --oracle-error real or independent: drop observations whose own error is larger (px; 0 = keep "
                   "all)")

@@ -9,6 +9,7 @@
 #include <deque>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <limits>
 #include <optional>
 #include <ostream>
@@ -215,6 +216,8 @@ namespace {
 // The true scene of an oracle run (--oracle-tracks): evio's planar scenes, or a crosscheck room
 // (meta.json); empty without --oracle-tracks. Its errors come before a dataset is read.
 evaluation::RayCaster open_oracle_scene(const VioArgs& args) {
+  if (args.oracle_observations && args.oracle_scene.empty())
+    throw InputError(args.dataset, 0, "--oracle-observations needs --oracle-tracks", "--oracle-tracks SCENE --oracle-error real --oracle-observations");
   if (args.oracle_frame_plane && !args.oracle_frame_motion)
     throw InputError(args.dataset, 0, "--oracle-frame-plane needs --oracle-frame-motion", "--oracle-frame-motion --oracle-frame-plane");
   if (args.oracle_frame_motion && args.oracle_scene.empty())
@@ -310,6 +313,22 @@ std::unique_ptr<evaluation::TrackOracle> attach_diagnostics(const VioArgs& args,
                                                          : evaluation::OracleError::kNone;
     oracle = std::make_unique<evaluation::TrackOracle>(read_trajectory(args.gt), cal, oracle_cast, oo);
     vio->set_observation_filter([o = oracle.get()](FeatureObservations* f) { o->apply(f); });
+    if (args.oracle_observations) {
+      if (oo.keep_error == evaluation::OracleError::kNone)
+        throw InputError(args.oracle_scene, 0, "--oracle-observations measures the front-end's own error",
+                         "--oracle-error real, independent or common_mode");
+      auto csv = std::make_shared<std::ofstream>((fs::path(args.out) / "oracle_observations.csv").string());
+      *csv << "t_s,track_id,age,error_x_px,error_y_px,common_x_px,common_y_px,true_x_px,true_y_px,flow_x_px_s,flow_y_px_s,depth_m,"
+              "qw_c_w,qx_c_w,qy_c_w,qz_c_w\n";
+      oracle->set_observation_sink([csv](const evaluation::OracleObservation& m) {
+        char row[400];
+        std::snprintf(row, sizeof row, "%s,%lld,%lld,%.4f,%.4f,%.4f,%.4f,%.3f,%.3f,%.2f,%.2f,%.4f,%.9f,%.9f,%.9f,%.9f\n",
+                      format_seconds(m.t_ns).c_str(), static_cast<long long>(m.track_id), static_cast<long long>(m.age), m.error_px.x(),
+                      m.error_px.y(), m.common_mode_px.x(), m.common_mode_px.y(), m.true_px.x(), m.true_px.y(), m.true_flow_px_s.x(),
+                      m.true_flow_px_s.y(), m.depth_m, m.q_c_w.w(), m.q_c_w.x(), m.q_c_w.y(), m.q_c_w.z());
+        *csv << row;
+      });
+    }
     if (args.oracle_frame_motion) {
       vio->set_frame_motion_oracle(
           [gt = read_trajectory(args.gt), T_c_b = cal.T_c_b, plane = args.oracle_frame_plane, cast = oracle_cast](

@@ -64,6 +64,7 @@ struct VioArgs {
   std::string oracle_error = "none";    // none | real | independent | common_mode (evaluation::OracleError)
   bool oracle_frame_motion = false;     // the frames' translation compensation from the ground truth
   bool oracle_frame_plane = false;      // with oracle_frame_motion: per-event depth from the plane through the tracks' true points
+  bool oracle_observations = false;     // with oracle_error != none: OUT/oracle_observations.csv
   // Diagnostics: every n-th tracking image of the frames front-end as PNG into out/tracking_images/
   // (0: none), with the frame's tracks drawn.
   int dump_tracking_images = 0;

@@ -56,6 +56,8 @@ void TrackOracle::apply(FeatureObservations* frame) {
   kept.reserve(frame->observations.size());
   std::vector<Eigen::Vector2d> real_error;  // per kept observation (px), for keep_error
   std::vector<int64_t> age;                 // per kept observation
+  std::vector<OracleObservation> measured;  // per kept observation, for the sink
+  const auto T_before = gt_.interpolate(frame->t_ns - 2'000'000), T_after = gt_.interpolate(frame->t_ns + 2'000'000);
   for (FeatureObservation o : frame->observations) {
     auto it = landmarks_.find(o.track_id);
     if (it == landmarks_.end()) {
@@ -84,6 +86,23 @@ void TrackOracle::apply(FeatureObservations* frame) {
                                                           K.fy * (b.y() / b.z() - p_c.y() / p_c.z()))
                                         : Eigen::Vector2d::Zero());
       age.push_back(l.age);
+      if (sink_) {
+        OracleObservation m;
+        m.t_ns = frame->t_ns;
+        m.track_id = o.track_id;
+        m.age = l.age;
+        m.error_px = real_error.back();
+        m.true_px = Eigen::Vector2d(K.fx * p_c.x() / p_c.z() + K.cx, K.fy * p_c.y() / p_c.z() + K.cy);
+        if (T_before && T_after) {
+          const Eigen::Vector3d a = (*T_before * camera_.T_c_b.inverse()).inverse() * l.X_w;
+          const Eigen::Vector3d b = (*T_after * camera_.T_c_b.inverse()).inverse() * l.X_w;
+          if (a.z() > 1e-9 && b.z() > 1e-9)
+            m.true_flow_px_s = Eigen::Vector2d(K.fx * (b.x() / b.z() - a.x() / a.z()), K.fy * (b.y() / b.z() - a.y() / a.z())) / 4e-3;
+        }
+        m.depth_m = p_c.z();
+        m.q_c_w = T_c_w.rotation;
+        measured.push_back(m);
+      }
     }
     const double x = p_c.x() / p_c.z() + e.x() / K.fx, y = p_c.y() / p_c.z() + e.y() / K.fy;
     o.bearing_c = Eigen::Vector3d(x, y, 1.0).normalized();
@@ -104,6 +123,11 @@ void TrackOracle::apply(FeatureObservations* frame) {
     common_mode_sq_sum_ += c.squaredNorm();
     ++stats_.frames;
     stats_.common_mode_rms_px = std::sqrt(common_mode_sq_sum_ / static_cast<double>(stats_.frames));
+    if (sink_)
+      for (OracleObservation& m : measured) {
+        m.common_mode_px = c;
+        sink_(m);
+      }
     for (size_t i = 0; i < kept.size(); ++i) {
       if (age[i] < 1) continue;
       int k = TrackOracleStats::kAgeBuckets - 1;

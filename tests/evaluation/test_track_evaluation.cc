@@ -248,6 +248,57 @@ TEST(TrackOracle, ErrorByTrackAgeGrowsWithTheDrift) {
   EXPECT_EQ(count[6], 0);   // no track reaches 64 frames
 }
 
+// The observation sink gets every observation the oracle measures: its error (the drift along y),
+// its age, its frame's common mode (the per-axis median of the frame's errors), the true projection,
+// its image velocity (50 px/s along x: 0.5 m/s sideways at 2 m with f = 200 px), the depth (2 m)
+// and the camera orientation.
+TEST(TrackOracle, ObservationSinkGetsEachObservationsErrorAndTruth) {
+  const Scenario s;
+  std::vector<FeatureObservations> frames = s.frames(20, 0.1, 1000);
+  TrackOracleOptions o;
+  o.keep_error = OracleError::kReal;
+  TrackOracle oracle(s.gt, s.camera, s.cast, o);
+  std::vector<OracleObservation> got;
+  oracle.set_observation_sink([&](const OracleObservation& m) { got.push_back(m); });
+  std::vector<FeatureObservations> before = frames;
+  size_t n = 0;
+  for (auto& f : frames) {
+    n += f.observations.size();
+    oracle.apply(&f);
+  }
+  ASSERT_EQ(got.size(), n);
+  ASSERT_GT(n, 500u);
+  std::map<int64_t, std::vector<double>> frame_errors;
+  for (const OracleObservation& m : got) frame_errors[m.t_ns].push_back(m.error_px.y());
+  size_t k = 0, i = 0;
+  std::map<int64_t, int64_t> age_of;
+  for (const OracleObservation& m : got) {
+    while (i >= before[k].observations.size()) {
+      ++k;
+      i = 0;
+    }
+    const FeatureObservation& ob = before[k].observations[i++];
+    EXPECT_EQ(m.t_ns, before[k].t_ns);
+    EXPECT_EQ(m.track_id, ob.track_id);
+    const auto [it, first] = age_of.emplace(ob.track_id, 0);
+    if (!first) ++it->second;
+    EXPECT_EQ(m.age, it->second);
+    EXPECT_NEAR(m.error_px.x(), 0.0, 1e-6);
+    EXPECT_NEAR(m.error_px.y(), 0.1 * static_cast<double>(m.age), 1e-6);
+    std::vector<double> v = frame_errors[m.t_ns];
+    std::nth_element(v.begin(), v.begin() + static_cast<long>(v.size() / 2), v.end());
+    EXPECT_NEAR(m.common_mode_px.y(), v[v.size() / 2], 1e-9);
+    Eigen::Vector2d observed;
+    ASSERT_TRUE(s.camera.camera.project(ob.bearing_c, &observed));
+    EXPECT_LT((m.true_px + m.error_px - observed).norm(), 1e-6);
+    // Zero where the ground truth does not cover t - 2 ms (the first frame, at t = 0).
+    EXPECT_NEAR(m.true_flow_px_s.x(), m.t_ns < 2'000'000 ? 0.0 : 50.0, 1e-3);
+    EXPECT_NEAR(m.true_flow_px_s.y(), 0.0, 1e-3);
+    EXPECT_NEAR(m.depth_m, 2.0, 1e-9);
+    EXPECT_TRUE(m.q_c_w.isApprox(s.gt.interpolate(m.t_ns)->inverse().rotation, 1e-12));
+  }
+}
+
 // keep_error splits the front-end's own error per frame: every observation after a track's first
 // is moved by a frame-wide shift c_k plus its own noise; `real` keeps the observations as they
 // are, `common_mode` gives every track the frame's median error (c_k up to the noise), and

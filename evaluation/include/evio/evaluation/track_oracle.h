@@ -12,12 +12,14 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <optional>
 #include <random>
 #include <string>
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 
 #include "evio/calib/calibration_io.h"
 #include "evio/evaluation/track_evaluation.h"
@@ -100,6 +102,23 @@ bool true_frame_motion(const Trajectory& groundtruth, const calib::SE3& T_c_b, c
                        const FeatureObservations& frame, Eigen::Vector3d* v_c, double* depth_m,
                        Eigen::Vector4d* plane_c = nullptr);
 
+// One front-end observation as the oracle measured it (keep_error != kNone), for studies of the
+// tracks' error (e.g. scripts/track_error_study.py): its own error e and its frame's common mode c
+// (as OracleError), and the truth it is measured against.
+struct OracleObservation {
+  int64_t t_ns = 0;     // frame time (IMU clock)
+  int64_t track_id = 0;
+  int64_t age = 0;      // observations of the track before this one (0: its first)
+  Eigen::Vector2d error_px = Eigen::Vector2d::Zero();        // e: observed minus true projection (px)
+  Eigen::Vector2d common_mode_px = Eigen::Vector2d::Zero();  // c: the frame's common mode (px)
+  Eigen::Vector2d true_px = Eigen::Vector2d::Zero();         // true projection (px, ideal pinhole)
+  // Image velocity of the true projection (px/s; the landmark projected at t -+ 2 ms of the ground
+  // truth), zero where the ground truth does not cover t -+ 2 ms.
+  Eigen::Vector2d true_flow_px_s = Eigen::Vector2d::Zero();
+  double depth_m = 0;   // z-depth of the landmark in the true camera frame (m)
+  Eigen::Quaterniond q_c_w = Eigen::Quaterniond::Identity();  // true camera orientation, world -> camera
+};
+
 class TrackOracle {
  public:
   // Throws std::invalid_argument on invalid options or an empty ray caster.
@@ -109,6 +128,9 @@ class TrackOracle {
   // Replaces the observations of one frame in place (frames in time order).
   void apply(FeatureObservations* frame);
   const TrackOracleStats& stats() const { return stats_; }
+  // Called for every observation apply() measures (keep_error != kNone), in frame order, before
+  // max_error_px drops any.
+  void set_observation_sink(std::function<void(const OracleObservation&)> sink) { sink_ = std::move(sink); }
 
  private:
   struct Landmark {
@@ -125,6 +147,7 @@ class TrackOracle {
   std::map<int64_t, Landmark> landmarks_;
   std::mt19937_64 rng_;
   double common_mode_sq_sum_ = 0;
+  std::function<void(const OracleObservation&)> sink_;
 };
 
 }  // namespace evio::evaluation
