@@ -28,20 +28,7 @@ from collections import defaultdict
 
 import numpy as np
 
-
-def rotation_matrices(q):
-    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-    R = np.empty((len(q), 3, 3))
-    R[:, 0, 0] = 1 - 2 * (y * y + z * z)
-    R[:, 0, 1] = 2 * (x * y - z * w)
-    R[:, 0, 2] = 2 * (x * z + y * w)
-    R[:, 1, 0] = 2 * (x * y + z * w)
-    R[:, 1, 1] = 1 - 2 * (x * x + z * z)
-    R[:, 1, 2] = 2 * (y * z - x * w)
-    R[:, 2, 0] = 2 * (x * z - y * w)
-    R[:, 2, 1] = 2 * (y * z + x * w)
-    R[:, 2, 2] = 1 - 2 * (x * x + y * y)
-    return R
+from check_eval import quat_to_rot  # quaternions x y z w -> rotation matrices
 
 
 def residual(A, y):
@@ -60,7 +47,7 @@ def study(path, min_obs, slip_px, independent):
     if independent:
         e = e - a[:, [col["common_x_px"], col["common_y_px"]]]
     z = a[:, col["depth_m"]]
-    R = rotation_matrices(a[:, [col["qw_c_w"], col["qx_c_w"], col["qy_c_w"], col["qz_c_w"]]])
+    R = quat_to_rot(a[:, [col["qx_c_w"], col["qy_c_w"], col["qz_c_w"], col["qw_c_w"]]])
     rows = defaultdict(list)
     for i in range(len(a)):
         rows[tid[i]].append(i)
