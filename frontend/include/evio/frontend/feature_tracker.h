@@ -105,7 +105,8 @@ struct FeatureTrackerOptions {
   // the track goes from the previous frame and its template restarts. Translation-only KLT
   // against a turned template is biased (an in-plane turn of ten degrees or more shifts it by
   // more than a pixel, and the forward-backward check still passes). A frame without the IMU
-  // rotation restarts every template.
+  // rotation restarts every template. With klt_warp the turn is taken out of the alignment and
+  // this limit only bounds how far a template may have turned before it is renewed.
   double template_max_rotation_deg = 0;
   // Warped template alignment (see KltWarp): each track's KLT result from the previous frame is
   // refined against its template (or, chained, the previous frame's patch) warped by the camera
