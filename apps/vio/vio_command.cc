@@ -218,6 +218,9 @@ namespace {
 evaluation::RayCaster open_oracle_scene(const VioArgs& args) {
   if (args.oracle_observations && args.oracle_scene.empty())
     throw InputError(args.dataset, 0, "--oracle-observations needs --oracle-tracks", "--oracle-tracks SCENE --oracle-error real --oracle-observations");
+  if (args.oracle_observations && args.oracle_error == "none")
+    throw InputError(args.oracle_scene, 0, "--oracle-observations measures the front-end's own error",
+                     "--oracle-error real, independent or common_mode");
   if (args.oracle_frame_plane && !args.oracle_frame_motion)
     throw InputError(args.dataset, 0, "--oracle-frame-plane needs --oracle-frame-motion", "--oracle-frame-motion --oracle-frame-plane");
   if (args.oracle_frame_motion && args.oracle_scene.empty())
@@ -314,9 +317,6 @@ std::unique_ptr<evaluation::TrackOracle> attach_diagnostics(const VioArgs& args,
     oracle = std::make_unique<evaluation::TrackOracle>(read_trajectory(args.gt), cal, oracle_cast, oo);
     vio->set_observation_filter([o = oracle.get()](FeatureObservations* f) { o->apply(f); });
     if (args.oracle_observations) {
-      if (oo.keep_error == evaluation::OracleError::kNone)
-        throw InputError(args.oracle_scene, 0, "--oracle-observations measures the front-end's own error",
-                         "--oracle-error real, independent or common_mode");
       auto csv = std::make_shared<std::ofstream>((fs::path(args.out) / "oracle_observations.csv").string());
       *csv << "t_s,track_id,age,error_x_px,error_y_px,common_x_px,common_y_px,true_x_px,true_y_px,flow_x_px_s,flow_y_px_s,depth_m,"
               "qw_c_w,qx_c_w,qy_c_w,qz_c_w\n";

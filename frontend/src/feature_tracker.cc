@@ -254,10 +254,13 @@ bool align_warped_patch(const cv::Mat& ref, const cv::Point2f& ref_px, const Eig
   const double tr = Ht.trace(), dt = Ht.determinant();
   const double min_eig = 0.5 * (tr - std::sqrt(std::max(0.0, tr * tr - 4 * dt))) / static_cast<double>(used.size());
   if (!(min_eig > 1.0)) return false;
-  Eigen::MatrixXd Ha(np, np);
+  // At most 4 parameters: fixed-capacity Eigen types, no heap allocation per track.
+  using Mat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 4, 4>;
+  using Vec = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 4, 1>;
+  Mat Ha(np, np);
   for (int r = 0; r < np; ++r)
     for (int c = 0; c < np; ++c) Ha(r, c) = H(active[static_cast<size_t>(r)], active[static_cast<size_t>(c)]);
-  const Eigen::LDLT<Eigen::MatrixXd> solver(Ha);
+  const Eigen::LDLT<Mat> solver(Ha);
   if (solver.info() != Eigen::Success) return false;
   // Inverse-compositional steps; a step (dp, dsigma, dphi) composes as sigma <- sigma - dsigma,
   // phi <- phi - dphi, p <- p - exp(sigma) R(phi) dp.
@@ -267,7 +270,7 @@ bool align_warped_patch(const cv::Mat& ref, const cv::Point2f& ref_px, const Eig
   const auto in_range = [&] { return (p - start).cwiseAbs().maxCoeff() < kReach && std::abs(phi) < kMaxTurnRad && std::abs(sigma) < kMaxLogScale; };
   for (int it = 0; it < max_iterations; ++it) {
     if (!in_range()) return false;
-    Eigen::VectorXd b = Eigen::VectorXd::Zero(np);
+    Vec b = Vec::Zero(np);
     if (np == 2) {  // translation only: one set of bilinear weights for the whole window
       const double x0 = p.x() - half, y0 = p.y() - half;
       const int ix = static_cast<int>(std::floor(x0)), iy = static_cast<int>(std::floor(y0));
@@ -291,7 +294,7 @@ bool align_warped_patch(const cv::Mat& ref, const cv::Point2f& ref_px, const Eig
         for (int r = 0; r < np; ++r) b(r) += sd[k](active[static_cast<size_t>(r)]) * e;
       }
     }
-    const Eigen::VectorXd d = solver.solve(b);
+    const Vec d = solver.solve(b);
     double dsigma = 0, dphi = 0;
     for (int r = 2; r < np; ++r) (active[static_cast<size_t>(r)] == 2 ? dsigma : dphi) = d(r);
     sigma -= dsigma;

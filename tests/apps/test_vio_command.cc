@@ -177,6 +177,11 @@ TEST(VioCommand, OracleTracksNeedGroundTruthAndAPlanesScene) {
   va.oracle_frame_motion = false;
   va.oracle_frame_plane = true;
   expect_error("--oracle-frame-plane without --oracle-frame-motion", {"--oracle-frame-motion"});
+  va.oracle_frame_plane = false;
+  va.oracle_observations = true;
+  expect_error("--oracle-observations without a scene", {"--oracle-tracks"});
+  va.oracle_scene = std::string(EVIO_SOURCE_DIR) + "/datasets/poster_6dof.yaml";
+  expect_error("--oracle-observations with --oracle-error none", {"--oracle-error real", "poster_6dof.yaml"});
 }
 
 TEST(VioCommand, ShortSimulatedSequenceEndToEnd) {
@@ -262,10 +267,22 @@ TEST(VioCommand, ShortSimulatedSequenceEndToEnd) {
   VioArgs ra = oa;
   ra.out = dir.file("oracle_real");
   ra.oracle_error = "real";
+  ra.oracle_observations = true;
   std::ostringstream ro;
   ASSERT_EQ(run_vio(ra, ro), 0) << ro.str();
   const double rmpe = json_value(read(ra.out + "/eval.json"), "mean_position_error_percent");
   EXPECT_NEAR(rmpe, mpe, 0.002);
+  // --oracle-observations: one CSV row per observation the oracle measured (as many as it replaced).
+  {
+    std::ifstream csv(ra.out + "/oracle_observations.csv");
+    std::string header, line;
+    ASSERT_TRUE(std::getline(csv, header));
+    EXPECT_EQ(header.rfind("t_s,track_id,age,error_x_px,error_y_px,common_x_px,common_y_px,true_x_px,true_y_px,", 0), 0u) << header;
+    int64_t rows = 0;
+    while (std::getline(csv, line)) ++rows;
+    EXPECT_EQ(static_cast<double>(rows), json_value(read(ra.out + "/stats.json"), "replaced"));
+  }
+  ra.oracle_observations = false;
   // --oracle-frame-motion: the frames' translation compensation from the true velocity and depth.
   ra.out = dir.file("oracle_frame_motion");
   ra.oracle_frame_motion = true;
