@@ -77,12 +77,18 @@ const Table<C>& mosaic_config_table() {
                     {"event_stride", "min_particles", "probe_every_batches", "probe_offset_rad"})
         .integer("event_stride", &C::event_stride, 0, 1000000)
         .integer("min_particles", &C::min_particles, -1, 1000000)
+        .choice("method", &C::tracker_method,
+                {{"pf", pipeline::MosaicTracker::kParticleFilter},
+                 {"odometry", pipeline::MosaicTracker::kOdometry},
+                 {"odometry+pf", pipeline::MosaicTracker::kOdometryParticleFilter}})
+        .number("odometry_noise_rad_per_sqrt_s", &C::odometry_noise_rad_per_sqrt_s, Range::kPositive, "rad/sqrt(s)")
         .note("event_stride", "0: by input, 4 with --use-imu, 1 without")
         .note("min_particles", "-1: by input, 20 with --use-imu, 40 without");
     Table<C> bootstrap("bootstrap settings");
     bootstrap.duration_ms("duration_ms", &C::bootstrap_ns, Range::kNonNegative)
         .duration_ms("window_ms", &C::bootstrap_window_ns, Range::kPositive)
         .integer("window_events", &C::bootstrap_window_events, 1000, 100000000)
+        .number("min_contrast_gain", &C::bootstrap_min_contrast_gain, Interval::at_least(1), "ratio")
         .include(mapping::rotational_cmax_table(), &C::cmax, {"width", "height", "focal_px"})  // those: the camera's
         .boolean("calibrate_contrast", &C::calibrate_contrast)
         .number("min_contrast_ratio", &C::min_contrast_ratio, Range::kUnit, "")

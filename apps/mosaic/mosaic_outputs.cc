@@ -5,10 +5,13 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <ostream>
 #include <string>
 #include <utility>
 #include <vector>
+
+#include <yaml-cpp/yaml.h>
 
 #include "evio/calib/error.h"
 #include "evio/calib/json.h"
@@ -17,6 +20,7 @@
 #include "evio/sensors/time.h"
 #include "evio/sensors/trajectory.h"
 #include "evio/simulator/scene_config.h"
+#include "evio/simulator/texture.h"
 
 namespace evio::apps {
 namespace {
@@ -33,20 +37,29 @@ std::string model_json(const MosaicConfig& cfg, const frontend::RotationParticle
   const bool relative = to.measurement_model == frontend::RotationMeasurementModel::kRelativeMotion ||
                         (to.measurement_model == frontend::RotationMeasurementModel::kAuto && (gyro || pv));
   const std::string measurement = relative ? "relative_motion" : "previous_mean";
+  // With tracker.method odometry+pf and no gyro, the filter's "gyro" samples are the odometry's rates.
+  const bool odometry = cfg.tracker_method != pipeline::MosaicTracker::kParticleFilter && !cfg.use_gyro;
+  const std::string driver = odometry ? "contrast-maximisation odometry" : "gyro";
   const std::string why = to.measurement_model != frontend::RotationMeasurementModel::kAuto ? "set in the config"
-                          : gyro ? "auto: the gyro drives the prediction"
+                          : gyro ? "auto: the " + driver + " drives the prediction"
                           : pv   ? "auto: the particles carry their own velocities (particle_velocity, no gyro)"
                                  : "auto: no gyro and no particle velocities";
-  const std::string motion = gyro ? std::string("gyro") : frontend::rotation_motion_model_name(motion_used);
+  const std::string motion = gyro ? (odometry ? std::string("odometry") : std::string("gyro")) : frontend::rotation_motion_model_name(motion_used);
   const double mean_particles = st.weighted_batches > 0 ? static_cast<double>(st.particle_batches) / static_cast<double>(st.weighted_batches) : 0.0;
+  if (cfg.tracker_method == pipeline::MosaicTracker::kOdometry)
+    return "{\"summary\": " +
+           json_string(std::string("rotation integrated from the ") +
+                       (cfg.use_gyro ? "gyro" : "contrast-maximisation rate of each window") + ", no map registration") +
+           ", \"tracker\": \"odometry\"}";
   return "{\"summary\": " +
-         json_string("rotation, " + measurement + " measurement (" + why + "), " + motion + " prediction, " + json_number(mean_particles, 9) +
+         json_string(std::string(pipeline::mosaic_tracker_name(cfg.tracker_method)) + " tracker: rotation, " + measurement + " measurement (" + why + "), " + motion + " prediction, " + json_number(mean_particles, 9) +
                      " particles on average") +
          ", \"measurement\": {\"option\": \"" + frontend::rotation_measurement_model_name(to.measurement_model) + "\", \"resolved\": \"" +
          measurement + "\", \"reason\": " + json_string(why) + "}, \"motion\": {\"option\": \"" +
          frontend::rotation_motion_model_name(to.motion_model) + "\", \"resolved\": \"" + motion +
          "\", \"gyro_predictions\": " + std::to_string(st.gyro_predictions) + "}, \"particles\": {\"configured\": " +
-         std::to_string(to.num_particles) + ", \"mean\": " + json_number(mean_particles, 9) + "}}";
+         std::to_string(to.num_particles) + ", \"mean\": " + json_number(mean_particles, 9) + "}, \"tracker\": \"" +
+         pipeline::mosaic_tracker_name(cfg.tracker_method) + "\"}";
 }
 
 void write_stats_json(const MosaicArgs& args, const MosaicConfig& cfg, const MosaicRun& run) {
@@ -69,8 +82,9 @@ void write_stats_json(const MosaicArgs& args, const MosaicConfig& cfg, const Mos
     << ",\n  \"batch_size\": " << cfg.tracker.batch_size << ",\n  \"event_stride\": " << cfg.tracker.event_stride
     << ",\n  \"measurement_model\": \"" << frontend::rotation_measurement_model_name(cfg.tracker.measurement_model) << "\"" << ",\n  \"mosaic_size\": [" << cfg.mosaic.width << ", "
     << cfg.mosaic.height << "],\n  \"bootstrap\": {\"method\": \"" << (args.use_imu ? "gyro" : "contrast_maximisation")
-    << "\", \"duration_s\": " << json_number((bs.t_end_ns - run.t0_ns) * 1e-9, 9) << ", \"cmax_windows\": " << bs.cmax_windows << ", \"short_windows\": " << bs.short_windows
+    << "\", \"duration_s\": " << json_number((bs.t_end_ns - run.t0_ns) * 1e-9, 9) << ", \"cmax_windows\": " << bs.cmax_windows << ", \"short_windows\": " << bs.short_windows << ", \"still_windows\": " << bs.still_windows
     << ", \"tracker_contrast\": " << json_number(bs.tracker_contrast, 9) << ", \"contrast_samples\": " << bs.contrast_samples << "}"
+    << ",\n  \"odometry\": {\"windows\": " << ms.odometry.windows << ", \"short_windows\": " << ms.odometry.short_windows << ", \"still_windows\": " << ms.odometry.still_windows << "}"
     << ",\n  \"tracker\": {\"events_used\": " << st.events_used << ", \"skipped_no_previous\": " << st.skipped_no_previous
     << ", \"skipped_unknown_map\": " << st.skipped_unknown_map << ", \"skipped_stride\": " << st.skipped_stride << ", \"batches\": " << st.batches
     << ", \"resamples\": " << st.resamples << ", \"linearized_batches\": " << st.linearized_batches << ", \"gyro_predictions\": " << st.gyro_predictions
@@ -97,15 +111,49 @@ void write_stats_json(const MosaicArgs& args, const MosaicConfig& cfg, const Mos
   f << "]\n}\n";
 }
 
-// The mosaic against the true panorama of a simulated dataset (scene_resolved.yaml), as eval.json
-// members (empty when the dataset is not a simulated panorama).
+// The true panorama's log intensity in the mosaic frame (R_w_m: mosaic -> the simulator's world),
+// cfg.mosaic size, for a dataset written from a panorama by `evio simulate` (scene_resolved.yaml)
+// or by the crosscheck simulator (meta.json with scene.file, its 16-bit equirectangular texture in
+// the same convention, radiance I_min + (I_max - I_min) v / 65535 and log(I + log_eps)).
+// std::nullopt for any other dataset.
+std::optional<mapping::ImageF> true_panorama_log(const MosaicArgs& args, const MosaicConfig& cfg, const Eigen::Matrix3d& R_w_m) {
+  const fs::path scene = fs::path(args.dataset) / "scene_resolved.yaml";
+  if (fs::exists(scene)) {
+    const simulator::SimulationConfig sc = simulator::load_simulation_config(scene.string());
+    if (!sc.panorama) return std::nullopt;
+    return simulator::panorama_log_reference(*sc.panorama, R_w_m, cfg.mosaic.width, cfg.mosaic.height);
+  }
+  const fs::path meta = fs::path(args.dataset) / "meta.json";
+  if (!fs::exists(meta)) return std::nullopt;
+  YAML::Node m;
+  try {
+    m = YAML::LoadFile(meta.string());  // JSON is YAML
+  } catch (const YAML::Exception& e) {
+    throw InputError(meta.string(), e.mark.line + 1, e.what(), "the crosscheck simulator's meta.json");
+  }
+  if (!m["scene"] || !m["scene"].IsMap() || !m["scene"]["file"]) return std::nullopt;  // not a panorama scene
+  const YAML::Node ev = m["config"]["events"];
+  if (!ev || !ev["I_min"] || !ev["I_max"] || !ev["log_eps"])
+    throw InputError(meta.string(), 0, "a panorama scene without config.events.I_min, I_max and log_eps",
+                     "the crosscheck simulator's meta.json");
+  const double i_min = ev["I_min"].as<double>(), i_max = ev["I_max"].as<double>(), eps = ev["log_eps"].as<double>();
+  const fs::path png = fs::path(args.dataset) / m["scene"]["file"].as<std::string>();
+  // log(I + eps) = log of the texture loaded with both ends shifted by eps.
+  const simulator::Texture tex = simulator::Texture::load(png.string(), i_min + eps, i_max + eps,
+                                                          simulator::TextureWrap::kRepeat, simulator::TextureWrap::kClamp);
+  return simulator::panorama_log_reference(tex, R_w_m, cfg.mosaic.width, cfg.mosaic.height, i_min + eps);
+}
+
+// The mosaic against the true panorama (true_panorama_log), as eval.json members (empty when the
+// dataset has none).
 std::string mosaic_quality_json(const MosaicArgs& args, const MosaicConfig& cfg, const mapping::MosaicReconstruction& rec,
                                 const Eigen::Matrix3d& R_w_m, std::ostream& out) {
-  const fs::path scene = fs::path(args.dataset) / "scene_resolved.yaml";
-  if (!fs::exists(scene)) return {};
-  const simulator::SimulationConfig sc = simulator::load_simulation_config(scene.string());
-  if (!sc.panorama) return {};
-  const mapping::ImageF ref = simulator::panorama_log_reference(*sc.panorama, R_w_m, cfg.mosaic.width, cfg.mosaic.height);
+  const std::optional<mapping::ImageF> truth = true_panorama_log(args, cfg, R_w_m);
+  if (!truth) return {};
+  const mapping::ImageF& ref = *truth;
+  // The truth beside the mosaic, over the seen texels and in the same display mapping.
+  mapping::write_log_image_tiff((fs::path(args.out) / "panorama_true_log.tiff").string(), ref, &rec.seen);
+  mapping::write_log_image_png8((fs::path(args.out) / "panorama_true.png").string(), ref, &rec.seen, cfg.display);
   const mapping::ImageQuality q = mapping::compare_images(rec.log_intensity, ref, &rec.seen);
   auto quality = [&](const mapping::ImageQuality& x) {
     return "{\"psnr_db\": " + json_number(x.psnr_db, 9) + ", \"ssim\": " + json_number(x.ssim, 9) + ", \"rmse_log\": " + json_number(x.rmse, 9) +
@@ -116,6 +164,20 @@ std::string mosaic_quality_json(const MosaicArgs& args, const MosaicConfig& cfg,
   out << "mosaic vs true panorama: PSNR " << json_number(q.psnr_db, 9) << " dB, SSIM " << json_number(q.ssim, 9) << " over "
       << q.pixels << " seen pixels (affine log-intensity fit, " << mapping::poisson_weighting_name(rec.weighting)
       << " Poisson weighting)\n";
+  // What a person sees: panorama.png's display values against the truth's linear intensity (as a
+  // photograph shows it), affine fit over the seen texels, peak 1.
+  mapping::ImageF truth_linear(ref.rows(), ref.cols());
+  for (Eigen::Index k = 0; k < ref.size(); ++k) truth_linear.data()[k] = std::exp(ref.data()[k]);
+  mapping::ImageQualityOptions display_options;
+  display_options.peak = 1.0;
+  const float truth_max = truth_linear.maxCoeff();
+  if (truth_max > 0) truth_linear /= truth_max;
+  const mapping::ImageQuality d =
+      mapping::compare_images(mapping::log_image_to_display(rec.log_intensity, &rec.seen, cfg.display), truth_linear, &rec.seen,
+                              display_options);
+  json += ",\n  \"display_quality\": {\"psnr_db\": " + json_number(d.psnr_db, 9) + ", \"ssim\": " + json_number(d.ssim, 9) +
+          ", \"fit\": \"panorama.png's display values against the true linear intensity, affine over the seen pixels\"}";
+  out << "  panorama.png vs the true intensity: PSNR " << json_number(d.psnr_db, 9) << " dB, SSIM " << json_number(d.ssim, 9) << "\n";
   if (rec.weighting == mapping::PoissonWeighting::kInformation) {
     // The unweighted solve that seeded the weighted one: before / after on the same mosaic.
     const mapping::ImageQuality u = mapping::compare_images(rec.unweighted_log_intensity, ref, &rec.seen);

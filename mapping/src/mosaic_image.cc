@@ -81,10 +81,37 @@ ImageF log_image_to_display(const ImageF& L, const MaskU8* seen, const LogImageD
   const double inv_gamma = 1.0 / o.gamma;
   for (Eigen::Index k = 0; k < n; ++k) {
     if (!usable(k)) continue;
-    double t = hi > lo ? (value(k) - lo) / (hi - lo) : 0.5;
-    t = std::clamp(t, 0.0, 1.0);
-    out.data()[k] = static_cast<float>(std::pow(t, inv_gamma));
+    const double t = hi > lo ? (value(k) - lo) / (hi - lo) : 0.5;
+    out.data()[k] = static_cast<float>(std::clamp(t, 0.0, 1.0));
   }
+  if (o.equalize_clip > 0) {
+    // CLAHE on 16 bits; unseen pixels at the seen median so they do not pull the tiles' histograms.
+    std::vector<float> seen_t;
+    for (Eigen::Index k = 0; k < n; ++k)
+      if (usable(k)) seen_t.push_back(out.data()[k]);
+    std::nth_element(seen_t.begin(), seen_t.begin() + static_cast<std::ptrdiff_t>(seen_t.size() / 2), seen_t.end());
+    const float median = seen_t[seen_t.size() / 2];
+    const int rows = static_cast<int>(L.rows()), cols = static_cast<int>(L.cols());
+    cv::Mat img(rows, cols, CV_16UC1);
+    for (int j = 0; j < rows; ++j)
+      for (int i = 0; i < cols; ++i) {
+        const Eigen::Index k = static_cast<Eigen::Index>(j) * cols + i;
+        img.at<uint16_t>(j, i) = static_cast<uint16_t>(std::lround(65535.0 * (usable(k) ? out.data()[k] : median)));
+      }
+    const int tx = std::max(1, (cols + o.equalize_tile_px - 1) / o.equalize_tile_px);
+    const int ty = std::max(1, (rows + o.equalize_tile_px - 1) / o.equalize_tile_px);
+    cv::Ptr<cv::CLAHE> clahe = cv::createCLAHE(o.equalize_clip, cv::Size(tx, ty));
+    cv::Mat eq;
+    clahe->apply(img, eq);
+    for (int j = 0; j < rows; ++j)
+      for (int i = 0; i < cols; ++i) {
+        const Eigen::Index k = static_cast<Eigen::Index>(j) * cols + i;
+        if (usable(k)) out.data()[k] = static_cast<float>(eq.at<uint16_t>(j, i) / 65535.0);
+      }
+  }
+  if (o.gamma != 1.0)
+    for (Eigen::Index k = 0; k < n; ++k)
+      if (usable(k)) out.data()[k] = static_cast<float>(std::pow(static_cast<double>(out.data()[k]), inv_gamma));
   return out;
 }
 

@@ -146,6 +146,8 @@ const Table<LogImageDisplayOptions>& log_image_display_table() {
                                 .number("high_percentile", &O::high_percentile, Interval::open_closed(0, 100), "%")
                                 .boolean("linear_intensity", &O::linear_intensity)
                                 .boolean("transparent_unseen", &O::transparent_unseen)
+                                .number("equalize_clip", &O::equalize_clip, Range::kNonNegative, "CLAHE clip limit")
+                                .integer("equalize_tile_px", &O::equalize_tile_px, 8, 65536)
                                 .validate();
   return t;
 }

@@ -33,10 +33,52 @@ Eigen::Vector3d MosaicPipeline::Impl::gyro_c_at(int64_t t_cam) const {
 
 // ---- bootstrap: rotation from the gyro or from contrast-maximisation rates ---------------------
 
-// Processes one bootstrap window when its events (and IMU) are complete; false when waiting.
+bool MosaicPipeline::Impl::cmax_window(const Event* ev, size_t n, int64_t tw0, int64_t t_limit, size_t* count,
+                                       int64_t* tw1) const {
+  int64_t end = std::min(t_limit, tw0 + opt.bootstrap_window_ns);
+  const size_t max_events = static_cast<size_t>(opt.bootstrap_window_events);
+  size_t j = 0;
+  while (j < n && ev[j].t_ns < end && j < max_events) ++j;
+  if (j == n && !finishing) return false;  // the window may hold more events
+  if (j < n && ev[j].t_ns < end) end = ev[j].t_ns;  // closed by the event count
+  *count = j;
+  *tw1 = end;
+  return true;
+}
+
+bool MosaicPipeline::Impl::cmax_rate(const Event* ev, size_t n, int64_t tw0, int64_t tw1, bool cut, bool* still) {
+  *still = false;
+  if (cut && 2 * static_cast<int64_t>(n) < opt.bootstrap_window_events && 2 * (tw1 - tw0) < opt.bootstrap_window_ns)
+    return false;  // a sub-millisecond window can give a rate many times the true one: the previous rate holds
+  std::vector<Eigen::Vector3f> b;
+  std::vector<int64_t> t;
+  b.reserve(n);
+  t.reserve(n);
+  for (size_t k = 0; k < n; ++k) {
+    if (ev[k].x >= W || ev[k].y >= H || !undistorter.valid(ev[k].x, ev[k].y)) continue;
+    b.push_back(undistorter.bearing(ev[k].x, ev[k].y));
+    t.push_back(ev[k].t_ns);
+  }
+  const auto r = mapping::estimate_angular_velocity(b, t, tw0, omega_c, cmax);
+  // Before the first moving window (a static start) the gain threshold applies; afterwards only a
+  // rate that is worse than none reads as still.
+  const double min_gain = moved ? 1.0 : opt.bootstrap_min_contrast_gain;
+  *still = !(r.contrast >= min_gain * r.contrast_zero);
+  if (!*still) moved = true;
+  omega_c = *still ? Eigen::Vector3d::Zero() : r.omega_c;
+  return true;
+}
+
+// Processes one bootstrap window when its events (and IMU) are complete; false when waiting. With
+// kOdometry the bootstrap runs to the end of the data.
 bool MosaicPipeline::Impl::bootstrap_step() {
+  const bool odometry_only = opt.tracker_method == MosaicTracker::kOdometry;
   if (available() == 0) {
     if (!finishing) return false;
+    if (odometry_only) {
+      result.stats.bootstrap.t_end_ns = result.stats.t_last_event_ns;
+      return false;
+    }
     end_bootstrap(result.stats.t_last_event_ns);
     return true;
   }
@@ -47,35 +89,30 @@ bool MosaicPipeline::Impl::bootstrap_step() {
     end_bootstrap(tw0);
     return true;
   }
-  int64_t tw1 = std::min(t_boot, tw0 + (opt.use_gyro ? std::min(opt.bootstrap_window_ns, opt.gyro_bootstrap_window_ns)
-                                                     : opt.bootstrap_window_ns));
-  const size_t max_events = opt.use_gyro ? std::numeric_limits<size_t>::max() : static_cast<size_t>(opt.bootstrap_window_events);
   size_t j = 0;
-  while (j < n && ev[j].t_ns < tw1 && j < max_events) ++j;
-  if (j == n && !finishing) return false;  // the window may hold more events
-  if (j < n && ev[j].t_ns < tw1) tw1 = ev[j].t_ns;  // closed by the event count
+  int64_t tw1 = 0;
+  if (opt.use_gyro) {
+    tw1 = std::min(t_boot, tw0 + std::min(opt.bootstrap_window_ns, opt.gyro_bootstrap_window_ns));
+    while (j < n && ev[j].t_ns < tw1) ++j;
+    if (j == n && !finishing) return false;  // the window may hold more events
+  } else if (!cmax_window(ev, n, tw0, t_boot, &j, &tw1)) {
+    return false;
+  }
   if (!imu_ready(tw1)) return false;
   const std::optional<Eigen::Matrix3d> R_ref0 = boot_ref_at(tw0), R_ref1 = boot_ref_at(tw1);
   const bool use_ref = R_ref0 && R_ref1;
   if (use_ref) {
     omega_c = tw1 > tw0 ? Eigen::Vector3d(calib::so3_log(R_ref0->transpose() * *R_ref1) / (1e-9 * static_cast<double>(tw1 - tw0)))
                         : omega_c;
-  } else if (!opt.use_gyro && result.stats.bootstrap.cmax_windows > 0 && tw1 == t_boot &&
-             2 * static_cast<int64_t>(j) < opt.bootstrap_window_events && 2 * (tw1 - tw0) < opt.bootstrap_window_ns) {
-    // The bootstrap's last window, cut short by its end: too little motion to constrain the rate
-    // (a sub-millisecond window can give a rate many times the true one, and the tracker started
-    // from it gets lost). The previous window's rate holds.
-    ++result.stats.bootstrap.short_windows;
   } else if (!opt.use_gyro) {
-    std::vector<Eigen::Vector3f> b;
-    std::vector<int64_t> t;
-    for (size_t k = 0; k < j; ++k) {
-      if (ev[k].x >= W || ev[k].y >= H || !undistorter.valid(ev[k].x, ev[k].y)) continue;
-      b.push_back(undistorter.bearing(ev[k].x, ev[k].y));
-      t.push_back(ev[k].t_ns);
-    }
-    omega_c = mapping::estimate_angular_velocity(b, t, tw0, omega_c, cmax).omega_c;
-    ++result.stats.bootstrap.cmax_windows;
+    // The first window is never kept short: there is no previous rate.
+    const bool cut = result.stats.bootstrap.cmax_windows > 0 && (tw1 == t_boot || j == n);
+    bool still = false;
+    if (cmax_rate(ev, j, tw0, tw1, cut, &still)) {
+      ++result.stats.bootstrap.cmax_windows;
+      if (still) ++result.stats.bootstrap.still_windows;
+    } else
+      ++result.stats.bootstrap.short_windows;
   }
   for (size_t k = 0; k < j; ++k) {
     const Event& e = ev[k];
@@ -150,6 +187,11 @@ void MosaicPipeline::Impl::end_bootstrap(int64_t t_track0) {
   bs.tracker_contrast = contrast_used;
   frontend::RotationParticleFilterOptions tracker_options = opt.tracker;
   tracker_options.contrast_threshold = contrast_used;
+  if (!opt.use_gyro && opt.tracker_method == MosaicTracker::kOdometryParticleFilter) {
+    // The odometry's rates are the filter's gyro: one sample per window.
+    tracker_options.gyro_noise_rad_per_sqrt_s = opt.odometry_noise_rad_per_sqrt_s;
+    tracker_options.gyro_max_age_ns = std::max(tracker_options.gyro_max_age_ns, opt.bootstrap_window_ns);
+  }
   pf = std::make_unique<frontend::RotationParticleFilter>(undistorter, tracker_options);
   pf->reset(Eigen::Quaterniond(R), t_track0);
   if (!opt.use_gyro) pf->set_velocity(omega_c);  // the last contrast-maximisation rate (kParticleVelocity)

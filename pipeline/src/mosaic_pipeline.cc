@@ -12,6 +12,18 @@
 
 namespace evio::pipeline {
 
+const char* mosaic_tracker_name(MosaicTracker t) {
+  switch (t) {
+    case MosaicTracker::kParticleFilter:
+      return "pf";
+    case MosaicTracker::kOdometry:
+      return "odometry";
+    case MosaicTracker::kOdometryParticleFilter:
+      return "odometry+pf";
+  }
+  return "?";
+}
+
 bool MosaicPipelineOptions::Validate(std::string* why) const {
   auto fail = [why](const std::string& m) {
     if (why) *why = m;
@@ -21,6 +33,11 @@ bool MosaicPipelineOptions::Validate(std::string* why) const {
   if (!mosaic.Validate(&w)) return fail("mosaic: " + w);
   if (!tracker.Validate(&w)) return fail("tracker: " + w);
   if (!cmax.Validate(&w)) return fail("cmax: " + w);
+  if (tracker_method != MosaicTracker::kParticleFilter && tracker_method != MosaicTracker::kOdometry &&
+      tracker_method != MosaicTracker::kOdometryParticleFilter)
+    return fail("tracker_method is not a MosaicTracker");
+  if (!(odometry_noise_rad_per_sqrt_s > 0) || !std::isfinite(odometry_noise_rad_per_sqrt_s))
+    return fail("odometry_noise_rad_per_sqrt_s must be finite and > 0 rad/sqrt(s)");
   if (failure_window_ns <= 0) return fail("failure_window_ns must be > 0 ns");
   if (failure_min_events < 0) return fail("failure_min_events must be >= 0");
   if (failure_lost_windows < 1) return fail("failure_lost_windows must be >= 1");
@@ -48,6 +65,8 @@ bool MosaicPipelineOptions::Validate(std::string* why) const {
   if (bootstrap_ns < 0) return fail("bootstrap_ns must be >= 0");
   if (bootstrap_window_ns <= 0) return fail("bootstrap_window_ns must be > 0");
   if (bootstrap_window_events < 1) return fail("bootstrap_window_events must be >= 1");
+  if (!(bootstrap_min_contrast_gain >= 1) || !std::isfinite(bootstrap_min_contrast_gain))
+    return fail("bootstrap_min_contrast_gain must be finite and >= 1");
   if (gyro_bootstrap_window_ns <= 0) return fail("gyro_bootstrap_window_ns must be > 0");
   if (gyro_integration_step_ns <= 0) return fail("gyro_integration_step_ns must be > 0");
   if (!(min_contrast_ratio >= 0 && min_contrast_ratio <= 1)) return fail("min_contrast_ratio must be in [0, 1]");
@@ -153,6 +172,34 @@ mapping::GradientMosaic::ReconstructMode MosaicPipeline::Impl::next_reconstruct_
 
 // ---- tracking and mapping ----------------------------------------------------------------------
 
+// kOdometryParticleFilter, events only: the contrast-maximisation windows after the tracked events
+// until one's middle is after t_now, each rate given to the filter as a gyro sample at its
+// window's middle (the filter interpolates linearly between them). False while a window may still
+// get events.
+bool MosaicPipeline::Impl::odometry_ahead(int64_t t_now) {
+  while (odo_mid_t <= t_now) {
+    const size_t i0 = head + odo_ahead;
+    const size_t n = pending.size() - i0;
+    if (n == 0) return finishing;  // the data's end: the last rate holds
+    const Event* ev = pending.data() + i0;
+    const int64_t tw0 = ev[0].t_ns;
+    size_t j = 0;
+    int64_t tw1 = 0;
+    if (!cmax_window(ev, n, tw0, INT64_MAX, &j, &tw1)) return false;
+    bool still = false;
+    if (cmax_rate(ev, j, tw0, tw1, j == n, &still)) {
+      ++result.stats.odometry.windows;
+      if (still) ++result.stats.odometry.still_windows;
+    } else
+      ++result.stats.odometry.short_windows;
+    odo_mid_t = tw0 + (tw1 - tw0) / 2;
+    odo_t = tw1;
+    odo_ahead += j;
+    pf->add_gyro(odo_mid_t, omega_c);
+  }
+  return true;
+}
+
 // Processes one particle-filter batch when its events (and IMU) are complete; false when waiting.
 bool MosaicPipeline::Impl::tracking_step() {
   const size_t batch = static_cast<size_t>(opt.tracker.batch_size);
@@ -161,6 +208,8 @@ bool MosaicPipeline::Impl::tracking_step() {
   const Event* ev = pending.data() + head;
   const int64_t t_now = ev[n - 1].t_ns;
   if (!imu_ready(t_now)) return false;
+  if (!opt.use_gyro && opt.tracker_method == MosaicTracker::kOdometryParticleFilter && !odometry_ahead(t_now))
+    return false;
   if (opt.use_gyro) {
     if (!imu_started) {
       // The last sample at or before the tracking start.
@@ -212,6 +261,7 @@ bool MosaicPipeline::Impl::tracking_step() {
   }
   record(t_pf, R_pf);
   head += n;
+  odo_ahead = odo_ahead > n ? odo_ahead - n : 0;
   processed += static_cast<int64_t>(n);
   // The tracker switches to a finished reconstruction once its latency has passed.
   if (recs_in_use < recs_submitted && processed - rec_point >= opt.reconstruct_latency_events) use_reconstruction();
@@ -289,7 +339,7 @@ void MosaicPipeline::add_events(EventSpan events) {
   MosaicStats& st = m.result.stats;
   if (m.phase == Impl::Phase::kStart) {
     m.t0 = events.front().t_ns;
-    m.t_boot = m.t0 + options_.bootstrap_ns;
+    m.t_boot = options_.tracker_method == MosaicTracker::kOdometry ? INT64_MAX : m.t0 + options_.bootstrap_ns;
     st.t_first_event_ns = m.t0;
     m.mapper.collect_segments = options_.calibrate_contrast;
     m.record(m.t0, m.R);

@@ -90,6 +90,14 @@ struct MosaicPipeline::Impl {
   int64_t recs_in_use = 0;             // and switched to by the tracker
   int64_t next_snap = INT64_MAX;
 
+  // Odometry ahead of the filter (kOdometryParticleFilter, events only): pending[head + odo_ahead]
+  // is the first event of the next contrast-maximisation window, odo_t the end of the last window
+  // (INT64_MIN: none yet), odo_mid_t the middle of the last window (its rate's sample time).
+  size_t odo_ahead = 0;
+  int64_t odo_t = INT64_MIN;
+  int64_t odo_mid_t = INT64_MIN;
+  bool moved = false;  // a contrast-maximisation window has sharpened its events (cmax_rate)
+
   // Tracking failure (mosaic_tracking_monitor.cc).
   bool lost = false;
   int64_t probe_seen_t = INT64_MIN, window_t0 = INT64_MIN;
@@ -130,6 +138,17 @@ struct MosaicPipeline::Impl {
   mapping::GradientMosaic::ReconstructMode next_reconstruct_mode();
 
   // ---- bootstrap (mosaic_bootstrap.cc) ----------------------------------------------------------
+  // Events only: the end of the contrast-maximisation window that starts with ev[0] at tw0, over
+  // the n events ev[0..n): *count events (closed by bootstrap_window_events), *tw1 its end (the
+  // count's closing event, tw0 + bootstrap_window_ns, or t_limit, whichever is first). False when
+  // the window may still get events (it reaches the end of ev[0..n) before its end, not finishing).
+  bool cmax_window(const Event* ev, size_t n, int64_t tw0, int64_t t_limit, size_t* count, int64_t* tw1) const;
+  // The rotational contrast-maximisation rate of the events ev[0..n) around tw0, from omega_c;
+  // omega_c is kept when the window was cut short (`cut`: by the bootstrap's or the data's end)
+  // below half the window's time and events (too little motion to constrain the rate), and set to
+  // zero when the window reads as still (*still = true; see bootstrap_min_contrast_gain).
+  // Returns true when a rate was estimated.
+  bool cmax_rate(const Event* ev, size_t n, int64_t tw0, int64_t tw1, bool cut, bool* still);
   bool bootstrap_step();
   void end_bootstrap(int64_t t_track0);
 
@@ -141,6 +160,7 @@ struct MosaicPipeline::Impl {
   bool global_relocalize(int64_t t_now);
 
   // ---- tracking and mapping (mosaic_pipeline.cc) ------------------------------------------------
+  bool odometry_ahead(int64_t t_now);
   bool tracking_step();
   void use_reconstruction();
   void process();

@@ -1,5 +1,5 @@
 // Log-intensity image output and quality (mapping/mosaic_image.h): display mapping (percentiles,
-// gamma, unseen pixels), PNG 8/16 and float TIFF files read back, and PSNR / SSIM after the affine
+// gamma, unseen pixels, local contrast equalisation), PNG 8/16 and float TIFF files read back, and PSNR / SSIM after the affine
 // fit with known answers.
 #include <cmath>
 #include <cstdio>
@@ -71,6 +71,50 @@ TEST(MosaicImage, DisplayMappingPercentilesGammaUnseen) {
   EXPECT_FLOAT_EQ(t(2, 2), 0.5f);
   LogImageDisplayOptions bad;
   bad.high_percentile = 0.5;
+  EXPECT_THROW(evio::mapping::log_image_to_display(L, nullptr, bad), std::invalid_argument);
+}
+
+// Local contrast equalisation (equalize_clip > 0, CLAHE): a dark half and a bright half, each with
+// a faint texture. The global mapping spends the range on the step between the halves, so each
+// half's texture spans a small part of it; equalised per tile, each half's texture is stretched.
+// Unseen pixels stay black and out of the equalisation; bad settings are rejected.
+TEST(MosaicImage, LocalContrastEqualisationStretchesEachRegionsTexture) {
+  const int W = 256, H = 128;
+  ImageF L(H, W);
+  for (int j = 0; j < H; ++j)
+    for (int i = 0; i < W; ++i)
+      L(j, i) = static_cast<float>((i < W / 2 ? -2.0 : 0.0) + 0.1 * std::sin(0.4 * i) * std::cos(0.3 * j));
+  MaskU8 seen = MaskU8::Ones(H, W);
+  for (int i = 0; i < W; ++i) seen(0, i) = 0;
+  auto texture_std = [&](const ImageF& t, int i0, int i1) {  // the texture's spread inside one half
+    double s = 0, s2 = 0;
+    int n = 0;
+    for (int j = 8; j < H - 8; ++j)
+      for (int i = i0; i < i1; ++i) {
+        s += t(j, i);
+        s2 += t(j, i) * t(j, i);
+        ++n;
+      }
+    return std::sqrt(std::max(0.0, s2 / n - (s / n) * (s / n)));
+  };
+  LogImageDisplayOptions o;
+  const ImageF global = evio::mapping::log_image_to_display(L, &seen, o);
+  o.equalize_clip = 3.0;
+  o.equalize_tile_px = 32;
+  const ImageF eq = evio::mapping::log_image_to_display(L, &seen, o);
+  const double g_dark = texture_std(global, 8, W / 2 - 8), g_bright = texture_std(global, W / 2 + 8, W - 8);
+  const double e_dark = texture_std(eq, 8, W / 2 - 8), e_bright = texture_std(eq, W / 2 + 8, W - 8);
+  std::printf("texture std, global / equalised: dark %.4f / %.4f, bright %.4f / %.4f\n", g_dark, e_dark, g_bright, e_bright);
+  EXPECT_GT(e_dark, 8 * g_dark);  // measured 11.2x
+  EXPECT_GT(e_bright, 8 * g_bright);  // measured 11.2x
+  for (int i = 0; i < W; ++i) EXPECT_EQ(eq(0, i), 0.0f);
+  EXPECT_GE(eq.minCoeff(), 0.0f);
+  EXPECT_LE(eq.maxCoeff(), 1.0f);
+  LogImageDisplayOptions bad;
+  bad.equalize_clip = -1;
+  EXPECT_THROW(evio::mapping::log_image_to_display(L, nullptr, bad), std::invalid_argument);
+  bad = {};
+  bad.equalize_tile_px = 4;
   EXPECT_THROW(evio::mapping::log_image_to_display(L, nullptr, bad), std::invalid_argument);
 }
 

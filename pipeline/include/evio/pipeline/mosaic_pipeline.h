@@ -29,7 +29,29 @@
 
 namespace evio::pipeline {
 
+// What tracks the rotation after the bootstrap.
+//  - kParticleFilter: the particle filter against the mosaic (Kim et al.); its prediction is the
+//    gyro's with use_gyro, else each particle's own angular velocity.
+//  - kOdometry: no map registration: the bootstrap's rotation source continues to the end, i.e.
+//    the gyro's rates integrated (use_gyro) or, events only, the rotational contrast-maximisation
+//    rate of each window (bootstrap_window_ns / bootstrap_window_events) integrated. It cannot be
+//    lost (every window gives a rate) but drifts with the rate errors; no failure detection.
+//  - kOdometryParticleFilter: the particle filter predicted by the odometry's rates: the gyro's
+//    with use_gyro (the same as kParticleFilter), else the contrast-maximisation windows' rates,
+//    computed ahead of the filter over the buffered events (one sample per window, at its middle,
+//    linear in between) with prediction noise odometry_noise_rad_per_sqrt_s. While lost, the
+//    filter keeps following the odometry and its particles are spread around it every failure
+//    window (failure_relocalize_spread_rad) until the map is found again.
+enum class MosaicTracker { kParticleFilter, kOdometry, kOdometryParticleFilter };
+// "pf", "odometry", "odometry+pf".
+const char* mosaic_tracker_name(MosaicTracker t);
+
 struct MosaicPipelineOptions {
+  MosaicTracker tracker_method = MosaicTracker::kParticleFilter;
+  // kOdometryParticleFilter without the gyro: the filter's rotation noise density around the
+  // contrast-maximisation rates, rad/sqrt(s) (> 0); covers the windows' rate errors.
+  double odometry_noise_rad_per_sqrt_s = 0.1;
+
   mapping::GradientMosaicOptions mosaic;            // equirectangular mosaic size (px), C, EKF noise, ...
   // particles, batch_size (events), event_stride, ...; probes every 4th batch here (the filter's
   // own default is none): tracker.probe_every_batches and probe_offset_rad drive the failure
@@ -91,6 +113,15 @@ struct MosaicPipelineOptions {
   // 66 deg/s (too little motion per window); fixed 30 ms ones diverged at 270 deg/s.
   int64_t bootstrap_window_ns = 50'000'000;
   int bootstrap_window_events = 40000;
+  // Events only, a static start: until the first contrast-maximisation window whose rate sharpens
+  // its image of warped events by at least this factor over no rotation (IWE variance at the rate
+  // / at zero, >= 1), windows are still: rate zero (the simplest motion that explains the events;
+  // on a still camera's noise events the maximiser's optimum is a rotation that is not there).
+  // From that window on, only a rate that sharpens less than none at all (gain < 1) reads as
+  // still: a moving window's gain also depends on the motion within it (dense scenes close their
+  // windows by the event count after a few pixels of motion), so the threshold would zero real
+  // rates there.
+  double bootstrap_min_contrast_gain = 1.15;
   // With the gyro: bootstrap windows of min(bootstrap_window_ns, this), ns (> 0); within one the
   // rate at each event's time is held constant from the event window's start.
   int64_t gyro_bootstrap_window_ns = 1'000'000;
@@ -199,10 +230,19 @@ struct MosaicBootstrapStats {
   int64_t t_end_ns = 0;           // tracking starts here (camera clock)
   int64_t cmax_windows = 0;       // contrast-maximisation windows (events only)
   int64_t short_windows = 0;      // a last window under half the window's time and events: previous rate kept
+  int64_t still_windows = 0;      // of cmax_windows, read as still (bootstrap_min_contrast_gain): rate zero
   int64_t events = 0;             // events of the bootstrap
   double tracker_contrast = 0;    // the tracker's C, log units
   bool contrast_calibrated = false;  // tracker_contrast from the bootstrap mosaic (else as configured)
   int64_t contrast_samples = 0;   // calibration samples used
+};
+
+// The odometry's contrast-maximisation windows after the bootstrap (events only,
+// kOdometryParticleFilter; with kOdometry the bootstrap runs to the end).
+struct MosaicOdometryStats {
+  int64_t windows = 0;        // windows whose rate was estimated
+  int64_t short_windows = 0;  // a last window under half the window's time and events: previous rate kept
+  int64_t still_windows = 0;  // of windows, read as still (bootstrap_min_contrast_gain): rate zero
 };
 
 // A span of lost tracking (camera clock): from the start of the first failure window below the
@@ -230,6 +270,7 @@ struct MosaicStats {
   int64_t seen_pixels = 0;            // of the final reconstruction
   double seen_fraction = 0;           // seen_pixels / mosaic texels
   MosaicBootstrapStats bootstrap;
+  MosaicOdometryStats odometry;
   frontend::RotationParticleFilterStats tracker;
   // Tracking quality (tracker.probe_every_batches > 0): the failure windows' mean probe contrast
   // (log-likelihood per event), lowest and mean over the windows; events not mapped while lost.
