@@ -10,12 +10,15 @@
 #include <sstream>
 
 #include <gtest/gtest.h>
+#include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
 #include "evio/calib/error.h"
 #include "evio_test/temp_dir.h"
 #include "evio_test/text_file.h"
 #include "simulate_command.h"
+#include "evio/simulator/scene_config.h"
+#include "evio/simulator/texture.h"
 
 namespace evio::apps {
 namespace {
@@ -105,6 +108,51 @@ TEST(MosaicCommand, ShortRotationWithAndWithoutGyro) {
     EXPECT_LE(c, 0.2) << stats;
     EXPECT_EQ(json_value(stats, "event_stride"), use_imu ? 4 : 1) << stats;
   }
+}
+
+// The crosscheck simulator's truth (meta.json + a 16-bit equirectangular panorama.png, radiance
+// I_min + (I_max - I_min) v / 65535, log(I + log_eps)): the same simulated sequence written in
+// that form (evio's panorama texture quantised to 16 bits, scene_resolved.yaml left out) scores
+// the same mosaic as evio's own truth, and the truth is written beside it.
+TEST(MosaicCommand, CrosscheckPanoramaIsTheSameTruth) {
+  evio_test::TempDir dir;
+  const std::string seq = simulate_rotation(dir, 0.6);
+  const std::string x = dir.file("crosscheck");
+  std::filesystem::create_directories(x);
+  for (const auto& e : std::filesystem::directory_iterator(seq))
+    if (e.is_regular_file() && e.path().filename() != "scene_resolved.yaml")
+      std::filesystem::copy_file(e.path(), x + "/" + e.path().filename().string());
+  const simulator::SimulationConfig sc = simulator::load_simulation_config(seq + "/scene_resolved.yaml");
+  ASSERT_TRUE(sc.panorama);
+  const cv::Mat& tex = sc.panorama->level(0);
+  double lo = 0, hi = 0;
+  cv::minMaxLoc(tex, &lo, &hi);
+  cv::Mat v16;
+  tex.convertTo(v16, CV_16U, 65535.0 / (hi - lo), -65535.0 * lo / (hi - lo));
+  ASSERT_TRUE(cv::imwrite(x + "/panorama.png", v16));
+  std::ofstream(x + "/meta.json") << "{\"generator\": \"test\", \"scene\": {\"file\": \"panorama.png\"}, \"config\": {\"events\": "
+                                     "{\"I_min\": " << lo << ", \"I_max\": " << hi << ", \"log_eps\": 0.0}}}\n";
+  double psnr[2] = {0, 0}, ssim[2] = {0, 0};
+  for (int k = 0; k < 2; ++k) {
+    MosaicArgs a;
+    a.dataset = k == 0 ? seq : x;
+    a.out = dir.file(k == 0 ? "own" : "cross");
+    a.gt = a.dataset + "/groundtruth.txt";
+    a.use_imu = true;
+    a.progress = false;
+    std::ostringstream o;
+    ASSERT_EQ(run_mosaic(a, o), 0);
+    const std::string ev = read(a.out + "/eval.json");
+    psnr[k] = json_value(ev, "psnr_db");
+    ssim[k] = json_value(ev, "ssim");
+    EXPECT_TRUE(std::isfinite(json_value(ev.substr(ev.find("display_quality")), "psnr_db"))) << ev;
+    EXPECT_TRUE(std::filesystem::exists(a.out + "/panorama_true.png"));
+    EXPECT_TRUE(std::filesystem::exists(a.out + "/panorama_true_log.tiff"));
+  }
+  std::printf("mosaic vs truth: evio's scene %.3f dB / %.4f, crosscheck form %.3f dB / %.4f\n", psnr[0], ssim[0], psnr[1], ssim[1]);
+  EXPECT_GT(psnr[0], 20.0);
+  EXPECT_NEAR(psnr[1], psnr[0], 0.05);
+  EXPECT_NEAR(ssim[1], ssim[0], 0.002);
 }
 
 TEST(MosaicConfig, ErrorsNameFileLineAndKey) {
