@@ -89,6 +89,8 @@ const Table<C>& mosaic_config_table() {
         .duration_ms("window_ms", &C::bootstrap_window_ns, Range::kPositive)
         .integer("window_events", &C::bootstrap_window_events, 1000, 100000000)
         .number("min_contrast_gain", &C::bootstrap_min_contrast_gain, Interval::at_least(1), "ratio")
+        .integer("rate_max_events", &C::bootstrap_rate_max_events, 0, 100000000)
+        .note("rate_max_events", "0: all of the window's events")
         .include(mapping::rotational_cmax_table(), &C::cmax, {"width", "height", "focal_px"})  // those: the camera's
         .boolean("calibrate_contrast", &C::calibrate_contrast)
         .number("min_contrast_ratio", &C::min_contrast_ratio, Range::kUnit, "")

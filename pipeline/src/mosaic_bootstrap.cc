@@ -54,7 +54,10 @@ bool MosaicPipeline::Impl::cmax_rate(const Event* ev, size_t n, int64_t tw0, int
   std::vector<int64_t> t;
   b.reserve(n);
   t.reserve(n);
-  for (size_t k = 0; k < n; ++k) {
+  // At most bootstrap_rate_max_events of them, evenly strided (0: all).
+  const size_t cap = static_cast<size_t>(opt.bootstrap_rate_max_events);
+  const size_t stride = cap > 0 && n > cap ? (n + cap - 1) / cap : 1;
+  for (size_t k = 0; k < n; k += stride) {
     if (ev[k].x >= W || ev[k].y >= H || !undistorter.valid(ev[k].x, ev[k].y)) continue;
     b.push_back(undistorter.bearing(ev[k].x, ev[k].y));
     t.push_back(ev[k].t_ns);

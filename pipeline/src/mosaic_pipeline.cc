@@ -65,6 +65,7 @@ bool MosaicPipelineOptions::Validate(std::string* why) const {
   if (bootstrap_ns < 0) return fail("bootstrap_ns must be >= 0");
   if (bootstrap_window_ns <= 0) return fail("bootstrap_window_ns must be > 0");
   if (bootstrap_window_events < 1) return fail("bootstrap_window_events must be >= 1");
+  if (bootstrap_rate_max_events < 0) return fail("bootstrap_rate_max_events must be >= 0");
   if (!(bootstrap_min_contrast_gain >= 1) || !std::isfinite(bootstrap_min_contrast_gain))
     return fail("bootstrap_min_contrast_gain must be finite and >= 1");
   if (gyro_bootstrap_window_ns <= 0) return fail("gyro_bootstrap_window_ns must be > 0");

@@ -122,6 +122,9 @@ struct MosaicPipelineOptions {
   // windows by the event count after a few pixels of motion), so the threshold would zero real
   // rates there.
   double bootstrap_min_contrast_gain = 1.15;
+  // Events only: a window's contrast-maximisation rate uses at most this many of its events,
+  // evenly strided (count, >= 0; 0: all). The rate's cost is linear in the events it warps.
+  int bootstrap_rate_max_events = 0;
   // With the gyro: bootstrap windows of min(bootstrap_window_ns, this), ns (> 0); within one the
   // rate at each event's time is held constant from the event window's start.
   int64_t gyro_bootstrap_window_ns = 1'000'000;
