@@ -125,19 +125,29 @@ std::optional<mapping::ImageF> true_panorama_log(const MosaicArgs& args, const M
   }
   const fs::path meta = fs::path(args.dataset) / "meta.json";
   if (!fs::exists(meta)) return std::nullopt;
-  YAML::Node m;
+  const char* expected = "the crosscheck simulator's meta.json (scene.file, config.events.I_min, I_max, log_eps)";
+  double i_min = 0, i_max = 0, eps = 0;
+  std::string file;
   try {
-    m = YAML::LoadFile(meta.string());  // JSON is YAML
+    const YAML::Node m = YAML::LoadFile(meta.string());  // JSON is YAML
+    const YAML::Node scene = m["scene"];
+    if (!scene || !scene.IsMap() || !scene["file"]) return std::nullopt;  // not a panorama scene
+    const YAML::Node ev = m["config"] ? m["config"]["events"] : YAML::Node();
+    if (!ev || !ev["I_min"] || !ev["I_max"] || !ev["log_eps"])
+      throw InputError(meta.string(), 0, "a panorama scene without config.events.I_min, I_max and log_eps", expected);
+    i_min = ev["I_min"].as<double>();
+    i_max = ev["I_max"].as<double>();
+    eps = ev["log_eps"].as<double>();
+    file = scene["file"].as<std::string>();
   } catch (const YAML::Exception& e) {
-    throw InputError(meta.string(), e.mark.line + 1, e.what(), "the crosscheck simulator's meta.json");
+    throw InputError(meta.string(), e.mark.line + 1, e.what(), expected);
   }
-  if (!m["scene"] || !m["scene"].IsMap() || !m["scene"]["file"]) return std::nullopt;  // not a panorama scene
-  const YAML::Node ev = m["config"]["events"];
-  if (!ev || !ev["I_min"] || !ev["I_max"] || !ev["log_eps"])
-    throw InputError(meta.string(), 0, "a panorama scene without config.events.I_min, I_max and log_eps",
-                     "the crosscheck simulator's meta.json");
-  const double i_min = ev["I_min"].as<double>(), i_max = ev["I_max"].as<double>(), eps = ev["log_eps"].as<double>();
-  const fs::path png = fs::path(args.dataset) / m["scene"]["file"].as<std::string>();
+  if (!(i_min >= 0 && i_max > i_min && eps >= 0 && std::isfinite(i_max) && std::isfinite(eps)))
+    throw InputError(meta.string(), 0,
+                     "config.events I_min " + std::to_string(i_min) + ", I_max " + std::to_string(i_max) + ", log_eps " +
+                         std::to_string(eps),
+                     "0 <= I_min < I_max and log_eps >= 0, finite");
+  const fs::path png = fs::path(args.dataset) / file;
   // log(I + eps) = log of the texture loaded with both ends shifted by eps.
   const simulator::Texture tex = simulator::Texture::load(png.string(), i_min + eps, i_max + eps,
                                                           simulator::TextureWrap::kRepeat, simulator::TextureWrap::kClamp);

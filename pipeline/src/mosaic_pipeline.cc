@@ -194,7 +194,6 @@ bool MosaicPipeline::Impl::odometry_ahead(int64_t t_now) {
     } else
       ++result.stats.odometry.short_windows;
     odo_mid_t = tw0 + (tw1 - tw0) / 2;
-    odo_t = tw1;
     odo_ahead += j;
     pf->add_gyro(odo_mid_t, omega_c);
   }

@@ -91,10 +91,9 @@ struct MosaicPipeline::Impl {
   int64_t next_snap = INT64_MAX;
 
   // Odometry ahead of the filter (kOdometryParticleFilter, events only): pending[head + odo_ahead]
-  // is the first event of the next contrast-maximisation window, odo_t the end of the last window
-  // (INT64_MIN: none yet), odo_mid_t the middle of the last window (its rate's sample time).
+  // is the first event of the next contrast-maximisation window, odo_mid_t the middle of the last
+  // window (its rate's sample time; INT64_MIN: none yet).
   size_t odo_ahead = 0;
-  int64_t odo_t = INT64_MIN;
   int64_t odo_mid_t = INT64_MIN;
   bool moved = false;  // a contrast-maximisation window has sharpened its events (cmax_rate)
 

@@ -149,6 +149,28 @@ TEST(MosaicCommand, CrosscheckPanoramaIsTheSameTruth) {
     EXPECT_TRUE(std::filesystem::exists(a.out + "/panorama_true.png"));
     EXPECT_TRUE(std::filesystem::exists(a.out + "/panorama_true_log.tiff"));
   }
+  // A malformed meta.json is an error that names it (the mosaic outputs are written before the evaluation).
+  for (const std::string& bad : {std::string("{\"scene\": {\"file\": \"panorama.png\"}}"),
+                                 std::string("{\"scene\": {\"file\": \"panorama.png\"}, \"config\": {\"events\": "
+                                             "{\"I_min\": \"dark\", \"I_max\": 1, \"log_eps\": 0}}}"),
+                                 std::string("{\"scene\": {\"file\": \"panorama.png\"}, \"config\": {\"events\": "
+                                             "{\"I_min\": 1, \"I_max\": 0.5, \"log_eps\": 0}}}"),
+                                 std::string("{\"scene\": [unclosed")}) {
+    std::ofstream(x + "/meta.json") << bad;
+    MosaicArgs a;
+    a.dataset = x;
+    a.out = dir.file("bad");
+    a.gt = x + "/groundtruth.txt";
+    a.use_imu = true;
+    a.progress = false;
+    std::ostringstream o;
+    try {
+      run_mosaic(a, o);
+      ADD_FAILURE() << "accepted " << bad;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("meta.json"), std::string::npos) << e.what();
+    }
+  }
   std::printf("mosaic vs truth: evio's scene %.3f dB / %.4f, crosscheck form %.3f dB / %.4f\n", psnr[0], ssim[0], psnr[1], ssim[1]);
   EXPECT_GT(psnr[0], 20.0);
   EXPECT_NEAR(psnr[1], psnr[0], 0.05);
