@@ -13,6 +13,7 @@
 
 #include "evio/sensors/dataset_calibration.h"
 #include "eval_command.h"
+#include "evio/backend/option_tables.h"
 #include "evio/calib/equirectangular.h"
 #include "evio/calib/error.h"
 #include "evio/calib/geometry.h"
@@ -80,7 +81,8 @@ const Table<C>& mosaic_config_table() {
         .choice("method", &C::tracker_method,
                 {{"pf", pipeline::MosaicTracker::kParticleFilter},
                  {"odometry", pipeline::MosaicTracker::kOdometry},
-                 {"odometry+pf", pipeline::MosaicTracker::kOdometryParticleFilter}})
+                 {"odometry+pf", pipeline::MosaicTracker::kOdometryParticleFilter},
+                 {"cmax_slam", pipeline::MosaicTracker::kCmaxSlam}})
         .number("odometry_noise_rad_per_sqrt_s", &C::odometry_noise_rad_per_sqrt_s, Range::kPositive, "rad/sqrt(s)")
         .note("event_stride", "0: by input, 4 with --use-imu, 1 without")
         .note("min_particles", "-1: by input, 20 with --use-imu, 40 without");
@@ -116,6 +118,9 @@ const Table<C>& mosaic_config_table() {
         .duration_ms("global_period_ms", &C::failure_global_period_ns, Range::kPositive)
         .number("global_min_gain", &C::failure_global_min_gain, Range::kPositive, "ratio")
         .include(mapping::relocalization_table(), &C::relocalization, {}, "global_");
+    Table<C> slam("CMax-SLAM back-end settings (tracker.method cmax_slam)");
+    slam.include(backend::cmax_slam_table(), &C::cmax_slam, {"panorama_width", "panorama_height"})  // those: the mosaic's
+        .note("knot_spacing_ms", "the rotation spline's knot spacing");
     Table<C> output("output settings");
     output.duration_ms("trajectory_ms", &C::trajectory_period_ns, Range::kPositive)
         .duration_ms("snapshot_ms", &C::snapshot_period_ns, Range::kNonNegative)
@@ -127,6 +132,7 @@ const Table<C>& mosaic_config_table() {
         .section("tracker", tracker, self)
         .section("bootstrap", bootstrap, self)
         .section("failure", failure, self)
+        .section("cmax_slam", slam, self)
         .section("output", output, self)
         .section("imu", imu, self)
         .ignored("description")

@@ -46,6 +46,11 @@ std::string model_json(const MosaicConfig& cfg, const frontend::RotationParticle
                                  : "auto: no gyro and no particle velocities";
   const std::string motion = gyro ? (odometry ? std::string("odometry") : std::string("gyro")) : frontend::rotation_motion_model_name(motion_used);
   const double mean_particles = st.weighted_batches > 0 ? static_cast<double>(st.particle_batches) / static_cast<double>(st.weighted_batches) : 0.0;
+  if (cfg.tracker_method == pipeline::MosaicTracker::kCmaxSlam)
+    return "{\"summary\": " +
+           json_string(std::string("rotation spline refined by the CMax-SLAM back-end (sliding window, panoramic contrast), predicted from the ") +
+                       (cfg.use_gyro ? "gyro" : "contrast-maximisation rate of each window")) +
+           ", \"tracker\": \"cmax_slam\"}";
   if (cfg.tracker_method == pipeline::MosaicTracker::kOdometry)
     return "{\"summary\": " +
            json_string(std::string("rotation integrated from the ") +
@@ -85,6 +90,10 @@ void write_stats_json(const MosaicArgs& args, const MosaicConfig& cfg, const Mos
     << "\", \"duration_s\": " << json_number((bs.t_end_ns - run.t0_ns) * 1e-9, 9) << ", \"cmax_windows\": " << bs.cmax_windows << ", \"short_windows\": " << bs.short_windows << ", \"still_windows\": " << bs.still_windows
     << ", \"tracker_contrast\": " << json_number(bs.tracker_contrast, 9) << ", \"contrast_samples\": " << bs.contrast_samples << "}"
     << ",\n  \"odometry\": {\"windows\": " << ms.odometry.windows << ", \"short_windows\": " << ms.odometry.short_windows << ", \"still_windows\": " << ms.odometry.still_windows << "}"
+    << ",\n  \"cmax_slam\": {\"windows\": " << ms.cmax_slam.windows << ", \"skipped_windows\": " << ms.cmax_slam.skipped_windows
+    << ", \"iterations\": " << ms.cmax_slam.iterations << ", \"evaluations\": " << ms.cmax_slam.evaluations
+    << ", \"events_used\": " << ms.cmax_slam.events_used << ", \"events_mapped\": " << ms.cmax_slam.events_mapped
+    << ", \"mean_contrast_gain\": " << json_number(ms.cmax_slam.mean_contrast_gain, 9) << "}"
     << ",\n  \"tracker\": {\"events_used\": " << st.events_used << ", \"skipped_no_previous\": " << st.skipped_no_previous
     << ", \"skipped_unknown_map\": " << st.skipped_unknown_map << ", \"skipped_stride\": " << st.skipped_stride << ", \"batches\": " << st.batches
     << ", \"resamples\": " << st.resamples << ", \"linearized_batches\": " << st.linearized_batches << ", \"gyro_predictions\": " << st.gyro_predictions
@@ -206,6 +215,17 @@ void write_mosaic_outputs(const MosaicArgs& args, const MosaicConfig& cfg, const
   mapping::write_log_image_png8((fs::path(args.out) / "panorama.png").string(), rec.log_intensity, &rec.seen, cfg.display);
   mapping::write_log_image_tiff((fs::path(args.out) / "panorama_log.tiff").string(), rec.log_intensity, &rec.seen);
   mapping::write_mask_png((fs::path(args.out) / "panorama_seen.png").string(), rec.seen);
+  if (!result.event_map.empty()) {
+    // The back-end's panoramic event map, log(1 + events per texel), in the panorama's display mapping.
+    mapping::ImageF counts(rec.log_intensity.rows(), rec.log_intensity.cols());
+    mapping::MaskU8 seen(counts.rows(), counts.cols());
+    for (Eigen::Index k = 0; k < counts.size(); ++k) {
+      const float c = result.event_map[static_cast<size_t>(k)];
+      counts.data()[k] = std::log1p(c);
+      seen.data()[k] = c > 0 ? 1 : 0;
+    }
+    mapping::write_log_image_png8((fs::path(args.out) / "event_map.png").string(), counts, &seen, cfg.display);
+  }
   write_stats_json(args, cfg, run);
   for (const pipeline::MosaicLostSegment& g : result.tracking_lost)
     out << "tracking lost " << format_seconds(g.t_begin_ns) << " s to " << format_seconds(g.t_end_ns) << " s ("

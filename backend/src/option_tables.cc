@@ -90,4 +90,27 @@ const Table<VisualInertialInitOptions>& visual_inertial_init_table() {
   return t;
 }
 
+const Table<CmaxSlamOptions>& cmax_slam_table() {
+  using O = CmaxSlamOptions;
+  static const Table<O> t = Table<O>("CMax-SLAM back-end settings")
+                                .duration_ms("knot_spacing_ms", &O::knot_spacing_ns, Range::kPositive)
+                                .integer("window_knots", &O::window_knots, 2, 10000)
+                                .integer("step_knots", &O::step_knots, 1, 10000)
+                                .integer("panorama_width", &O::panorama_width, 16, 1 << 15)
+                                .integer("panorama_height", &O::panorama_height, 8, 1 << 15)
+                                .number("blur_px", &O::blur_sigma_px, Interval::closed(0, 10), "px")
+                                .number("coarse_blur_px", &O::coarse_blur_sigma_px, Interval::closed(0, 10), "px")
+                                .integer("max_window_events", &O::max_window_events, 0, 1000000000)
+                                .integer("max_iterations", &O::max_iterations, 1, 100000)
+                                .number("map_weight", &O::map_weight, Range::kNonNegative, "")
+                                .number("box_margin_px", &O::box_margin_px, Range::kNonNegative, "px")
+                                .number("prior_weight", &O::prior_weight, Range::kNonNegative, "per rad^2")
+                                .number("rate_prior_weight", &O::rate_prior_weight, Range::kNonNegative, "per rad^2")
+                                .boolean("keep_first_window", &O::keep_first_window)
+                                .note("max_window_events", "0: all of the window's events")
+                                .note("coarse_blur_px", "0 or <= blur_px: no coarse pass")
+                                .validate();
+  return t;
+}
+
 }  // namespace evio::backend

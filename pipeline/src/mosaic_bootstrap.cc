@@ -75,11 +75,16 @@ bool MosaicPipeline::Impl::cmax_rate(const Event* ev, size_t n, int64_t tw0, int
 // Processes one bootstrap window when its events (and IMU) are complete; false when waiting. With
 // kOdometry the bootstrap runs to the end of the data.
 bool MosaicPipeline::Impl::bootstrap_step() {
-  const bool odometry_only = opt.tracker_method == MosaicTracker::kOdometry;
+  const bool odometry_only = opt.tracker_method == MosaicTracker::kOdometry || opt.tracker_method == MosaicTracker::kCmaxSlam;
   if (available() == 0) {
     if (!finishing) return false;
     if (odometry_only) {
       result.stats.bootstrap.t_end_ns = result.stats.t_last_event_ns;
+      if (slam && !slam_finished) {
+        slam->finish(result.stats.t_last_event_ns);
+        slam_finished = true;
+        slam_drain();
+      }
       return false;
     }
     end_bootstrap(result.stats.t_last_event_ns);
@@ -117,7 +122,12 @@ bool MosaicPipeline::Impl::bootstrap_step() {
     } else
       ++result.stats.bootstrap.short_windows;
   }
-  for (size_t k = 0; k < j; ++k) {
+  for (size_t k = 0; k < j && slam; ++k) {
+    const Event& e = ev[k];
+    slam_waiting.push_back(e);
+    if (e.x < W && e.y < H && undistorter.valid(e.x, e.y)) slam->add_event(e.t_ns, undistorter.bearing(e.x, e.y));
+  }
+  for (size_t k = 0; k < j && !slam; ++k) {
     const Event& e = ev[k];
     const Eigen::Vector3d w_c = opt.use_gyro ? gyro_c_at(e.t_ns) : omega_c;
     std::optional<Eigen::Matrix3d> R_g = use_ref ? boot_ref_at(e.t_ns) : std::nullopt;
@@ -136,11 +146,31 @@ bool MosaicPipeline::Impl::bootstrap_step() {
   } else {
     R = R * calib::so3_exp(omega_c * (static_cast<double>(tw1 - tw0) * 1e-9));
   }
-  record(tw1, R);
+  if (slam) {
+    // The odometry's rotation predicts the back-end's new knots.
+    slam->predict(tw1, R);
+    slam->update(tw1);
+    slam_drain();
+  } else {
+    record(tw1, R);
+  }
   head += j;
   processed += static_cast<int64_t>(j);
   result.stats.bootstrap.events += static_cast<int64_t>(j);
   return true;
+}
+
+void MosaicPipeline::Impl::slam_drain() {
+  const int64_t t_final = slam_finished ? INT64_MAX : slam->finalized_until_ns();
+  while (!slam_waiting.empty() && slam_waiting.front().t_ns < t_final) {
+    const Event& e = slam_waiting.front();
+    mapper.map_event(e, slam->rotation(e.t_ns).cast<float>(), Eigen::Vector3f::Zero(), 0.0f);
+    slam_waiting.pop_front();
+  }
+  const int64_t t_knots = slam_finished ? result.stats.t_last_event_ns : slam->finalized_until_ns();
+  for (; slam_recorded < slam->knots() && slam->knot_time(slam_recorded) <= t_knots; ++slam_recorded)
+    record(slam->knot_time(slam_recorded), slam->knot(slam_recorded));
+  if (slam_finished) record(result.stats.t_last_event_ns, slam->rotation(result.stats.t_last_event_ns));
 }
 
 // The bootstrap mosaic's reconstruction, the tracker's contrast and the particle filter at t_track0.

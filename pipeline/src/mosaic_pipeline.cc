@@ -20,6 +20,8 @@ const char* mosaic_tracker_name(MosaicTracker t) {
       return "odometry";
     case MosaicTracker::kOdometryParticleFilter:
       return "odometry+pf";
+    case MosaicTracker::kCmaxSlam:
+      return "cmax_slam";
   }
   return "?";
 }
@@ -34,8 +36,14 @@ bool MosaicPipelineOptions::Validate(std::string* why) const {
   if (!tracker.Validate(&w)) return fail("tracker: " + w);
   if (!cmax.Validate(&w)) return fail("cmax: " + w);
   if (tracker_method != MosaicTracker::kParticleFilter && tracker_method != MosaicTracker::kOdometry &&
-      tracker_method != MosaicTracker::kOdometryParticleFilter)
+      tracker_method != MosaicTracker::kOdometryParticleFilter && tracker_method != MosaicTracker::kCmaxSlam)
     return fail("tracker_method is not a MosaicTracker");
+  {
+    backend::CmaxSlamOptions c = cmax_slam;
+    c.panorama_width = mosaic.width;
+    c.panorama_height = mosaic.height;
+    if (!c.Validate(&w)) return fail("cmax_slam: " + w);
+  }
   if (!(odometry_noise_rad_per_sqrt_s > 0) || !std::isfinite(odometry_noise_rad_per_sqrt_s))
     return fail("odometry_noise_rad_per_sqrt_s must be finite and > 0 rad/sqrt(s)");
   if (failure_window_ns <= 0) return fail("failure_window_ns must be > 0 ns");
@@ -339,10 +347,17 @@ void MosaicPipeline::add_events(EventSpan events) {
   MosaicStats& st = m.result.stats;
   if (m.phase == Impl::Phase::kStart) {
     m.t0 = events.front().t_ns;
-    m.t_boot = options_.tracker_method == MosaicTracker::kOdometry ? INT64_MAX : m.t0 + options_.bootstrap_ns;
+    const bool odometry = options_.tracker_method == MosaicTracker::kOdometry || options_.tracker_method == MosaicTracker::kCmaxSlam;
+    m.t_boot = odometry ? INT64_MAX : m.t0 + options_.bootstrap_ns;
+    if (options_.tracker_method == MosaicTracker::kCmaxSlam) {
+      backend::CmaxSlamOptions c = options_.cmax_slam;
+      c.panorama_width = options_.mosaic.width;
+      c.panorama_height = options_.mosaic.height;
+      m.slam = std::make_unique<backend::CmaxSlam>(c, m.t0, m.R);
+    }
     st.t_first_event_ns = m.t0;
     m.mapper.collect_segments = options_.calibrate_contrast;
-    m.record(m.t0, m.R);
+    if (!m.slam) m.record(m.t0, m.R);  // kCmaxSlam: knot 0, once final
     m.phase = Impl::Phase::kBootstrap;
   }
   st.events += static_cast<int64_t>(events.size());
@@ -367,6 +382,10 @@ MosaicResult MosaicPipeline::finish() {
   r.stats.events_mapped = m.mapper.events_mapped;
   r.reconstruction = m.mapper.mosaic.reconstruct(mapping::GradientMosaic::ReconstructMode::kFull, m.opt.output_weighting);
   if (m.pf) r.stats.tracker = m.pf->stats();
+  if (m.slam) {
+    r.stats.cmax_slam = m.slam->stats();
+    r.event_map = m.slam->event_map();
+  }
   int64_t seen = 0;
   for (Eigen::Index k = 0; k < r.reconstruction.seen.size(); ++k) seen += r.reconstruction.seen.data()[k] ? 1 : 0;
   r.stats.seen_pixels = seen;

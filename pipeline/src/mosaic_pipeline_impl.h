@@ -97,6 +97,15 @@ struct MosaicPipeline::Impl {
   int64_t odo_mid_t = INT64_MIN;
   bool moved = false;  // a contrast-maximisation window has sharpened its events (cmax_rate)
 
+  // kCmaxSlam: the back-end, the events waiting for their window to be final (then mapped), the
+  // knots recorded in the trajectory so far, and whether the back-end has finished.
+  std::unique_ptr<backend::CmaxSlam> slam;
+  std::deque<Event> slam_waiting;
+  size_t slam_recorded = 0;
+  bool slam_finished = false;
+  // Maps the waiting events the back-end has finalised and records its final knots.
+  void slam_drain();
+
   // Tracking failure (mosaic_tracking_monitor.cc).
   bool lost = false;
   int64_t probe_seen_t = INT64_MIN, window_t0 = INT64_MIN;

@@ -5,6 +5,7 @@
 // Durations held in s or ns are written in ms under keys ending in _ms.
 #pragma once
 
+#include "evio/backend/cmax_slam.h"
 #include "evio/backend/initialization.h"
 #include "evio/backend/sliding_window_estimator.h"
 #include "evio/sensors/config_table.h"
@@ -14,5 +15,6 @@ namespace evio::backend {
 const yaml_config::Table<SlidingWindowOptions>& sliding_window_table();
 const yaml_config::Table<StaticInitOptions>& static_init_table();
 const yaml_config::Table<VisualInertialInitOptions>& visual_inertial_init_table();
+const yaml_config::Table<CmaxSlamOptions>& cmax_slam_table();
 
 }  // namespace evio::backend

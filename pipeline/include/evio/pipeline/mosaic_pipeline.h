@@ -18,6 +18,7 @@
 
 #include <Eigen/Core>
 
+#include "evio/backend/cmax_slam.h"
 #include "evio/calib/calibration_io.h"
 #include "evio/frontend/rotation_particle_filter.h"
 #include "evio/mapping/contrast_maximization.h"
@@ -42,8 +43,14 @@ namespace evio::pipeline {
 //    linear in between) with prediction noise odometry_noise_rad_per_sqrt_s. While lost, the
 //    filter keeps following the odometry and its particles are spread around it every failure
 //    window (failure_relocalize_spread_rad) until the map is found again.
-enum class MosaicTracker { kParticleFilter, kOdometry, kOdometryParticleFilter };
-// "pf", "odometry", "odometry+pf".
+//  - kCmaxSlam: the odometry's rates (gyro or contrast-maximisation windows, as kOdometry) predict
+//    the knots of a rotation spline that the CMax-SLAM back-end (backend::CmaxSlam, options
+//    cmax_slam) refines over a sliding window by maximising the contrast of the panoramic image of
+//    warped events, registered to the panoramic event map of the events before the window. The
+//    gradient mosaic maps each event once its window is final (a delay of window_knots knots), and
+//    the trajectory is the spline's knots. Cannot be lost; no failure detection.
+enum class MosaicTracker { kParticleFilter, kOdometry, kOdometryParticleFilter, kCmaxSlam };
+// "pf", "odometry", "odometry+pf", "cmax_slam".
 const char* mosaic_tracker_name(MosaicTracker t);
 
 struct MosaicPipelineOptions {
@@ -51,6 +58,9 @@ struct MosaicPipelineOptions {
   // kOdometryParticleFilter without the gyro: the filter's rotation noise density around the
   // contrast-maximisation rates, rad/sqrt(s) (> 0); covers the windows' rate errors.
   double odometry_noise_rad_per_sqrt_s = 0.1;
+  // kCmaxSlam: the back-end's options; its panorama is the mosaic's (mosaic.width x mosaic.height,
+  // whatever panorama_width / panorama_height say).
+  backend::CmaxSlamOptions cmax_slam;
 
   mapping::GradientMosaicOptions mosaic;            // equirectangular mosaic size (px), C, EKF noise, ...
   // particles, batch_size (events), event_stride, ...; probes every 4th batch here (the filter's
@@ -274,6 +284,7 @@ struct MosaicStats {
   double seen_fraction = 0;           // seen_pixels / mosaic texels
   MosaicBootstrapStats bootstrap;
   MosaicOdometryStats odometry;
+  backend::CmaxSlamStats cmax_slam;  // kCmaxSlam only
   frontend::RotationParticleFilterStats tracker;
   // Tracking quality (tracker.probe_every_batches > 0): the failure windows' mean probe contrast
   // (log-likelihood per event), lowest and mean over the windows; events not mapped while lost.
@@ -293,6 +304,9 @@ struct MosaicResult {
   mapping::MosaicReconstruction reconstruction;
   MosaicStats stats;
   std::vector<MosaicLostSegment> tracking_lost;
+  // kCmaxSlam: the back-end's panoramic event map (events per texel, reconstruction-sized,
+  // row-major); empty otherwise.
+  std::vector<float> event_map;
 };
 
 class MosaicPipeline {
