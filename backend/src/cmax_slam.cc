@@ -254,13 +254,11 @@ class WindowCost : public ceres::FirstOrderFunction {
     for (double v : img_) var += (v - mean) * (v - mean);
     var /= n;
     if (!std::isfinite(var)) return false;
-    const int np = NumParameters();
     *cost = -var * scale_ + prior(x, gradient);
     if (!grad) return true;
     // dcost/dI = -2 scale (I - mean) / n; back through the blur (its own adjoint) to the votes.
     for (double& v : img_) v = -2.0 * scale_ * (v - mean) / n;
     blur(&img_, w, h, kernel_, &tmp_);
-
     for (size_t k = 0; k < ev_.size(); ++k) {
       const double lx = pos_[k].x(), ly = pos_[k].y();
       if (!(lx >= 0 && ly >= 0 && lx < w - 1 && ly < h - 1)) continue;
@@ -475,7 +473,15 @@ Eigen::Matrix3d CmaxSlam::rotation(int64_t t_ns) const {
   if (s + 1 >= static_cast<int64_t>(knots_.size())) return knots_.back();
   const double u = static_cast<double>(t_ns - knot_time(static_cast<size_t>(s))) / static_cast<double>(dt_);
   const Mat3& R0 = knots_[static_cast<size_t>(s)];
-  return R0 * calib::so3_exp(u * calib::so3_log(Mat3(R0.transpose() * knots_[static_cast<size_t>(s) + 1])));
+  // A final segment's rotation never changes: kept for the next call (finalisation and the
+  // caller's mapping ask for every event of a segment in turn).
+  if (s != cached_segment_) {
+    const Vec3 w = calib::so3_log(Mat3(R0.transpose() * knots_[static_cast<size_t>(s) + 1]));
+    if (knot_time(static_cast<size_t>(s) + 1) > t_a_) return R0 * calib::so3_exp(u * w);
+    cached_segment_ = s;
+    cached_w_ = w;
+  }
+  return R0 * calib::so3_exp(u * cached_w_);
 }
 
 void CmaxSlam::update(int64_t t_complete_ns) {
@@ -561,7 +567,6 @@ void CmaxSlam::optimize_window(int64_t ta, int64_t tb) {
   for (double v : x) finite = finite && std::abs(v) < 1.0;
   if (finite && f1 <= f0) {
     const Mat3 last_before = knots_[static_cast<size_t>(last)];
-
     for (int j = free_first ? fixed : fixed + 1; j <= last; ++j) {
       const double* d = x.data() + 3 * (j - fixed - (free_first ? 0 : 1));
       knots_[static_cast<size_t>(j)] = orthonormal(knots_[static_cast<size_t>(j)] * calib::so3_exp(Vec3(d[0], d[1], d[2])));
@@ -579,13 +584,14 @@ void CmaxSlam::optimize_window(int64_t ta, int64_t tb) {
 
 void CmaxSlam::finalize_until(int64_t t) {
   const calib::Equirectangular pano(opt_.panorama_width, opt_.panorama_height);
+  // The knots before the new t_a_ are final from here on.
+  t_a_ = std::max(t_a_, std::min(t, knot_time(knots_.size() - 1)));
   while (!events_.empty() && events_.front().t < t) {
     const Ev& e = events_.front();
     vote(&map_, pano, rotation(e.t) * Vec3(e.bx, e.by, e.bz));
     events_.pop_front();
     ++stats_.events_mapped;
   }
-  t_a_ = std::max(t_a_, std::min(t, knot_time(knots_.size() - 1)));
 }
 
 }  // namespace evio::backend

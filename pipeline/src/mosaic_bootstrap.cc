@@ -73,7 +73,7 @@ bool MosaicPipeline::Impl::cmax_rate(const Event* ev, size_t n, int64_t tw0, int
 }
 
 // Processes one bootstrap window when its events (and IMU) are complete; false when waiting. With
-// kOdometry the bootstrap runs to the end of the data.
+// kOdometry and kCmaxSlam the bootstrap runs to the end of the data.
 bool MosaicPipeline::Impl::bootstrap_step() {
   const bool odometry_only = opt.tracker_method == MosaicTracker::kOdometry || opt.tracker_method == MosaicTracker::kCmaxSlam;
   if (available() == 0) {
@@ -122,10 +122,13 @@ bool MosaicPipeline::Impl::bootstrap_step() {
     } else
       ++result.stats.bootstrap.short_windows;
   }
-  for (size_t k = 0; k < j && slam; ++k) {
-    const Event& e = ev[k];
-    slam_waiting.push_back(e);
-    if (e.x < W && e.y < H && undistorter.valid(e.x, e.y)) slam->add_event(e.t_ns, undistorter.bearing(e.x, e.y));
+  if (slam) {
+    // The back-end gets the bearings now; the mosaic maps the events once their window is final.
+    for (size_t k = 0; k < j; ++k) {
+      const Event& e = ev[k];
+      slam_waiting.push_back(e);
+      if (e.x < W && e.y < H && undistorter.valid(e.x, e.y)) slam->add_event(e.t_ns, undistorter.bearing(e.x, e.y));
+    }
   }
   for (size_t k = 0; k < j && !slam; ++k) {
     const Event& e = ev[k];

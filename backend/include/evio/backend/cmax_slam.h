@@ -129,6 +129,9 @@ class CmaxSlam {
   Eigen::Matrix3d odo_at_last_knot_;
   std::deque<Ev> events_;  // events at or after t_a_
   int64_t t_a_;
+  // rotation(): the last final segment asked for and its Log(R_s^T R_{s+1}).
+  mutable int64_t cached_segment_ = -1;
+  mutable Eigen::Vector3d cached_w_ = Eigen::Vector3d::Zero();
   std::vector<float> map_;
   double gain_sum_ = 0;
   CmaxSlamStats stats_;
