@@ -93,7 +93,9 @@ void write_stats_json(const MosaicArgs& args, const MosaicConfig& cfg, const Mos
     << ",\n  \"cmax_slam\": {\"windows\": " << ms.cmax_slam.windows << ", \"skipped_windows\": " << ms.cmax_slam.skipped_windows
     << ", \"iterations\": " << ms.cmax_slam.iterations << ", \"evaluations\": " << ms.cmax_slam.evaluations
     << ", \"events_used\": " << ms.cmax_slam.events_used << ", \"events_mapped\": " << ms.cmax_slam.events_mapped
-    << ", \"mean_contrast_gain\": " << json_number(ms.cmax_slam.mean_contrast_gain, 9) << "}"
+    << ", \"mean_contrast_gain\": " << json_number(ms.cmax_slam.mean_contrast_gain, 9)
+    << ", \"global\": {\"refined\": " << (ms.cmax_slam.global_refined ? "true" : "false") << ", \"iterations\": " << ms.cmax_slam.global_iterations
+    << ", \"events\": " << ms.cmax_slam.global_events << ", \"contrast_gain\": " << json_number(ms.cmax_slam.global_contrast_gain, 9) << "}}"
     << ",\n  \"tracker\": {\"events_used\": " << st.events_used << ", \"skipped_no_previous\": " << st.skipped_no_previous
     << ", \"skipped_unknown_map\": " << st.skipped_unknown_map << ", \"skipped_stride\": " << st.skipped_stride << ", \"batches\": " << st.batches
     << ", \"resamples\": " << st.resamples << ", \"linearized_batches\": " << st.linearized_batches << ", \"gyro_predictions\": " << st.gyro_predictions

@@ -3,9 +3,12 @@
 
 #include <algorithm>
 #include <climits>
+#include <limits>
+#include <memory>
 #include <cmath>
 #include <stdexcept>
 
+#include <Eigen/Eigenvalues>
 #include <ceres/ceres.h>
 
 #include "evio/calib/equirectangular.h"
@@ -30,6 +33,9 @@ bool CmaxSlamOptions::Validate(std::string* why) const {
   if (!(box_margin_px >= 0) || !std::isfinite(box_margin_px)) return fail("box_margin_px must be >= 0");
   if (!(prior_weight >= 0) || !std::isfinite(prior_weight)) return fail("prior_weight must be >= 0");
   if (!(rate_prior_weight >= 0) || !std::isfinite(rate_prior_weight)) return fail("rate_prior_weight must be >= 0");
+  if (global_iterations < 0) return fail("global_iterations must be >= 0");
+  if (!(global_rate_weight >= 0) || !std::isfinite(global_rate_weight)) return fail("global_rate_weight must be >= 0");
+  if (global_max_events < 1000) return fail("global_max_events must be >= 1000");
   return true;
 }
 
@@ -49,8 +55,9 @@ std::vector<double> gaussian_taps(double sigma) {
   return k;
 }
 
-// Separable convolution with zero padding (a symmetric operator: it is its own adjoint).
-void blur(std::vector<double>* img, int w, int h, const std::vector<double>& k, std::vector<double>* tmp) {
+// Separable convolution with zero padding, or circular along x when wrap_x (the full panorama's
+// longitude); either way a symmetric operator: it is its own adjoint.
+void blur(std::vector<double>* img, int w, int h, const std::vector<double>& k, std::vector<double>* tmp, bool wrap_x = false) {
   const int r = static_cast<int>(k.size()) / 2;
   if (r == 0) return;
   std::vector<double>& a = *img;
@@ -61,8 +68,12 @@ void blur(std::vector<double>* img, int w, int h, const std::vector<double>& k, 
     double* out = b.data() + static_cast<size_t>(y) * w;
     for (int x = 0; x < w; ++x) {
       double s = 0;
-      const int i0 = std::max(-r, -x), i1 = std::min(r, w - 1 - x);
-      for (int i = i0; i <= i1; ++i) s += k[i + r] * row[x + i];
+      if (wrap_x && (x < r || x + r >= w)) {
+        for (int i = -r; i <= r; ++i) s += k[i + r] * row[((x + i) % w + w) % w];
+      } else {
+        const int i0 = std::max(-r, -x), i1 = std::min(r, w - 1 - x);
+        for (int i = i0; i <= i1; ++i) s += k[i + r] * row[x + i];
+      }
       out[x] = s;
     }
   }
@@ -78,18 +89,88 @@ void blur(std::vector<double>* img, int w, int h, const std::vector<double>& k, 
   }
 }
 
+// A spline segment between consecutive knots R_i, R_{i+1}.
+struct Seg {
+  Vec3 w;     // Log(R_i^T R_{i+1})
+  Mat3 E;     // Exp(w)
+  Mat3 Jinv;  // Jr^-1(w)
+};
+Seg make_seg(const Mat3& Ra, const Mat3& Rb) {
+  Seg s;
+  s.w = calib::so3_log(Mat3(Ra.transpose() * Rb));
+  s.E = calib::so3_exp(s.w);
+  s.Jinv = calib::so3_right_jacobian_inv(s.w);
+  return s;
+}
+
+// The spline's rotation at u in [0, 1] of a time segment whose order control knots start at R0,
+// with seg[0 .. order - 2] the segments between them:
+//   linear (order 2):  R(u) = R0 Exp(u w0)
+//   cubic (order 4), the cumulative uniform B-spline:
+//     R(u) = R0 Exp(l1 w0) Exp(l2 w1) Exp(l3 w2),  l1 = (5 + 3u - 3u^2 + u^3) / 6,
+//     l2 = (1 + 3u + 3u^2 - 2u^3) / 6,  l3 = u^3 / 6.
+// D (optional, order matrices): the right perturbation phi of R(u) per right perturbation delta_c
+// of control knot c (dphi = sum_c D[c] ddelta_c), from dw_i = Jr^-1(w_i) (delta_{i+1} - E_i^T delta_i)
+// and Exp(l (w + dw)) = Exp(l w) Exp(l Jr(l w) dw):
+//   M_j = (A_{j+1} ... A_last)^T l_j Jr(l_j w_{j-1}) Jr^-1(w_{j-1}),  A_j = Exp(l_j w_{j-1}),
+//   D[0] = (A_1 ... A_last)^T - M_1 E_0^T,  D[c] = M_c - M_{c+1} E_c^T,  D[last] = M_last.
+Mat3 spline_rotation(int order, const Mat3& R0, const Seg* seg, double u, Mat3* D) {
+  if (order == 2) {
+    const Vec3 uw = u * seg[0].w;
+    const Mat3 A = calib::so3_exp(uw);
+    if (D) {
+      D[1] = u * calib::so3_right_jacobian(uw) * seg[0].Jinv;
+      D[0] = A.transpose() - D[1] * seg[0].E.transpose();
+    }
+    return R0 * A;
+  }
+  const double u2 = u * u, u3 = u2 * u;
+  const double l[3] = {(5 + 3 * u - 3 * u2 + u3) / 6, (1 + 3 * u + 3 * u2 - 2 * u3) / 6, u3 / 6};
+  Mat3 A[3];
+  for (int j = 0; j < 3; ++j) A[j] = calib::so3_exp(l[j] * seg[j].w);
+  if (D) {
+    Mat3 Q = Mat3::Identity();  // (A_{j+1} ... A_3)^T
+    Mat3 M[3];
+    for (int j = 2; j >= 0; --j) {
+      M[j] = Q * l[j] * calib::so3_right_jacobian(Vec3(l[j] * seg[j].w)) * seg[j].Jinv;
+      Q = Q * A[j].transpose();
+    }
+    D[0] = Q - M[0] * seg[0].E.transpose();
+    D[1] = M[0] - M[1] * seg[1].E.transpose();
+    D[2] = M[1] - M[2] * seg[2].E.transpose();
+    D[3] = M[2];
+  }
+  return R0 * A[0] * A[1] * A[2];
+}
+
+// The spline's basis weights of a time segment's order control knots at u (they sum to 1): the
+// share of an event at u in each knot.
+void spline_weights(int order, double u, double* b) {
+  if (order == 2) {
+    b[0] = 1 - u;
+    b[1] = u;
+    return;
+  }
+  const double u2 = u * u, u3 = u2 * u;
+  b[0] = (1 - u) * (1 - u) * (1 - u) / 6;
+  b[1] = (3 * u3 - 6 * u2 + 4) / 6;
+  b[2] = (-3 * u3 + 3 * u2 + 3 * u + 1) / 6;
+  b[3] = u3 / 6;
+}
+
 // The window's cost -Var(I) over its box as a function of the free knots' right perturbations.
 class WindowCost : public ceres::FirstOrderFunction {
  public:
   struct Event {
-    int seg;  // spline segment (knots seg, seg + 1)
-    double u;  // position in the segment, [0, 1)
+    int seg;  // the first of its time segment's order control knots (seg .. seg + order - 1)
+    double u;  // position in the time segment, [0, 1)
     Vec3 b;   // unit bearing, camera frame
   };
-  // Knots [fixed, last]: the first is fixed unless free_first, the others are free (3 parameters each).
-  WindowCost(const std::vector<Mat3>& knots, int fixed, int last, bool free_first, std::vector<Event> events,
+  // Knots [fixed, last] of a spline of the given order (2: linear, 4: cubic): the first n_fixed
+  // are fixed, the others free (3 parameters each). Every event's control knots are in [fixed, last].
+  WindowCost(const std::vector<Mat3>& knots, int order, int fixed, int last, int n_fixed, std::vector<Event> events,
              const calib::Equirectangular& pano, const std::vector<double>& kernel)
-      : knots_(knots), fixed_(fixed), last_(last), skip_(free_first ? 0 : 1), ev_(std::move(events)), pano_(pano), kernel_(kernel) {
+      : knots_(knots), order_(order), fixed_(fixed), last_(last), skip_(n_fixed), ev_(std::move(events)), pano_(pano), kernel_(kernel) {
     for (int j = fixed; j < last; ++j) Ebar_.push_back(knots[j].transpose() * knots[j + 1]);
   }
 
@@ -147,6 +228,43 @@ class WindowCost : public ceres::FirstOrderFunction {
     bv0_ = std::max(0, static_cast<int>(std::floor(y0 - m)));
     bh_ = std::min(H, static_cast<int>(std::ceil(y1 + m)) + 1) - bv0_;
   }
+  // The whole trajectory (the global pass): the full panorama's longitude, wrapping, in a frame
+  // whose pole is the trajectory's principal rotation axis (the eigenvector of the sum over the
+  // segments of w w^T, w the segment's rotation in the world frame), so the sweep runs along the
+  // equator; rows from the events' latitudes grown by margin.
+  void set_global(double margin) {
+    std::vector<double> zero(NumParameters(), 0.0);
+    rotations(zero.data());
+    Mat3 S = Mat3::Zero();
+    for (int j = 0; j + 1 < static_cast<int>(Rk_.size()); ++j) {
+      const Vec3 w = Rk_[j] * seg_[j].w;
+      S += w * w.transpose();
+    }
+    Vec3 pole = Vec3::UnitZ();
+    if (S.trace() > 1e-12) {
+      Eigen::SelfAdjointEigenSolver<Mat3> es(S);
+      pole = es.eigenvectors().col(2).normalized();
+    }
+    Vec3 x_axis = std::abs(pole.z()) < 0.9 ? Vec3::UnitZ() : Vec3::UnitX();
+    x_axis = (x_axis - x_axis.dot(pole) * pole).normalized();
+    R_pw_.row(0) = x_axis.transpose();
+    R_pw_.row(1) = pole.cross(x_axis).transpose();
+    R_pw_.row(2) = pole.transpose();
+    wrap_ = true;
+    double y0 = 1e300, y1 = -1e300;
+    for (const Event& e : ev_) {
+      const double y = pano_.project(Vec3(R_pw_ * (rotation_of(e) * e.b))).y() - 0.5;
+      y0 = std::min(y0, y);
+      y1 = std::max(y1, y);
+    }
+    const double m = margin + static_cast<double>(kernel_.size() / 2) + 1;
+    const int H = pano_.height();
+    bu0_ = 0;
+    bw_ = pano_.width();
+    bc_ = 0.5 * bw_;
+    bv0_ = ev_.empty() ? 0 : std::max(0, static_cast<int>(std::floor(y0 - m)));
+    bh_ = ev_.empty() ? H : std::max(2, std::min(H, static_cast<int>(std::ceil(y1 + m)) + 1) - bv0_);
+  }
   // World frame -> the window's panorama frame (set_box).
   const Mat3& window_frame() const { return R_pw_; }
   int box_u0() const { return bu0_; }
@@ -161,6 +279,11 @@ class WindowCost : public ceres::FirstOrderFunction {
     prior_weight_ = prior_weight;
     rate_prior_weight_ = rate_prior_weight;
   }
+  // The global pass: the rate prior becomes weight * sum over the segments of the pseudo-Huber
+  // norm sqrt(|r|^2 + c^2) - c of their change r (c = kRobustRateRad), which costs a change
+  // concentrated in a few segments (a step undone) far less than the same total spread over all
+  // (the contrast's own collapse: the panorama swept less, its events denser).
+  void set_robust_rate_prior(double weight) { robust_rate_weight_ = weight; }
 
   // prior_weight / 2 * mean over the free knots of |delta_j|^2 + rate_prior_weight / 2 * mean
   // over the segments of |delta_{j+1} - E_j^T delta_j|^2, E_j = R_j^T R_{j+1} at x = 0: the
@@ -180,6 +303,20 @@ class WindowCost : public ceres::FirstOrderFunction {
       const Vec3 d = delta(j);
       p += 0.5 * wa * d.squaredNorm();
       if (gradient) Eigen::Map<Vec3>(gradient + 3 * (j - skip_)) += wa * d;
+    }
+    if (robust_rate_weight_ > 0) {
+      const double c = kRobustRateRad;
+      for (int j = 0; j + 1 < nk; ++j) {
+        const Mat3& E = Ebar_[j];
+        const Vec3 r = delta(j + 1) - E.transpose() * delta(j);
+        const double q = std::sqrt(r.squaredNorm() + c * c);
+        p += robust_rate_weight_ * (q - c);
+        if (!gradient) continue;
+        const Vec3 g = robust_rate_weight_ / q * r;
+        Eigen::Map<Vec3>(gradient + 3 * (j + 1 - skip_)) += g;
+        if (j >= skip_) Eigen::Map<Vec3>(gradient + 3 * (j - skip_)) -= E * g;
+      }
+      return p;
     }
     const double wr = rate_prior_weight_ / (nk - 1);
     if (wr > 0) {
@@ -214,38 +351,33 @@ class WindowCost : public ceres::FirstOrderFunction {
     const bool grad = gradient != nullptr;
     if (grad) {
       Jproj_.resize(ev_.size());
-      D0_.resize(ev_.size());
-      D1_.resize(ev_.size());
+      D_.resize(ev_.size() * static_cast<size_t>(order_));
     }
     pos_.resize(ev_.size());
     for (size_t k = 0; k < ev_.size(); ++k) {
       const Event& e = ev_[k];
-      const Seg& s = seg_[e.seg - fixed_];
-      const Vec3 uw = e.u * s.w;
-      const Mat3 A = calib::so3_exp(uw);
-      const Mat3 R = Rk_[e.seg - fixed_] * A;
+      const int c = e.seg - fixed_;
+      const Mat3 R = spline_rotation(order_, Rk_[c], &seg_[c], e.u, grad ? &D_[k * order_] : nullptr);
       const Vec3 d = R_pw_ * (R * e.b);
       Eigen::Matrix<double, 2, 3> Jp;
       const Eigen::Vector2d uv = grad ? pano_.project(d, &Jp) : pano_.project(d);
-      const double lx = unwrap(uv.x() - 0.5) - bu0_, ly = uv.y() - 0.5 - bv0_;
+      double lx = unwrap(uv.x() - 0.5) - bu0_;
+      if (wrap_) lx -= w * std::floor(lx / w);
+      const double ly = uv.y() - 0.5 - bv0_;
       pos_[k] = {lx, ly};
-      if (grad) {
-        Jproj_[k] = Jp * R_pw_ * (-R * calib::hat(e.b));
-        const Mat3 D1 = e.u * calib::so3_right_jacobian(uw) * s.Jinv;
-        D1_[k] = D1;
-        D0_[k] = A.transpose() - D1 * s.E.transpose();
-      }
-      if (!(lx >= 0 && ly >= 0 && lx < w - 1 && ly < h - 1)) continue;
+      if (grad) Jproj_[k] = Jp * R_pw_ * (-R * calib::hat(e.b));
+      if (!inside(lx, ly)) continue;
       const int ix = static_cast<int>(lx), iy = static_cast<int>(ly);
       const double fx = lx - ix, fy = ly - iy;
       double* p = votes_.data() + static_cast<size_t>(iy) * w + ix;
+      const int dx = right(ix);
       p[0] += (1 - fx) * (1 - fy);
-      p[1] += fx * (1 - fy);
+      p[dx] += fx * (1 - fy);
       p[w] += (1 - fx) * fy;
-      p[w + 1] += fx * fy;
+      p[w + dx] += fx * fy;
     }
     img_ = votes_;
-    blur(&img_, w, h, kernel_, &tmp_);
+    blur(&img_, w, h, kernel_, &tmp_, wrap_);
     const double n = static_cast<double>(img_.size());
     double mean = 0;
     for (size_t i = 0; i < img_.size(); ++i) mean += img_[i] += base_.empty() ? 0.0 : base_[i];
@@ -258,21 +390,20 @@ class WindowCost : public ceres::FirstOrderFunction {
     if (!grad) return true;
     // dcost/dI = -2 scale (I - mean) / n; back through the blur (its own adjoint) to the votes.
     for (double& v : img_) v = -2.0 * scale_ * (v - mean) / n;
-    blur(&img_, w, h, kernel_, &tmp_);
+    blur(&img_, w, h, kernel_, &tmp_, wrap_);
     for (size_t k = 0; k < ev_.size(); ++k) {
       const double lx = pos_[k].x(), ly = pos_[k].y();
-      if (!(lx >= 0 && ly >= 0 && lx < w - 1 && ly < h - 1)) continue;
+      if (!inside(lx, ly)) continue;
       const int ix = static_cast<int>(lx), iy = static_cast<int>(ly);
       const double fx = lx - ix, fy = ly - iy;
       const double* g = img_.data() + static_cast<size_t>(iy) * w + ix;
-      const double gx = (1 - fy) * (g[1] - g[0]) + fy * (g[w + 1] - g[w]);
-      const double gy = (1 - fx) * (g[w] - g[0]) + fx * (g[w + 1] - g[1]);
+      const int dx = right(ix);
+      const double gx = (1 - fy) * (g[dx] - g[0]) + fy * (g[w + dx] - g[w]);
+      const double gy = (1 - fx) * (g[w] - g[0]) + fx * (g[w + dx] - g[dx]);
       const Eigen::RowVector3d gphi = Eigen::RowVector2d(gx, gy) * Jproj_[k];
-      const int s = ev_[k].seg;
-      if (s - fixed_ >= skip_) {
-        Eigen::Map<Eigen::RowVector3d>(gradient + 3 * (s - fixed_ - skip_)) += gphi * D0_[k] * Jr_[s - fixed_];
-      }
-      Eigen::Map<Eigen::RowVector3d>(gradient + 3 * (s + 1 - fixed_ - skip_)) += gphi * D1_[k] * Jr_[s + 1 - fixed_];
+      const int c0 = ev_[k].seg - fixed_;
+      for (int c = std::max(0, skip_ - c0); c < order_; ++c)
+        Eigen::Map<Eigen::RowVector3d>(gradient + 3 * (c0 + c - skip_)) += gphi * D_[k * order_ + c] * Jr_[c0 + c];
     }
     for (int i = 0; i < NumParameters(); ++i)
       if (!std::isfinite(gradient[i])) return false;
@@ -280,18 +411,19 @@ class WindowCost : public ceres::FirstOrderFunction {
   }
 
  private:
-  struct Seg {
-    Vec3 w;    // Log(R_i^T R_{i+1})
-    Mat3 E;    // Exp(w)
-    Mat3 Jinv; // Jr^-1(w)
-  };
+  // A vote at box position (lx, ly) lands inside (its four texels; x wraps in the global pass).
+  bool inside(double lx, double ly) const {
+    return ly >= 0 && ly < bh_ - 1 && (wrap_ ? lx >= 0 && lx < bw_ : lx >= 0 && lx < bw_ - 1);
+  }
+  // The offset from texel column ix to the next (wrapping in the global pass).
+  int right(int ix) const { return wrap_ && ix + 1 >= bw_ ? 1 - bw_ : 1; }
   double unwrap(double x) const {
     const double W = pano_.width();
     return x + W * std::round((bc_ - x) / W);
   }
   Mat3 rotation_of(const Event& e) const {
-    const Seg& s = seg_[e.seg - fixed_];
-    return Rk_[e.seg - fixed_] * calib::so3_exp(e.u * s.w);
+    const int c = e.seg - fixed_;
+    return spline_rotation(order_, Rk_[c], &seg_[c], e.u, nullptr);
   }
   // The knots and segments at parameters x.
   void rotations(const double* x) const {
@@ -299,38 +431,94 @@ class WindowCost : public ceres::FirstOrderFunction {
     Rk_.resize(nk);
     Jr_.resize(nk);
     seg_.resize(nk - 1);
-    Rk_[0] = knots_[fixed_];
-    Jr_[0].setIdentity();
+    for (int j = 0; j < skip_; ++j) {
+      Rk_[j] = knots_[fixed_ + j];
+      Jr_[j].setIdentity();
+    }
     for (int j = skip_; j < nk; ++j) {
       const Vec3 delta(x[3 * (j - skip_)], x[3 * (j - skip_) + 1], x[3 * (j - skip_) + 2]);
       Rk_[j] = knots_[fixed_ + j] * calib::so3_exp(delta);
       Jr_[j] = calib::so3_right_jacobian(delta);
     }
-    for (int j = 0; j + 1 < nk; ++j) {
-      Seg& s = seg_[j];
-      s.w = calib::so3_log(Mat3(Rk_[j].transpose() * Rk_[j + 1]));
-      s.E = calib::so3_exp(s.w);
-      s.Jinv = calib::so3_right_jacobian_inv(s.w);
-    }
+    for (int j = 0; j + 1 < nk; ++j) seg_[j] = make_seg(Rk_[j], Rk_[j + 1]);
   }
 
   const std::vector<Mat3>& knots_;
-  const int fixed_, last_, skip_;
+  const int order_, fixed_, last_, skip_;
   const std::vector<Event> ev_;
   const calib::Equirectangular& pano_;
   const std::vector<double>& kernel_;
   double bc_ = 0;
   Mat3 R_pw_ = Mat3::Identity();
   int bu0_ = 0, bv0_ = 0, bw_ = 1, bh_ = 1;
+  bool wrap_ = false;
   std::vector<double> base_;
-  double scale_ = 1, prior_weight_ = 0, rate_prior_weight_ = 0;
+  double scale_ = 1, prior_weight_ = 0, rate_prior_weight_ = 0, robust_rate_weight_ = 0;
+  static constexpr double kRobustRateRad = 1e-3;
   std::vector<Mat3> Ebar_;  // the segments' rotations at x = 0
   mutable std::vector<Mat3> Rk_, Jr_;
   mutable std::vector<Seg> seg_;
   mutable std::vector<double> votes_, img_, tmp_;
   mutable std::vector<Eigen::Vector2d> pos_;
   mutable std::vector<Eigen::Matrix<double, 2, 3>> Jproj_;
-  mutable std::vector<Mat3> D0_, D1_;
+  mutable std::vector<Mat3> D_;  // order per event: dphi / ddelta of its control knots
+};
+
+// The global pass's parameters: the knots' left perturbations as running sums of increments
+// less their mean over the events, R_j = Exp(theta_j - theta_mean) R_j0 with
+// theta_j = eps_0 + ... + eps_j and theta_mean = sum_j w_j theta_j (w_j: knot j's share of the
+// events). One increment turns everything after it, so a step left in the trajectory is one
+// parameter, not every later knot's; subtracting the mean holds the panorama as a whole (the
+// equirectangular IWE's contrast is not invariant under a rotation of the whole scene, and
+// would otherwise turn it), leaving the first knot to fix the world frame afterwards. In the inner
+// cost's right perturbations delta_j = R_j0^T (theta_j - theta_mean) (exactly: R Exp(R^T t) =
+// Exp(t) R), a linear map; the gradient follows by its transpose.
+class IncrementCost : public ceres::FirstOrderFunction {
+ public:
+  // inner: knots [fixed, last], all free (owned); R0: the knots at x = 0; share: w_j (sum 1).
+  IncrementCost(WindowCost* inner, std::vector<Mat3> R0, std::vector<double> share)
+      : inner_(inner), R0_(std::move(R0)), w_(std::move(share)) {}
+  int NumParameters() const override { return inner_->NumParameters(); }
+  bool Evaluate(const double* eps, double* cost, double* gradient) const override {
+    const size_t n = R0_.size();
+    theta_.resize(n);
+    Vec3 acc = Vec3::Zero(), mean = Vec3::Zero();
+    for (size_t j = 0; j < n; ++j) {
+      acc += Vec3(eps[3 * j], eps[3 * j + 1], eps[3 * j + 2]);
+      theta_[j] = acc;
+      mean += w_[j] * acc;
+    }
+    delta_.resize(3 * n);
+    for (size_t j = 0; j < n; ++j) Eigen::Map<Vec3>(delta_.data() + 3 * j) = R0_[j].transpose() * (theta_[j] - mean);
+    if (!gradient) return inner_->Evaluate(delta_.data(), cost, nullptr);
+    gdelta_.assign(3 * n, 0.0);
+    if (!inner_->Evaluate(delta_.data(), cost, gdelta_.data())) return false;
+    // h_j = df/dtheta'_j; df/dtheta_j = h_j - w_j sum_i h_i; df/deps_i = sum over j >= i.
+    Vec3 H = Vec3::Zero();
+    for (size_t j = 0; j < n; ++j) {
+      theta_[j] = R0_[j] * Vec3(gdelta_[3 * j], gdelta_[3 * j + 1], gdelta_[3 * j + 2]);
+      H += theta_[j];
+    }
+    acc.setZero();
+    for (size_t j = n; j-- > 0;) {
+      acc += theta_[j] - w_[j] * H;
+      Eigen::Map<Vec3>(gradient + 3 * j) = acc;
+    }
+    return true;
+  }
+  // The knots' right perturbations at eps.
+  const std::vector<double>& deltas(const double* eps) const {
+    double f = 0;
+    Evaluate(eps, &f, nullptr);
+    return delta_;
+  }
+
+ private:
+  std::unique_ptr<WindowCost> inner_;
+  const std::vector<Mat3> R0_;
+  const std::vector<double> w_;
+  mutable std::vector<Vec3> theta_;
+  mutable std::vector<double> delta_, gdelta_;
 };
 
 // Bilinear vote of direction d into an equirectangular image (u wraps, v clipped).
@@ -403,6 +591,31 @@ void prepare(WindowCost* cost, const std::vector<float>& map, const CmaxSlamOpti
   cost->set_scale(f < 0 ? -1.0 / f : 1.0, opt.prior_weight, opt.rate_prior_weight);
 }
 
+// Control knots per time segment.
+int spline_order(const CmaxSlamOptions& o) { return o.spline == CmaxSlamSpline::kCubic ? 4 : 2; }
+
+// Coarse to fine: a wider blur first widens the basin, then the fine blur.
+std::vector<double> blur_levels(const CmaxSlamOptions& o) {
+  std::vector<double> sigmas;
+  if (o.coarse_blur_sigma_px > o.blur_sigma_px) sigmas.push_back(o.coarse_blur_sigma_px);
+  sigmas.push_back(o.blur_sigma_px);
+  return sigmas;
+}
+
+// L-BFGS (Ceres' GradientProblemSolver) from x, silently.
+ceres::GradientProblemSolver::Summary minimise(const ceres::GradientProblem& problem, double* x, int max_iterations,
+                                               double function_tolerance, double parameter_tolerance) {
+  ceres::GradientProblemSolver::Options so;
+  so.max_num_iterations = max_iterations;
+  so.logging_type = ceres::SILENT;
+  so.function_tolerance = function_tolerance;
+  so.gradient_tolerance = 1e-12;
+  so.parameter_tolerance = parameter_tolerance;
+  ceres::GradientProblemSolver::Summary sum;
+  ceres::Solve(so, problem, x, &sum);
+  return sum;
+}
+
 // Fewer events than this in a window: no optimisation (the prediction is kept).
 constexpr size_t kMinWindowEvents = 50;
 
@@ -418,17 +631,18 @@ double cmax_slam_window_cost(const std::vector<Eigen::Matrix3d>& knots, int64_t 
       x.size() != static_cast<size_t>(3 * (last - fixed)))
     throw std::invalid_argument("cmax_slam_window_cost: inconsistent knots, events or parameters");
   const int64_t dt = options.knot_spacing_ns;
+  const int order = spline_order(options);
   std::vector<WindowCost::Event> ev;
   for (size_t k = 0; k < t_ns.size(); ++k) {
     const int64_t s = (t_ns[k] - t0_ns) / dt;
-    if (t_ns[k] < t0_ns || s < fixed || s >= last)
+    if (t_ns[k] < t0_ns || s < fixed || s + order - 1 > last)
       throw std::invalid_argument("cmax_slam_window_cost: an event outside the knots' span");
     ev.push_back({static_cast<int>(s), static_cast<double>(t_ns[k] - t0_ns - s * dt) / static_cast<double>(dt),
                   bearing_c[k].normalized()});
   }
   const calib::Equirectangular pano(options.panorama_width, options.panorama_height);
   const std::vector<double> kernel = gaussian_taps(options.blur_sigma_px);
-  WindowCost cost(knots, fixed, last, false, std::move(ev), pano, kernel);
+  WindowCost cost(knots, order, fixed, last, 1, std::move(ev), pano, kernel);
   prepare(&cost, map, options, kernel);
   double f = 0;
   if (gradient) gradient->assign(x.size(), 0.0);
@@ -436,11 +650,124 @@ double cmax_slam_window_cost(const std::vector<Eigen::Matrix3d>& knots, int64_t 
   return f;
 }
 
+namespace {
+
+// The global pass's events: segment and position on the spline of knots from t0_ns.
+std::vector<WindowCost::Event> spline_events(size_t knots, int order, int64_t t0_ns, int64_t dt, const std::vector<int64_t>& t_ns,
+                                             const std::vector<Eigen::Vector3d>& bearing_c) {
+  if (t_ns.size() != bearing_c.size() || knots < static_cast<size_t>(order))
+    throw std::invalid_argument("CMax-SLAM global pass: inconsistent knots or events");
+  const int64_t smax = static_cast<int64_t>(knots) - order;  // the last time segment
+  std::vector<WindowCost::Event> ev;
+  ev.reserve(t_ns.size());
+  for (size_t k = 0; k < t_ns.size(); ++k) {
+    if (t_ns[k] < t0_ns || t_ns[k] > t0_ns + (smax + 1) * dt) throw std::invalid_argument("CMax-SLAM global pass: an event outside the knots' span");
+    const int64_t s = std::min<int64_t>((t_ns[k] - t0_ns) / dt, smax);
+    ev.push_back({static_cast<int>(s), static_cast<double>(t_ns[k] - t0_ns - s * dt) / static_cast<double>(dt), bearing_c[k].normalized()});
+  }
+  return ev;
+}
+
+// The global pass's cost at one blur (kernel and pano must outlive it): every knot free, as
+// running increments less their mean (weights: each knot's share of the events through the
+// spline's interpolation), with the robust rate prior; normalised to -1 at eps = 0.
+std::unique_ptr<IncrementCost> global_cost(const std::vector<Mat3>& knots, const std::vector<WindowCost::Event>& ev,
+                                           const calib::Equirectangular& pano, const std::vector<double>& kernel, const CmaxSlamOptions& o) {
+  const int order = spline_order(o);
+  std::vector<double> share(knots.size(), 0.0);
+  double b[4];
+  for (const WindowCost::Event& e : ev) {
+    spline_weights(order, e.u, b);
+    for (int c = 0; c < order; ++c) share[static_cast<size_t>(e.seg + c)] += b[c] / static_cast<double>(ev.size());
+  }
+  const int last = static_cast<int>(knots.size()) - 1;
+  auto* inner = new WindowCost(knots, order, 0, last, 0, ev, pano, kernel);
+  inner->set_global(o.box_margin_px);
+  std::vector<double> zero(static_cast<size_t>(inner->NumParameters()), 0.0);
+  double fz = 0;
+  inner->Evaluate(zero.data(), &fz, nullptr);
+  inner->set_scale(fz < 0 ? -1.0 / fz : 1.0, 0.0, 0.0);
+  // The prior's weight per rad of change is global_rate_weight over the trajectory's total
+  // rotation (rad): shrinking every segment by a fraction a then costs global_rate_weight * a at
+  // any length (the contrast it buys also grows with a, not with the length), while undoing a
+  // step costs in proportion to the step.
+  double turned = 0;
+  for (size_t j = 0; j + 1 < knots.size(); ++j) turned += calib::so3_log(Mat3(knots[j].transpose() * knots[j + 1])).norm();
+  inner->set_robust_rate_prior(o.global_rate_weight / std::max(turned, 1e-3));
+  return std::make_unique<IncrementCost>(inner, knots, std::move(share));
+}
+
+}  // namespace
+
+double cmax_slam_global_cost(const std::vector<Eigen::Matrix3d>& knots, int64_t t0_ns, const std::vector<int64_t>& t_ns,
+                             const std::vector<Eigen::Vector3d>& bearing_c, const CmaxSlamOptions& options,
+                             const std::vector<double>& eps, std::vector<double>* gradient) {
+  std::string why;
+  if (!options.Validate(&why)) throw std::invalid_argument("CmaxSlamOptions: " + why);
+  if (eps.size() != 3 * knots.size()) throw std::invalid_argument("cmax_slam_global_cost: 3 parameters per knot");
+  const std::vector<WindowCost::Event> ev = spline_events(knots.size(), spline_order(options), t0_ns, options.knot_spacing_ns, t_ns, bearing_c);
+  const calib::Equirectangular pano(options.panorama_width, options.panorama_height);
+  const std::vector<double> kernel = gaussian_taps(options.blur_sigma_px);
+  const std::unique_ptr<IncrementCost> cost = global_cost(knots, ev, pano, kernel, options);
+  double f = 0;
+  if (gradient) gradient->assign(eps.size(), 0.0);
+  if (!cost->Evaluate(eps.data(), &f, gradient ? gradient->data() : nullptr)) return std::numeric_limits<double>::quiet_NaN();
+  return f;
+}
+
+CmaxSlamGlobalResult cmax_slam_refine_globally(const std::vector<Eigen::Matrix3d>& knots, int64_t t0_ns, const std::vector<int64_t>& t_ns,
+                                               const std::vector<Eigen::Vector3d>& bearing_c, const CmaxSlamOptions& options) {
+  std::string why;
+  if (!options.Validate(&why)) throw std::invalid_argument("CmaxSlamOptions: " + why);
+  CmaxSlamGlobalResult r;
+  r.knots = knots;
+  const int order = spline_order(options);
+  const std::vector<WindowCost::Event> ev = spline_events(knots.size(), order, t0_ns, options.knot_spacing_ns, t_ns, bearing_c);
+  if (ev.size() < kMinWindowEvents || knots.size() < static_cast<size_t>(order) + 1 || options.global_iterations < 1) return r;
+  const calib::Equirectangular pano(options.panorama_width, options.panorama_height);
+  const std::vector<double> sigmas = blur_levels(options);
+  std::vector<double> eps(3 * knots.size(), 0.0), delta;
+  double f0 = 0, f1 = 0;
+  for (size_t level = 0; level < sigmas.size(); ++level) {
+    const std::vector<double> kernel = gaussian_taps(sigmas[level]);
+    std::unique_ptr<IncrementCost> owned = global_cost(knots, ev, pano, kernel, options);
+    IncrementCost* cost = owned.get();
+    ceres::GradientProblem problem(owned.release());  // owns the cost
+    const bool fine = level + 1 == sigmas.size();
+    if (fine) {
+      std::vector<double> zero(eps.size(), 0.0);
+      cost->Evaluate(zero.data(), &f0, nullptr);
+    }
+    const ceres::GradientProblemSolver::Summary sum = minimise(problem, eps.data(), options.global_iterations, 1e-8, 1e-10);
+    r.iterations += static_cast<int64_t>(sum.iterations.size() > 0 ? sum.iterations.size() - 1 : 0);
+    if (fine) {
+      cost->Evaluate(eps.data(), &f1, nullptr);
+      delta = cost->deltas(eps.data());
+    }
+  }
+  bool finite = std::isfinite(f1);
+  for (double v : delta) finite = finite && std::abs(v) < 1.0;
+  if (!finite || !(f1 < f0)) return r;
+  r.refined = true;
+  r.contrast_gain = -f1;  // f0 = -1: the rate prior is zero at eps = 0
+  for (size_t j = 0; j < knots.size(); ++j) r.knots[j] = knots[j] * calib::so3_exp(Vec3(delta[3 * j], delta[3 * j + 1], delta[3 * j + 2]));
+  // The world frame stays: R(t0) unchanged.
+  auto start = [&](const std::vector<Mat3>& k) {
+    Seg seg[3];
+    for (int j = 0; j + 1 < order; ++j) seg[j] = make_seg(k[static_cast<size_t>(j)], k[static_cast<size_t>(j) + 1]);
+    return spline_rotation(order, k.front(), seg, 0.0, nullptr);
+  };
+  const Mat3 back = start(knots) * start(r.knots).transpose();
+  for (Mat3& R : r.knots) R = orthonormal(back * R);
+  return r;
+}
+
 CmaxSlam::CmaxSlam(const CmaxSlamOptions& options, int64_t t0_ns, const Eigen::Matrix3d& R_w_c0)
-    : opt_(options), t0_(t0_ns), dt_(options.knot_spacing_ns), t_a_(t0_ns) {
+    : opt_(options), t0_(t0_ns), dt_(options.knot_spacing_ns), order_(spline_order(options)), offset_(order_ == 4 ? 1 : 0), t_a_(t0_ns) {
   std::string why;
   if (!opt_.Validate(&why)) throw std::invalid_argument("CmaxSlamOptions: " + why);
-  knots_.push_back(orthonormal(R_w_c0));
+  // The knots up to t0: a still start (cubic: one more, before t0).
+  for (int i = 0; i <= offset_; ++i) knots_.push_back(orthonormal(R_w_c0));
   odo_.emplace_back(t0_ns, knots_.front());
   odo_at_last_knot_ = knots_.front();
   map_.assign(static_cast<size_t>(opt_.panorama_width) * opt_.panorama_height, 0.0f);
@@ -449,6 +776,18 @@ CmaxSlam::CmaxSlam(const CmaxSlamOptions& options, int64_t t0_ns, const Eigen::M
 void CmaxSlam::add_event(int64_t t_ns, const Eigen::Vector3f& bearing_c) {
   if (t_ns < t_a_) throw std::invalid_argument("CmaxSlam::add_event: event before the finalised time");
   events_.push_back({t_ns, bearing_c.x(), bearing_c.y(), bearing_c.z()});
+  // The global pass's sample: every kept_stride_-th event; past the cap, every other one is
+  // dropped and the stride doubles (an even sample of all events, at most the cap).
+  if (opt_.global_iterations > 0 && seen_++ % kept_stride_ == 0) {
+    kept_.push_back(events_.back());
+    if (kept_.size() > static_cast<size_t>(opt_.global_max_events)) {
+      size_t k = 0;
+      for (size_t i = 0; i < kept_.size(); i += 2) kept_[k++] = kept_[i];
+      kept_.resize(k);
+      kept_stride_ *= 2;
+      seen_ = 1;  // the next kept event is kept_stride_ after the last one kept
+    }
+  }
 }
 
 void CmaxSlam::predict(int64_t t_ns, const Eigen::Matrix3d& R_odometry) {
@@ -468,27 +807,35 @@ void CmaxSlam::predict(int64_t t_ns, const Eigen::Matrix3d& R_odometry) {
 }
 
 Eigen::Matrix3d CmaxSlam::rotation(int64_t t_ns) const {
-  if (t_ns <= t0_) return knots_.front();
-  const int64_t s = (t_ns - t0_) / dt_;
-  if (s + 1 >= static_cast<int64_t>(knots_.size())) return knots_.back();
-  const double u = static_cast<double>(t_ns - knot_time(static_cast<size_t>(s))) / static_cast<double>(dt_);
-  const Mat3& R0 = knots_[static_cast<size_t>(s)];
-  // A final segment's rotation never changes: kept for the next call (finalisation and the
-  // caller's mapping ask for every event of a segment in turn).
-  if (s != cached_segment_) {
-    const Vec3 w = calib::so3_log(Mat3(R0.transpose() * knots_[static_cast<size_t>(s) + 1]));
-    if (knot_time(static_cast<size_t>(s) + 1) > t_a_) return R0 * calib::so3_exp(u * w);
-    cached_segment_ = s;
-    cached_w_ = w;
+  const int64_t smax = static_cast<int64_t>(knots_.size()) - order_;  // the last time segment with its knots
+  if (smax < 0) return knots_.back();
+  int64_t s = t_ns <= t0_ ? 0 : (t_ns - t0_) / dt_;
+  double u = t_ns <= t0_ ? 0.0 : static_cast<double>(t_ns - t0_ - s * dt_) / static_cast<double>(dt_);
+  if (s > smax) {  // held at the end
+    s = smax;
+    u = 1.0;
   }
-  return R0 * calib::so3_exp(u * cached_w_);
+  const size_t c = static_cast<size_t>(s);
+  Seg seg[3];
+  // A final segment's rotation never changes: its Logs are kept for the next call (finalisation
+  // and the caller's mapping ask for every event of a segment in turn).
+  if (s == cached_segment_) {
+    for (int j = 0; j + 1 < order_; ++j) seg[j].w = cached_w_[j];
+  } else {
+    for (int j = 0; j + 1 < order_; ++j) seg[j].w = calib::so3_log(Mat3(knots_[c + j].transpose() * knots_[c + j + 1]));
+    if (t0_ + (s + 1) * dt_ <= t_a_) {
+      cached_segment_ = s;
+      for (int j = 0; j + 1 < order_; ++j) cached_w_[j] = seg[j].w;
+    }
+  }
+  return spline_rotation(order_, knots_[c], seg, u, nullptr);
 }
 
 void CmaxSlam::update(int64_t t_complete_ns) {
   const int64_t span = opt_.window_knots * dt_;
   while (t_a_ + span <= t_complete_ns) {
     const int64_t tb = t_a_ + span;
-    if (knot_time(knots_.size() - 1) < tb) break;
+    if (knot_time(knots_.size() - 1) < tb + (order_ - 2 - offset_) * dt_) break;  // the window's last control knot
     optimize_window(t_a_, tb);
     finalize_until(t_a_ + opt_.step_knots * dt_);
   }
@@ -499,20 +846,42 @@ void CmaxSlam::finish(int64_t t_end_ns) {
   // The last window's knots must reach past t_end_ns; beyond the predicted ones the last segment's
   // rotation repeats (constant velocity).
   const Mat3 step = knots_.size() > 1 ? Mat3(knots_[knots_.size() - 2].transpose() * knots_.back()) : Mat3::Identity();
-  while (knot_time(knots_.size() - 1) <= t_end_ns) knots_.push_back(knots_.back() * step);
+  while (knot_time(knots_.size() - 1) <= t_end_ns + (order_ - 2 - offset_) * dt_) knots_.push_back(knots_.back() * step);
   if (t_end_ns >= t_a_) optimize_window(t_a_, t_end_ns + 1);
   finalize_until(INT64_MAX);
+  if (opt_.global_iterations > 0) refine_globally();
+}
+
+void CmaxSlam::refine_globally() {
+  if (kept_.size() < kMinWindowEvents || knots_.size() < static_cast<size_t>(order_) + 1) return;
+  std::vector<int64_t> t;
+  std::vector<Eigen::Vector3d> b;
+  t.reserve(kept_.size());
+  b.reserve(kept_.size());
+  for (const Ev& e : kept_) {
+    t.push_back(e.t);
+    b.emplace_back(e.bx, e.by, e.bz);
+  }
+  const CmaxSlamGlobalResult r = cmax_slam_refine_globally(knots_, t0_, t, b, opt_);
+  stats_.global_iterations = r.iterations;
+  stats_.global_events = static_cast<int64_t>(kept_.size());
+  if (!r.refined) return;
+  stats_.global_contrast_gain = r.contrast_gain;
+  stats_.global_refined = true;
+  knots_ = r.knots;
+  cached_segment_ = -1;
 }
 
 void CmaxSlam::optimize_window(int64_t ta, int64_t tb) {
+  // The window's time segments [fixed, s_last] have control knots [fixed, s_last + order - 1].
   const int fixed = static_cast<int>((ta - t0_) / dt_);
-  const int last = static_cast<int>((tb - t0_ + dt_ - 1) / dt_);
+  const int last = static_cast<int>((tb - t0_ + dt_ - 1) / dt_) - 1 + order_ - 1;
   size_t n = 0;
   while (n < events_.size() && events_[n].t < tb) ++n;
   // The first window keeps the prediction: without a map its cost barely constrains the
   // window's rotation as a whole, nor its first segment, whose errors would offset every later
   // window registered to the map it starts.
-  if (n < kMinWindowEvents || last <= fixed || (opt_.keep_first_window && stats_.events_mapped == 0)) {
+  if (n < kMinWindowEvents || last - fixed + 1 <= order_ - 1 || (opt_.keep_first_window && stats_.events_mapped == 0)) {
     ++stats_.skipped_windows;
     return;
   }
@@ -523,24 +892,23 @@ void CmaxSlam::optimize_window(int64_t ta, int64_t tb) {
   for (size_t k = 0; k < n; k += stride) {
     const Ev& e = events_[k];
     const int64_t s = (e.t - t0_) / dt_;
-    ev.push_back({static_cast<int>(s), static_cast<double>(e.t - knot_time(static_cast<size_t>(s))) / static_cast<double>(dt_),
+    ev.push_back({static_cast<int>(s), static_cast<double>(e.t - t0_ - s * dt_) / static_cast<double>(dt_),
                   Vec3(e.bx, e.by, e.bz).normalized()});
   }
   const calib::Equirectangular pano(opt_.panorama_width, opt_.panorama_height);
   const size_t used = ev.size();
-  // Coarse to fine: a wider blur first widens the basin, then the fine blur.
-  std::vector<double> sigmas;
-  if (opt_.coarse_blur_sigma_px > opt_.blur_sigma_px) sigmas.push_back(opt_.coarse_blur_sigma_px);
-  sigmas.push_back(opt_.blur_sigma_px);
+  const std::vector<double> sigmas = blur_levels(opt_);
   // The first window (nothing finalised yet) frees its first knot as well: no earlier event
   // depends on it, and fixing it would let the sparse first segment anchor the whole window.
+  // Otherwise the knots that shape the finalised segments stay: the window's first order - 1.
   const bool free_first = stats_.events_mapped == 0 && fixed == 0;
-  const int n_free = last - fixed + (free_first ? 1 : 0);
+  const int n_fixed = free_first ? 0 : order_ - 1;
+  const int n_free = last - fixed + 1 - n_fixed;
   std::vector<double> x(static_cast<size_t>(3 * n_free), 0.0);
   double f0 = 0, f1 = 0, prior1 = 0;
   for (size_t level = 0; level < sigmas.size(); ++level) {
     const std::vector<double> kernel = gaussian_taps(sigmas[level]);
-    auto* cost = new WindowCost(knots_, fixed, last, free_first, level + 1 < sigmas.size() ? ev : std::move(ev), pano, kernel);
+    auto* cost = new WindowCost(knots_, order_, fixed, last, n_fixed, level + 1 < sigmas.size() ? ev : std::move(ev), pano, kernel);
     ceres::GradientProblem problem(cost);  // owns cost
     prepare(cost, map_, opt_, kernel);
     const bool fine = level + 1 == sigmas.size();
@@ -548,14 +916,7 @@ void CmaxSlam::optimize_window(int64_t ta, int64_t tb) {
       std::vector<double> zero(x.size(), 0.0);
       cost->Evaluate(zero.data(), &f0, nullptr);
     }
-    ceres::GradientProblemSolver::Options so;
-    so.max_num_iterations = opt_.max_iterations;
-    so.logging_type = ceres::SILENT;
-    so.function_tolerance = 1e-7;
-    so.gradient_tolerance = 1e-12;
-    so.parameter_tolerance = 1e-9;
-    ceres::GradientProblemSolver::Summary sum;
-    ceres::Solve(so, problem, x.data(), &sum);
+    const ceres::GradientProblemSolver::Summary sum = minimise(problem, x.data(), opt_.max_iterations, 1e-7, 1e-9);
     stats_.iterations += static_cast<int64_t>(sum.iterations.size() > 0 ? sum.iterations.size() - 1 : 0);
     stats_.evaluations += sum.num_cost_evaluations + sum.num_gradient_evaluations;
     if (fine) {
@@ -567,8 +928,8 @@ void CmaxSlam::optimize_window(int64_t ta, int64_t tb) {
   for (double v : x) finite = finite && std::abs(v) < 1.0;
   if (finite && f1 <= f0) {
     const Mat3 last_before = knots_[static_cast<size_t>(last)];
-    for (int j = free_first ? fixed : fixed + 1; j <= last; ++j) {
-      const double* d = x.data() + 3 * (j - fixed - (free_first ? 0 : 1));
+    for (int j = fixed + n_fixed; j <= last; ++j) {
+      const double* d = x.data() + 3 * (j - fixed - n_fixed);
       knots_[static_cast<size_t>(j)] = orthonormal(knots_[static_cast<size_t>(j)] * calib::so3_exp(Vec3(d[0], d[1], d[2])));
     }
     // The predicted knots after the window keep their rotations relative to its last knot.
@@ -585,7 +946,7 @@ void CmaxSlam::optimize_window(int64_t ta, int64_t tb) {
 void CmaxSlam::finalize_until(int64_t t) {
   const calib::Equirectangular pano(opt_.panorama_width, opt_.panorama_height);
   // The knots before the new t_a_ are final from here on.
-  t_a_ = std::max(t_a_, std::min(t, knot_time(knots_.size() - 1)));
+  t_a_ = std::max(t_a_, std::min(t, t0_ + (static_cast<int64_t>(knots_.size()) - order_ + 1) * dt_));
   while (!events_.empty() && events_.front().t < t) {
     const Ev& e = events_.front();
     vote(&map_, pano, rotation(e.t) * Vec3(e.bx, e.by, e.bz));

@@ -93,6 +93,7 @@ const Table<VisualInertialInitOptions>& visual_inertial_init_table() {
 const Table<CmaxSlamOptions>& cmax_slam_table() {
   using O = CmaxSlamOptions;
   static const Table<O> t = Table<O>("CMax-SLAM back-end settings")
+                                .choice("spline", &O::spline, {{"linear", CmaxSlamSpline::kLinear}, {"cubic", CmaxSlamSpline::kCubic}})
                                 .duration_ms("knot_spacing_ms", &O::knot_spacing_ns, Range::kPositive)
                                 .integer("window_knots", &O::window_knots, 2, 10000)
                                 .integer("step_knots", &O::step_knots, 1, 10000)
@@ -107,6 +108,11 @@ const Table<CmaxSlamOptions>& cmax_slam_table() {
                                 .number("prior_weight", &O::prior_weight, Range::kNonNegative, "per rad^2")
                                 .number("rate_prior_weight", &O::rate_prior_weight, Range::kNonNegative, "per rad^2")
                                 .boolean("keep_first_window", &O::keep_first_window)
+                                .integer("global_iterations", &O::global_iterations, 0, 100000)
+                                .number("global_rate_weight", &O::global_rate_weight, Range::kNonNegative, "")
+                                .integer("global_max_events", &O::global_max_events, 1000, 1000000000)
+                                .note("global_iterations", "0: no global pass")
+                                .note("global_rate_weight", "per (rad of a segment's change / rad turned in all)")
                                 .note("max_window_events", "0: all of the window's events")
                                 .note("coarse_blur_px", "0 or <= blur_px: no coarse pass")
                                 .validate();

@@ -84,6 +84,13 @@ bool MosaicPipeline::Impl::bootstrap_step() {
         slam->finish(result.stats.t_last_event_ns);
         slam_finished = true;
         slam_drain();
+        // The global pass moved knots already recorded: the trajectory is the refined spline.
+        if (slam->stats().global_refined) {
+          std::vector<StampedPose> poses(result.rotation.begin(), result.rotation.end());
+          const Eigen::Matrix3d R_c_b = cal.T_c_b.rotation.toRotationMatrix();
+          for (StampedPose& p : poses) p.T_w_b.rotation = Eigen::Quaterniond(slam->rotation(p.t_ns) * R_c_b).normalized();
+          result.rotation = Trajectory(std::move(poses));
+        }
       }
       return false;
     }
@@ -171,8 +178,9 @@ void MosaicPipeline::Impl::slam_drain() {
     slam_waiting.pop_front();
   }
   const int64_t t_knots = slam_finished ? result.stats.t_last_event_ns : slam->finalized_until_ns();
+  // The spline at its knots' times (the knots themselves with the linear spline).
   for (; slam_recorded < slam->knots() && slam->knot_time(slam_recorded) <= t_knots; ++slam_recorded)
-    record(slam->knot_time(slam_recorded), slam->knot(slam_recorded));
+    if (slam->knot_time(slam_recorded) >= t0) record(slam->knot_time(slam_recorded), slam->rotation(slam->knot_time(slam_recorded)));
   if (slam_finished) record(result.stats.t_last_event_ns, slam->rotation(result.stats.t_last_event_ns));
 }
 
