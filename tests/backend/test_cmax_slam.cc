@@ -291,6 +291,19 @@ TEST(CmaxSlam, RejectsInvalidOptionsAndLateEvents) {
   o.step_knots = 11;
   EXPECT_THROW(CmaxSlam(o, 0, Mat3::Identity()), std::invalid_argument);
   o = CmaxSlamOptions();
+  o.global_iterations = -1;
+  EXPECT_THROW(CmaxSlam(o, 0, Mat3::Identity()), std::invalid_argument);
+  o = CmaxSlamOptions();
+  o.global_max_events = 999;
+  EXPECT_THROW(CmaxSlam(o, 0, Mat3::Identity()), std::invalid_argument);
+  o = CmaxSlamOptions();
+  o.global_rate_weight = -0.1;
+  EXPECT_THROW(CmaxSlam(o, 0, Mat3::Identity()), std::invalid_argument);
+  // The global pass on its own: events outside the knots' span are refused.
+  o = CmaxSlamOptions();
+  const std::vector<Mat3> three(3, Mat3::Identity());
+  EXPECT_THROW(cmax_slam_refine_globally(three, 0, {100'000'000}, {Vec3(0, 0, 1)}, o), std::invalid_argument);
+  o = CmaxSlamOptions();
   CmaxSlam slam(o, 1000, Mat3::Identity());
   EXPECT_THROW(slam.add_event(999, Eigen::Vector3f(0, 0, 1)), std::invalid_argument);
   // No events at all: finishing keeps the prediction.
