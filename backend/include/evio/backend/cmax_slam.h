@@ -94,7 +94,7 @@ struct CmaxSlamOptions {
   // quadratic prior: undoing a step changes one segment, while the contrast of a whole panorama
   // also rises when every segment turns less (its events swept onto fewer texels); turning a
   // fraction a less everywhere costs global_rate_weight * a at any length.
-  double global_rate_weight = 3.0;
+  double global_rate_weight = 1.5;
   // Events in the global pass's sample (>= 1000); at most this many are kept in memory.
   int global_max_events = 300000;
   bool Validate(std::string* why) const;
