@@ -481,6 +481,26 @@ class IncrementCost : public ceres::FirstOrderFunction {
   int NumParameters() const override { return inner_->NumParameters(); }
   bool Evaluate(const double* eps, double* cost, double* gradient) const override {
     const size_t n = R0_.size();
+    deltas(eps);
+    if (!gradient) return inner_->Evaluate(delta_.data(), cost, nullptr);
+    gdelta_.assign(3 * n, 0.0);
+    if (!inner_->Evaluate(delta_.data(), cost, gdelta_.data())) return false;
+    // h_j = df/dtheta'_j; df/dtheta_j = h_j - w_j sum_i h_i; df/deps_i = sum over j >= i.
+    theta_.resize(n);
+    Vec3 H = Vec3::Zero(), acc = Vec3::Zero();
+    for (size_t j = 0; j < n; ++j) {
+      theta_[j] = R0_[j] * Vec3(gdelta_[3 * j], gdelta_[3 * j + 1], gdelta_[3 * j + 2]);
+      H += theta_[j];
+    }
+    for (size_t j = n; j-- > 0;) {
+      acc += theta_[j] - w_[j] * H;
+      Eigen::Map<Vec3>(gradient + 3 * j) = acc;
+    }
+    return true;
+  }
+  // The knots' right perturbations at eps (the linear map above; no cost evaluated).
+  const std::vector<double>& deltas(const double* eps) const {
+    const size_t n = R0_.size();
     theta_.resize(n);
     Vec3 acc = Vec3::Zero(), mean = Vec3::Zero();
     for (size_t j = 0; j < n; ++j) {
@@ -490,26 +510,6 @@ class IncrementCost : public ceres::FirstOrderFunction {
     }
     delta_.resize(3 * n);
     for (size_t j = 0; j < n; ++j) Eigen::Map<Vec3>(delta_.data() + 3 * j) = R0_[j].transpose() * (theta_[j] - mean);
-    if (!gradient) return inner_->Evaluate(delta_.data(), cost, nullptr);
-    gdelta_.assign(3 * n, 0.0);
-    if (!inner_->Evaluate(delta_.data(), cost, gdelta_.data())) return false;
-    // h_j = df/dtheta'_j; df/dtheta_j = h_j - w_j sum_i h_i; df/deps_i = sum over j >= i.
-    Vec3 H = Vec3::Zero();
-    for (size_t j = 0; j < n; ++j) {
-      theta_[j] = R0_[j] * Vec3(gdelta_[3 * j], gdelta_[3 * j + 1], gdelta_[3 * j + 2]);
-      H += theta_[j];
-    }
-    acc.setZero();
-    for (size_t j = n; j-- > 0;) {
-      acc += theta_[j] - w_[j] * H;
-      Eigen::Map<Vec3>(gradient + 3 * j) = acc;
-    }
-    return true;
-  }
-  // The knots' right perturbations at eps.
-  const std::vector<double>& deltas(const double* eps) const {
-    double f = 0;
-    Evaluate(eps, &f, nullptr);
     return delta_;
   }
 

@@ -48,7 +48,11 @@ namespace evio::pipeline {
 //    cmax_slam) refines over a sliding window by maximising the contrast of the panoramic image of
 //    warped events, registered to the panoramic event map of the events before the window. The
 //    gradient mosaic maps each event once its window is final (a delay of window_knots knots), and
-//    the trajectory is the spline's knots. Cannot be lost; no failure detection.
+//    the trajectory is the spline at its knots' times; after the back-end's global pass
+//    (cmax_slam.global_iterations) it is the refined spline, while the mosaic stays mapped along
+//    the spline before the pass (a caller that can read the data again maps it along the refined
+//    trajectory: set_bootstrap_reference with kOdometry, as evio mosaic does). Cannot be lost; no
+//    failure detection.
 enum class MosaicTracker { kParticleFilter, kOdometry, kOdometryParticleFilter, kCmaxSlam };
 // "pf", "odometry", "odometry+pf", "cmax_slam".
 const char* mosaic_tracker_name(MosaicTracker t);
