@@ -82,14 +82,19 @@ const Table<C>& mosaic_config_table() {
                 {{"pf", pipeline::MosaicTracker::kParticleFilter},
                  {"odometry", pipeline::MosaicTracker::kOdometry},
                  {"odometry+pf", pipeline::MosaicTracker::kOdometryParticleFilter},
-                 {"cmax_slam", pipeline::MosaicTracker::kCmaxSlam}})
+                 {"cmax_slam", pipeline::MosaicTracker::kCmaxSlam},
+                 {"auto", pipeline::MosaicTracker::kAuto}})
         .number("odometry_noise_rad_per_sqrt_s", &C::odometry_noise_rad_per_sqrt_s, Range::kPositive, "rad/sqrt(s)")
         .note("event_stride", "0: by input, 4 with --use-imu, 1 without")
-        .note("min_particles", "-1: by input, 20 with --use-imu, 40 without");
+        .note("min_particles", "-1: by input, 20 with --use-imu, 40 without")
+        .note("method", "auto: cmax_slam events only, pf with --use-imu");
     Table<C> bootstrap("bootstrap settings");
     bootstrap.duration_ms("duration_ms", &C::bootstrap_ns, Range::kNonNegative)
         .duration_ms("window_ms", &C::bootstrap_window_ns, Range::kPositive)
         .integer("window_events", &C::bootstrap_window_events, 1000, 100000000)
+        .integer("min_window_events", &C::bootstrap_min_window_events, 0, 100000000)
+        .duration_ms("max_window_ms", &C::bootstrap_max_window_ns, Range::kPositive)
+        .note("min_window_events", "0: no floor; a window with fewer events by window_ms stays open up to max_window_ms")
         .number("min_contrast_gain", &C::bootstrap_min_contrast_gain, Interval::at_least(1), "ratio")
         .integer("rate_max_events", &C::bootstrap_rate_max_events, 0, 100000000)
         .note("rate_max_events", "0: all of the window's events")
@@ -183,6 +188,8 @@ MosaicConfig resolve_mosaic_config(const MosaicArgs& args) {
   if (args.stride > 0) cfg.event_stride = args.stride;
   frontend::resolve_input_defaults(&cfg.tracker, args.use_imu, cfg.event_stride, cfg.min_particles);
   cfg.use_gyro = args.use_imu;
+  cfg.tracker_reason = pipeline::mosaic_tracker_reason(cfg.tracker_method, cfg.use_gyro);
+  cfg.tracker_method = pipeline::resolve_mosaic_tracker(cfg.tracker_method, cfg.use_gyro);
   if (args.width > 0) {
     cfg.mosaic.width = args.width;
     cfg.mosaic.height = args.width / 2;

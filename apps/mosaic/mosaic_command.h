@@ -33,6 +33,9 @@ struct MosaicConfig : pipeline::MosaicPipelineOptions {
   // tracker.min_particles when the YAML leaves it unset or -1: the adaptive particle count
   // (KLD-sampling) down to 20 particles with --use-imu and 40 without (frontend/rotation_particle_filter.h).
   int min_particles = -1;
+  // Why tracker_method is what it is once resolved by the input: "set", or "auto: events only" /
+  // "auto: with the gyro" (pipeline::resolve_mosaic_tracker).
+  std::string tracker_reason = "set";
   mapping::LogImageDisplayOptions display;            // output.{gamma, low_percentile, high_percentile, transparent_unseen}
 };
 

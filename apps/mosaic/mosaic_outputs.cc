@@ -46,16 +46,19 @@ std::string model_json(const MosaicConfig& cfg, const frontend::RotationParticle
                                  : "auto: no gyro and no particle velocities";
   const std::string motion = gyro ? (odometry ? std::string("odometry") : std::string("gyro")) : frontend::rotation_motion_model_name(motion_used);
   const double mean_particles = st.weighted_batches > 0 ? static_cast<double>(st.particle_batches) / static_cast<double>(st.weighted_batches) : 0.0;
+  // The tracker as it ran and why (tracker.method auto: chosen by the input).
+  const std::string tail = ", \"tracker\": \"" + std::string(pipeline::mosaic_tracker_name(cfg.tracker_method)) +
+                           "\", \"tracker_choice\": " + json_string(cfg.tracker_reason) + "}";
   if (cfg.tracker_method == pipeline::MosaicTracker::kCmaxSlam)
     return "{\"summary\": " +
            json_string(std::string("rotation spline refined by the CMax-SLAM back-end (sliding window, panoramic contrast), predicted from the ") +
                        (cfg.use_gyro ? "gyro" : "contrast-maximisation rate of each window")) +
-           ", \"tracker\": \"cmax_slam\"}";
+           tail;
   if (cfg.tracker_method == pipeline::MosaicTracker::kOdometry)
     return "{\"summary\": " +
            json_string(std::string("rotation integrated from the ") +
                        (cfg.use_gyro ? "gyro" : "contrast-maximisation rate of each window") + ", no map registration") +
-           ", \"tracker\": \"odometry\"}";
+           tail;
   return "{\"summary\": " +
          json_string(std::string(pipeline::mosaic_tracker_name(cfg.tracker_method)) + " tracker: rotation, " + measurement + " measurement (" + why + "), " + motion + " prediction, " + json_number(mean_particles, 9) +
                      " particles on average") +
@@ -63,8 +66,7 @@ std::string model_json(const MosaicConfig& cfg, const frontend::RotationParticle
          measurement + "\", \"reason\": " + json_string(why) + "}, \"motion\": {\"option\": \"" +
          frontend::rotation_motion_model_name(to.motion_model) + "\", \"resolved\": \"" + motion +
          "\", \"gyro_predictions\": " + std::to_string(st.gyro_predictions) + "}, \"particles\": {\"configured\": " +
-         std::to_string(to.num_particles) + ", \"mean\": " + json_number(mean_particles, 9) + "}, \"tracker\": \"" +
-         pipeline::mosaic_tracker_name(cfg.tracker_method) + "\"}";
+         std::to_string(to.num_particles) + ", \"mean\": " + json_number(mean_particles, 9) + "}" + tail;
 }
 
 void write_stats_json(const MosaicArgs& args, const MosaicConfig& cfg, const MosaicRun& run) {
@@ -237,6 +239,7 @@ void write_mosaic_outputs(const MosaicArgs& args, const MosaicConfig& cfg, const
         << ")\n";
   const double processing_s = run.processing_s, cpu_s = run.cpu_s, duration_s = run.duration_s();
   const int64_t events = run.events;
+  out << "tracker       " << pipeline::mosaic_tracker_name(cfg.tracker_method) << " (" << cfg.tracker_reason << ")\n";
   out << "events        " << events << " over " << json_number(duration_s, 9) << " s, bootstrap "
       << (args.use_imu ? "gyro" : "contrast maximisation") << " " << json_number((result.stats.bootstrap.t_end_ns - run.t0_ns) * 1e-9, 9) << " s\n";
   out << "speed         " << json_number(processing_s, 9) << " s processing, real-time factor "

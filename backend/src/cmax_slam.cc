@@ -36,6 +36,7 @@ bool CmaxSlamOptions::Validate(std::string* why) const {
   if (global_iterations < 0) return fail("global_iterations must be >= 0");
   if (!(global_rate_weight >= 0) || !std::isfinite(global_rate_weight)) return fail("global_rate_weight must be >= 0");
   if (global_max_events < 1000) return fail("global_max_events must be >= 1000");
+  if (!(min_segment_events >= 0) || !std::isfinite(min_segment_events)) return fail("min_segment_events must be >= 0");
   return true;
 }
 
@@ -284,6 +285,9 @@ class WindowCost : public ceres::FirstOrderFunction {
   // concentrated in a few segments (a step undone) far less than the same total spread over all
   // (the contrast's own collapse: the panorama swept less, its events denser).
   void set_robust_rate_prior(double weight) { robust_rate_weight_ = weight; }
+  // The windows' quadratic rate prior per segment j (between knots fixed + j and fixed + j + 1):
+  // its weight times factor[j] (empty: 1 each).
+  void set_rate_prior_factors(std::vector<double> factor) { rate_factor_ = std::move(factor); }
 
   // prior_weight / 2 * mean over the free knots of |delta_j|^2 + rate_prior_weight / 2 * mean
   // over the segments of |delta_{j+1} - E_j^T delta_j|^2, E_j = R_j^T R_{j+1} at x = 0: the
@@ -323,10 +327,11 @@ class WindowCost : public ceres::FirstOrderFunction {
       for (int j = 0; j + 1 < nk; ++j) {
         const Mat3& E = Ebar_[j];
         const Vec3 r = delta(j + 1) - E.transpose() * delta(j);
-        p += 0.5 * wr * r.squaredNorm();
+        const double w = rate_factor_.empty() ? wr : wr * rate_factor_[static_cast<size_t>(j)];
+        p += 0.5 * w * r.squaredNorm();
         if (!gradient) continue;
-        Eigen::Map<Vec3>(gradient + 3 * (j + 1 - skip_)) += wr * r;
-        if (j >= skip_) Eigen::Map<Vec3>(gradient + 3 * (j - skip_)) -= wr * (E * r);
+        Eigen::Map<Vec3>(gradient + 3 * (j + 1 - skip_)) += w * r;
+        if (j >= skip_) Eigen::Map<Vec3>(gradient + 3 * (j - skip_)) -= w * (E * r);
       }
     }
     return p;
@@ -454,6 +459,7 @@ class WindowCost : public ceres::FirstOrderFunction {
   bool wrap_ = false;
   std::vector<double> base_;
   double scale_ = 1, prior_weight_ = 0, rate_prior_weight_ = 0, robust_rate_weight_ = 0;
+  std::vector<double> rate_factor_;
   static constexpr double kRobustRateRad = 1e-3;
   std::vector<Mat3> Ebar_;  // the segments' rotations at x = 0
   mutable std::vector<Mat3> Rk_, Jr_;
@@ -570,7 +576,7 @@ void prepare_map(WindowCost* cost, const std::vector<float>& map, const CmaxSlam
     }
   const double vsum = cost->votes_at_zero();
   if (msum <= 0 || vsum <= 0) return;
-  const double alpha = opt.map_weight * vsum / msum;
+  const double alpha = opt.map_weight * std::min(1.0, vsum / msum);
   for (double& v : base) v *= alpha;
   std::vector<double> tmp;
   blur(&base, bw, bh, kernel, &tmp);
@@ -616,6 +622,28 @@ ceres::GradientProblemSolver::Summary minimise(const ceres::GradientProblem& pro
   return sum;
 }
 
+// The windows' rate prior per knot segment j of knots [fixed, last] (CmaxSlamOptions::
+// min_segment_events): floor / the events of its time segment, at least 1 (empty: floor 0). Knot
+// segment j is mostly time segment fixed + j - 1 for the cubic spline (its middle Log), fixed + j
+// for the linear one; the cubic's first and last take their neighbour's count.
+std::vector<double> rate_prior_factors(const std::vector<int64_t>& t_ns, int64_t t0, int64_t dt, int fixed, int last, int order,
+                                       double floor) {
+  if (!(floor > 0)) return {};
+  const int nseg = last - fixed;
+  const int shift = (order - 2) / 2;
+  std::vector<double> count(static_cast<size_t>(nseg), 0.0);
+  for (int64_t t : t_ns) {
+    const int64_t j = (t - t0) / dt - fixed + shift;
+    if (j >= 0 && j < nseg) count[static_cast<size_t>(j)] += 1;
+  }
+  std::vector<double> factor(static_cast<size_t>(nseg));
+  for (int j = 0; j < nseg; ++j) {
+    const int jj = std::clamp(j, std::min(shift, nseg - 1), std::max(0, nseg - 1 - shift));
+    factor[static_cast<size_t>(j)] = std::max(1.0, floor / std::max(1.0, count[static_cast<size_t>(jj)]));
+  }
+  return factor;
+}
+
 // Fewer events than this in a window: no optimisation (the prediction is kept).
 constexpr size_t kMinWindowEvents = 50;
 
@@ -643,6 +671,7 @@ double cmax_slam_window_cost(const std::vector<Eigen::Matrix3d>& knots, int64_t 
   const calib::Equirectangular pano(options.panorama_width, options.panorama_height);
   const std::vector<double> kernel = gaussian_taps(options.blur_sigma_px);
   WindowCost cost(knots, order, fixed, last, 1, std::move(ev), pano, kernel);
+  cost.set_rate_prior_factors(rate_prior_factors(t_ns, t0_ns, dt, fixed, last, order, options.min_segment_events));
   prepare(&cost, map, options, kernel);
   double f = 0;
   if (gradient) gradient->assign(x.size(), 0.0);
@@ -895,6 +924,9 @@ void CmaxSlam::optimize_window(int64_t ta, int64_t tb) {
     ev.push_back({static_cast<int>(s), static_cast<double>(e.t - t0_ - s * dt_) / static_cast<double>(dt_),
                   Vec3(e.bx, e.by, e.bz).normalized()});
   }
+  std::vector<int64_t> times(n);
+  for (size_t k = 0; k < n; ++k) times[k] = events_[k].t;
+  const std::vector<double> factor = rate_prior_factors(times, t0_, dt_, fixed, last, order_, opt_.min_segment_events);
   const calib::Equirectangular pano(opt_.panorama_width, opt_.panorama_height);
   const size_t used = ev.size();
   const std::vector<double> sigmas = blur_levels(opt_);
@@ -910,6 +942,7 @@ void CmaxSlam::optimize_window(int64_t ta, int64_t tb) {
     const std::vector<double> kernel = gaussian_taps(sigmas[level]);
     auto* cost = new WindowCost(knots_, order_, fixed, last, n_fixed, level + 1 < sigmas.size() ? ev : std::move(ev), pano, kernel);
     ceres::GradientProblem problem(cost);  // owns cost
+    cost->set_rate_prior_factors(factor);
     prepare(cost, map_, opt_, kernel);
     const bool fine = level + 1 == sigmas.size();
     if (fine) {

@@ -107,6 +107,8 @@ const Table<CmaxSlamOptions>& cmax_slam_table() {
                                 .number("box_margin_px", &O::box_margin_px, Range::kNonNegative, "px")
                                 .number("prior_weight", &O::prior_weight, Range::kNonNegative, "per rad^2")
                                 .number("rate_prior_weight", &O::rate_prior_weight, Range::kNonNegative, "per rad^2")
+                                .number("min_segment_events", &O::min_segment_events, Range::kNonNegative, "events")
+                                .note("min_segment_events", "0: off; a sparser knot segment's rate prior weighs this / its events")
                                 .boolean("keep_first_window", &O::keep_first_window)
                                 .integer("global_iterations", &O::global_iterations, 0, 100000)
                                 .number("global_rate_weight", &O::global_rate_weight, Range::kNonNegative, "")

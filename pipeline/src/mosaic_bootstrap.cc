@@ -37,8 +37,15 @@ bool MosaicPipeline::Impl::cmax_window(const Event* ev, size_t n, int64_t tw0, i
                                        int64_t* tw1) const {
   int64_t end = std::min(t_limit, tw0 + opt.bootstrap_window_ns);
   const size_t max_events = static_cast<size_t>(opt.bootstrap_window_events);
+  const size_t min_events = std::min(max_events, static_cast<size_t>(opt.bootstrap_min_window_events));
   size_t j = 0;
   while (j < n && ev[j].t_ns < end && j < max_events) ++j;
+  if (j < min_events && end < t_limit && (j < n || !finishing)) {
+    // Too few events by window_ns: open until the floor's count or max_window_ns.
+    end = std::min(t_limit, tw0 + opt.bootstrap_max_window_ns);
+    while (j < n && ev[j].t_ns < end && j < min_events) ++j;
+    if (j < n && ev[j].t_ns < end) end = ev[j].t_ns;  // closed by the floor's count
+  }
   if (j == n && !finishing) return false;  // the window may hold more events
   if (j < n && ev[j].t_ns < end) end = ev[j].t_ns;  // closed by the event count
   *count = j;

@@ -22,8 +22,20 @@ const char* mosaic_tracker_name(MosaicTracker t) {
       return "odometry+pf";
     case MosaicTracker::kCmaxSlam:
       return "cmax_slam";
+    case MosaicTracker::kAuto:
+      return "auto";
   }
   return "?";
+}
+
+MosaicTracker resolve_mosaic_tracker(MosaicTracker t, bool use_gyro) {
+  if (t != MosaicTracker::kAuto) return t;
+  return use_gyro ? MosaicTracker::kParticleFilter : MosaicTracker::kCmaxSlam;
+}
+
+std::string mosaic_tracker_reason(MosaicTracker t, bool use_gyro) {
+  if (t != MosaicTracker::kAuto) return "set";
+  return use_gyro ? "auto: with the gyro" : "auto: events only";
 }
 
 bool MosaicPipelineOptions::Validate(std::string* why) const {
@@ -36,7 +48,8 @@ bool MosaicPipelineOptions::Validate(std::string* why) const {
   if (!tracker.Validate(&w)) return fail("tracker: " + w);
   if (!cmax.Validate(&w)) return fail("cmax: " + w);
   if (tracker_method != MosaicTracker::kParticleFilter && tracker_method != MosaicTracker::kOdometry &&
-      tracker_method != MosaicTracker::kOdometryParticleFilter && tracker_method != MosaicTracker::kCmaxSlam)
+      tracker_method != MosaicTracker::kOdometryParticleFilter && tracker_method != MosaicTracker::kCmaxSlam &&
+      tracker_method != MosaicTracker::kAuto)
     return fail("tracker_method is not a MosaicTracker");
   {
     backend::CmaxSlamOptions c = cmax_slam;
@@ -73,6 +86,8 @@ bool MosaicPipelineOptions::Validate(std::string* why) const {
   if (bootstrap_ns < 0) return fail("bootstrap_ns must be >= 0");
   if (bootstrap_window_ns <= 0) return fail("bootstrap_window_ns must be > 0");
   if (bootstrap_window_events < 1) return fail("bootstrap_window_events must be >= 1");
+  if (bootstrap_min_window_events < 0) return fail("bootstrap_min_window_events must be >= 0");
+  if (bootstrap_max_window_ns < bootstrap_window_ns) return fail("bootstrap_max_window_ns must be >= bootstrap_window_ns");
   if (bootstrap_rate_max_events < 0) return fail("bootstrap_rate_max_events must be >= 0");
   if (!(bootstrap_min_contrast_gain >= 1) || !std::isfinite(bootstrap_min_contrast_gain))
     return fail("bootstrap_min_contrast_gain must be finite and >= 1");
@@ -98,10 +113,13 @@ Eigen::Matrix3d mosaic_initial_camera_rotation() {
 
 namespace {
 
-const MosaicPipelineOptions& checked(const MosaicPipelineOptions& o) {
+// Validated, with the tracker resolved (kAuto: by use_gyro).
+MosaicPipelineOptions checked(const MosaicPipelineOptions& o) {
   std::string why;
   if (!o.Validate(&why)) throw std::invalid_argument("MosaicPipeline options: " + why);
-  return o;
+  MosaicPipelineOptions r = o;
+  r.tracker_method = resolve_mosaic_tracker(o.tracker_method, o.use_gyro);
+  return r;
 }
 
 // The tracker's map (NaN = unseen) as a reconstruction for the snapshot callback.

@@ -48,9 +48,12 @@ TEST(MosaicCommand, ShortRotationWithAndWithoutGyro) {
     a.gt = seq + "/groundtruth.txt";
     a.use_imu = use_imu;
     a.progress = false;
+    // The particle filter: the default (auto) with the gyro, set events only (auto: cmax_slam).
+    if (!use_imu) a.set = {"tracker.method=pf"};
     std::ostringstream o;
     ASSERT_EQ(run_mosaic(a, o), 0);
     std::printf("%s", o.str().c_str());
+    EXPECT_NE(o.str().find(use_imu ? "tracker       pf (auto: with the gyro)" : "tracker       pf (set)"), std::string::npos) << o.str();
     for (const char* f : {"rotation.tum", "panorama.png", "panorama_seen.png", "panorama_log.tiff", "stats.json", "eval.json", "mosaic_config.yaml"})
       EXPECT_TRUE(std::filesystem::exists(a.out + "/" + f)) << f;
     const std::string stats = read(a.out + "/stats.json"), ev = read(a.out + "/eval.json");
@@ -81,7 +84,7 @@ TEST(MosaicCommand, ShortRotationWithAndWithoutGyro) {
     EXPECT_GT(json_value(stats, "real_time_factor"), 0);
     const double rms = json_value(ev, "rot_rms_deg"), mx = json_value(ev, "rot_max_deg");
     EXPECT_TRUE(std::isfinite(json_value(ev, "psnr_db"))) << ev;
-    // Measured (1 s, up to ~200 deg/s): 0.153 deg RMS with the gyro, 0.451 deg events only
+    // Measured (1 s, up to ~200 deg/s): 0.153 deg RMS with the gyro, 0.505 deg events only
     // (particle velocities); PSNR 27 / 22 dB against the true panorama (bounds ~1.2x).
     EXPECT_LT(rms, use_imu ? 0.19 : 0.55) << ev;
     EXPECT_LE(rms, mx);
@@ -110,8 +113,8 @@ TEST(MosaicCommand, ShortRotationWithAndWithoutGyro) {
   }
 }
 
-// tracker.method cmax_slam, events only: the global pass refines the trajectory, and the mosaic is
-// mapped a second time along it (its PSNR against the true panorama).
+// The default tracker (auto) events only is cmax_slam, and says so: the global pass refines the
+// trajectory, and the mosaic is mapped a second time along it (its PSNR against the true panorama).
 TEST(MosaicCommand, CmaxSlamGlobalPassRemapsTheMosaic) {
   evio_test::TempDir dir;
   const std::string seq = simulate_rotation(dir, 1.0);
@@ -120,11 +123,12 @@ TEST(MosaicCommand, CmaxSlamGlobalPassRemapsTheMosaic) {
   a.out = dir.file("slam");
   a.gt = seq + "/groundtruth.txt";
   a.progress = false;
-  a.set = {"tracker.method=cmax_slam"};
   std::ostringstream o;
   ASSERT_EQ(run_mosaic(a, o), 0);
   std::printf("%s", o.str().c_str());
   const std::string stats = read(a.out + "/stats.json"), ev = read(a.out + "/eval.json");
+  EXPECT_NE(stats.find("\"tracker\": \"cmax_slam\", \"tracker_choice\": \"auto: events only\""), std::string::npos) << stats;
+  EXPECT_NE(o.str().find("tracker       cmax_slam (auto: events only)"), std::string::npos) << o.str();
   EXPECT_TRUE(std::filesystem::exists(a.out + "/event_map.png"));
   const size_t g = stats.find("\"global\"");
   ASSERT_NE(g, std::string::npos) << stats;

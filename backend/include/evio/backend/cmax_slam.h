@@ -20,9 +20,11 @@
 //         right perturbation phi of R(t), and the spline's Jacobians (linear:
 //           dphi/d(delta_{i+1}) = u Jr(u w) Jr^-1(w),  dphi/d(delta_i) = Exp(u w)^T - u Jr(u w) Jr^-1(w) Exp(w)^T;
 //         cubic: the same chain through each of the three factors, spline_rotation).
-// alpha = map_weight * (the window's votes / the map's events, both inside the box): the map's
-// events pull the window's events onto edges seen before (registration), at a weight independent
-// of how many events the map holds. map_weight 0 is the paper's window-only objective.
+// alpha = map_weight * min(1, the window's votes / the map's events, both inside the box): the
+// map's events pull the window's events onto edges seen before (registration), at a weight
+// independent of how many events the map holds once it holds more than the window, and never
+// more than one vote per map event (a young map of a few hundred events would otherwise be
+// amplified onto its noise). map_weight 0 is the paper's window-only objective.
 //
 // Sliding window: the window covers the time segments [t_a, t_a + window_knots dt); the knots that
 // shape earlier, finalised segments stay fixed (linear: the knot at t_a; cubic: the first three
@@ -77,6 +79,11 @@ struct CmaxSlamOptions {
   // window's segments of the change squared (to first order). Where the events are few (a static
   // start) it keeps the segments' motion as predicted instead of fitting it to noise.
   double rate_prior_weight = 100.0;
+  // A time segment with fewer events than this (count, >= 0; 0: off) has its rate prior weighted by
+  // min_segment_events / its events (at most / 1): a few hundred events of a slow or still camera
+  // are gathered by a motion that is not there, while the front-end's prediction over its longer
+  // window holds.
+  double min_segment_events = 1000;
   // The first window (no map yet) keeps the front-end's prediction and starts the map.
   bool keep_first_window = true;
   // The box the window's events may move in during the optimisation: their initial box grown by

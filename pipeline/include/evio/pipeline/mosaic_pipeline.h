@@ -53,12 +53,22 @@ namespace evio::pipeline {
 //    the spline before the pass (a caller that can read the data again maps it along the refined
 //    trajectory: set_bootstrap_reference with kOdometry, as evio mosaic does). Cannot be lost; no
 //    failure detection.
-enum class MosaicTracker { kParticleFilter, kOdometry, kOdometryParticleFilter, kCmaxSlam };
-// "pf", "odometry", "odometry+pf", "cmax_slam".
+//  - kAuto: chosen by the input (resolve_mosaic_tracker): kCmaxSlam events only, kParticleFilter
+//    with use_gyro.
+enum class MosaicTracker { kParticleFilter, kOdometry, kOdometryParticleFilter, kCmaxSlam, kAuto };
+// "pf", "odometry", "odometry+pf", "cmax_slam", "auto".
 const char* mosaic_tracker_name(MosaicTracker t);
+// The tracker kAuto stands for, any other unchanged. Events only, kCmaxSlam: the only tracker that
+// is never lost there (the filter alone is lost on most scenes it was not developed on, the
+// odometry drifts). With a gyro, kParticleFilter: registration to the mosaic bounds the drift of a
+// biased consumer gyro, which the gyro integrated (kOdometry) or the back-end predicted by it
+// (kCmaxSlam) keep (docs/results/mosaic.md, "The default tracker").
+MosaicTracker resolve_mosaic_tracker(MosaicTracker t, bool use_gyro);
+// A short reason for the choice, e.g. "auto: events only" ("set" when t is not kAuto).
+std::string mosaic_tracker_reason(MosaicTracker t, bool use_gyro);
 
 struct MosaicPipelineOptions {
-  MosaicTracker tracker_method = MosaicTracker::kParticleFilter;
+  MosaicTracker tracker_method = MosaicTracker::kAuto;  // resolved by the pipeline (resolve_mosaic_tracker)
   // kOdometryParticleFilter without the gyro: the filter's rotation noise density around the
   // contrast-maximisation rates, rad/sqrt(s) (> 0); covers the windows' rate errors.
   double odometry_noise_rad_per_sqrt_s = 0.1;
@@ -127,6 +137,14 @@ struct MosaicPipelineOptions {
   // 66 deg/s (too little motion per window); fixed 30 ms ones diverged at 270 deg/s.
   int64_t bootstrap_window_ns = 50'000'000;
   int bootstrap_window_events = 40000;
+  // Events only, the floor: a window that holds fewer than bootstrap_min_window_events events
+  // (count, >= 0; 0: no floor) when bootstrap_window_ns has passed stays open until it holds that
+  // many or bootstrap_max_window_ns (ns, >= bootstrap_window_ns) has passed. On a few hundred
+  // events (a slow or still camera) the maximiser's optimum can be a fast rotation that is not
+  // there: the events of a 240 x 180 sensor gather on a few texels; longer windows at low event
+  // rates hold slow motion, which a constant rate over the window models.
+  int bootstrap_min_window_events = 2000;
+  int64_t bootstrap_max_window_ns = 200'000'000;
   // Events only, a static start: until the first contrast-maximisation window whose rate sharpens
   // its image of warped events by at least this factor over no rotation (IWE variance at the rate
   // / at zero, >= 1), windows are still: rate zero (the simplest motion that explains the events;
@@ -368,6 +386,7 @@ class MosaicPipeline {
   int64_t events_processed() const;
   // Events held now: waiting for their bootstrap window or tracker batch to complete, or for the IMU.
   size_t buffered_events() const;
+  // The options as they run: tracker_method resolved (never kAuto).
   const MosaicPipelineOptions& options() const { return options_; }
 
  private:
