@@ -44,8 +44,9 @@ int main(int argc, char** argv) try {
          "--align",
          [&eval](const std::string& s) { eval.options.alignment.method = *evio::evaluation::alignment_from_name(s); },
          "Alignment of each estimate to the ground truth: none, se3 (Umeyama), sim3 (Umeyama with scale), posyaw "
-         "(translation + yaw, the 4 unobservable DoF of VIO)")
-      ->check(CLI::IsMember({"none", "se3", "sim3", "posyaw"}))
+         "(translation + yaw, the 4 unobservable DoF of VIO), first_pose (the first pair's poses: for a camera turning "
+         "in place, where a fit to positions follows their errors)")
+      ->check(CLI::IsMember({"none", "se3", "sim3", "posyaw", "first_pose"}))
       ->default_str("se3");
   cli->add_option("--align-first-s", eval.options.alignment.first_s,
                   "Fit the alignment on the pairs of the first S seconds only (0: all pairs), s")

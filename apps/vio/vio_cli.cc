@@ -16,6 +16,9 @@ int main(int argc, char** argv) try {
                   "folder's calib.yaml, else the dataset's calibration");
   cli->add_option("--gt", vio.gt,
                   "Ground truth (TUM or csv): evaluate at the end (SE3 alignment on the first 5 s) into eval.json");
+  cli->add_flag("--gt-align-first-pose", vio.gt_align_first_pose,
+                "With --gt: align the first pose instead (for a camera turning in place with a few cm of translation, "
+                "where a fit to positions follows their errors)");
   cli->add_option("--oracle-tracks", vio.oracle_scene,
                   "Error budget on a simulated sequence: SCENE.yaml it was simulated from, or the meta.json of a "
                   "crosscheck-simulator room sequence (needs --gt). The estimator sees the true projections of the "

@@ -52,6 +52,9 @@ struct VioArgs {
   std::vector<std::string> set;  // --set key.sub=value overrides of the config, in order
   std::string calib;    // optional Kalibr camchain (+ imu0) or ECD calib.txt
   std::string gt;       // optional ground truth (TUM or csv) -> eval.json
+  // The evaluation's alignment: true, the first pose's (a camera turning in place); false, SE3
+  // fitted on the first 5 s.
+  bool gt_align_first_pose = false;
   std::string out;
   bool progress = true;
   // Error budget (evaluation::TrackOracle): the estimator sees the true projections of the

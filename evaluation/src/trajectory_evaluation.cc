@@ -15,7 +15,9 @@
 //   position. Likewise se3/sim3 on two or more positions that do not span a plane (RMS spread
 //   under 1 mm, or second singular value under 1e-3 of the first: a still or rotating-in-place
 //   camera, a straight line) align the first pair's poses (R = R_gt0 R_est0^T, scale 1), since
-//   Umeyama's rotation is undetermined there. Aligned orientation: R * R_est (as rpg's align_trajectory).
+//   Umeyama's rotation is undetermined there. first_pose aligns the first pair's poses always (a
+//   camera turning in place with a few cm of translation: a fit to positions follows their
+//   errors). Aligned orientation: R * R_est (as rpg's align_trajectory).
 // - ATE: |p_gt - p_est_aligned| and the angle of R_gt^T R_est_aligned (the same angle as rpg's
 //   R_est R_gt^-1), computed from the quaternion with atan2 (rpg: arccos of the trace, which
 //   loses precision below ~1e-4 deg; same value otherwise).
@@ -150,12 +152,13 @@ const char* alignment_name(Alignment a) {
     case Alignment::kSE3: return "se3";
     case Alignment::kSim3: return "sim3";
     case Alignment::kPosYaw: return "posyaw";
+    case Alignment::kFirstPose: return "first_pose";
   }
   return "none";
 }
 
 std::optional<Alignment> alignment_from_name(const std::string& name) {
-  for (Alignment a : {Alignment::kNone, Alignment::kSE3, Alignment::kSim3, Alignment::kPosYaw}) {
+  for (Alignment a : {Alignment::kNone, Alignment::kSE3, Alignment::kSim3, Alignment::kPosYaw, Alignment::kFirstPose}) {
     if (name == alignment_name(a)) return a;
   }
   return std::nullopt;
@@ -299,6 +302,8 @@ AlignmentResult align_positions(const std::vector<Eigen::Vector3d>& p_groundtrut
   r.method = method;
   r.pairs_used = p_groundtruth.size();
   if (method == Alignment::kNone) return r;
+  if (method == Alignment::kFirstPose)
+    throw std::invalid_argument("alignment first_pose needs the poses' orientations, not positions alone");
   const size_t n = p_groundtruth.size();
   const std::string name = alignment_name(method);
   if (n == 0) throw std::invalid_argument("alignment " + name + ": no pairs to align");
@@ -428,14 +433,15 @@ AlignmentResult align(const AssociatedPoses& pairs, const AlignmentOptions& opti
     throw std::invalid_argument(std::string("alignment ") + alignment_name(options.method) +
                                 ": no pairs within the alignment window (first_s / first_poses)");
   }
-  if ((options.method == Alignment::kSE3 || options.method == Alignment::kSim3) && n >= 2 &&
-      (!has_3d_spread(p_gt) || !has_3d_spread(p_est))) {
-    // Positions that do not span a plane (a still or rotating-in-place camera, a straight line)
-    // leave the Umeyama rotation undetermined: align the first pair's poses instead
+  if (options.method == Alignment::kFirstPose ||
+      ((options.method == Alignment::kSE3 || options.method == Alignment::kSim3) && n >= 2 &&
+       (!has_3d_spread(p_gt) || !has_3d_spread(p_est)))) {
+    // first_pose, or positions that do not span a plane (a still or rotating-in-place camera, a
+    // straight line), which leave the Umeyama rotation undetermined: the first pair's poses
     // (rotation R_gt0 R_est0^T, translation from its positions, scale 1).
     AlignmentResult r;
     r.method = options.method;
-    r.pairs_used = n;
+    r.pairs_used = options.method == Alignment::kFirstPose ? 1 : n;
     r.rotation = pairs.groundtruth[0].rotation_matrix() * pairs.estimate[0].rotation_matrix().transpose();
     r.translation = p_gt[0] - r.rotation * p_est[0];
     return r;

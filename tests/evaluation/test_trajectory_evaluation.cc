@@ -2,6 +2,7 @@
 #include "evio/evaluation/trajectory_evaluation.h"
 
 #include <cmath>
+#include <random>
 #include <stdexcept>
 
 #include <gtest/gtest.h>
@@ -71,6 +72,47 @@ TEST(Evaluation, EachAlignmentRecoversKnownTransform) {
     EXPECT_LT(r.ate.trans_m.max, 1e-9);
     EXPECT_LT(r.ate.rot_deg.max, 1e-6);
   }
+}
+
+// first_pose aligns the first pair's poses whatever the positions say: an exact transform is
+// recovered; a camera turning in place with position noise (which an SE3 fit on positions
+// follows, turning the whole estimate) keeps its orientation error zero; positions alone are
+// refused.
+TEST(Evaluation, FirstPoseAlignmentIgnoresPositionNoise) {
+  const auto gt = curve();
+  const Eigen::Matrix3d R = some_rotation();
+  const Eigen::Vector3d t(1.5, -2.0, 0.7);
+  ev::EvaluationOptions o;
+  o.alignment.method = ev::Alignment::kFirstPose;
+  {
+    const auto r = ev::evaluate(gt, transformed(gt, R.transpose(), -(R.transpose() * t), 1.0), o);
+    EXPECT_LT((r.alignment.rotation - R).norm(), 1e-9);
+    EXPECT_LT((r.alignment.translation - t).norm(), 1e-9);
+    EXPECT_EQ(r.alignment.pairs_used, 1u);
+    EXPECT_LT(r.ate.trans_m.max, 1e-9);
+    EXPECT_LT(r.ate.rot_deg.max, 1e-6);
+  }
+  // Turning in place (orientation along the curve's, positions within 2 cm of a point) with
+  // 1 cm position noise in the estimate only: an SE3 fit on the positions turns the estimate.
+  std::vector<evio::StampedPose> g, e;
+  std::mt19937_64 rng(3);
+  std::normal_distribution<double> N(0, 0.01);
+  for (const auto& p : gt) {
+    const Eigen::Vector3d c = 0.02 * p.T_w_b.translation.normalized();
+    g.push_back({p.t_ns, SE3(p.T_w_b.rotation, c)});
+    e.push_back({p.t_ns, SE3(p.T_w_b.rotation, c + Eigen::Vector3d(N(rng), N(rng), N(rng)))});
+  }
+  const auto first = ev::evaluate(evio::Trajectory(g), evio::Trajectory(e), o);
+  EXPECT_LT(first.ate.rot_deg.max, 1e-6);
+  ev::EvaluationOptions se3;
+  se3.alignment.first_s = 5;
+  const auto fitted = ev::evaluate(evio::Trajectory(g), evio::Trajectory(e), se3);
+  std::printf("in place, 1 cm position noise: orientation ATE %.3g deg first_pose, %.3g deg se3 on 5 s\n", first.ate.rot_deg.rmse,
+              fitted.ate.rot_deg.rmse);
+  EXPECT_GT(fitted.ate.rot_deg.rmse, 1.4);  // measured 1.75 deg
+  EXPECT_THROW(ev::align_positions({Eigen::Vector3d::Zero()}, {Eigen::Vector3d::Zero()}, ev::Alignment::kFirstPose),
+               std::invalid_argument);
+  EXPECT_EQ(ev::alignment_from_name("first_pose"), ev::Alignment::kFirstPose);
 }
 
 TEST(Evaluation, ConstantOffsetGivesAteEqualToOffset) {

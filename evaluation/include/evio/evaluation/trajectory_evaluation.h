@@ -24,8 +24,12 @@ enum class Alignment {
   kSE3,     // rotation + translation (Umeyama without scale)
   kSim3,    // rotation + translation + scale (Umeyama with scale)
   kPosYaw,  // translation + rotation about gravity (world z) only: the 4 unobservable DoF of VIO
+  // The first pair's poses: rotation R_gt0 R_est0^T, translation from its positions, scale 1.
+  // For motion with little translation (a camera turning in place), where a fit to positions
+  // follows their errors: the orientation error then grows from zero at the start.
+  kFirstPose,
 };
-// "none", "se3", "sim3", "posyaw".
+// "none", "se3", "sim3", "posyaw", "first_pose".
 const char* alignment_name(Alignment a);
 std::optional<Alignment> alignment_from_name(const std::string& name);
 
