@@ -491,6 +491,9 @@ int run_vio_estimation(const VioArgs& args, std::ostream& out, evaluation::GyroI
 }  // namespace
 
 int run_vio(const VioArgs& args, std::ostream& out) {
+  if (args.gt_align_first_pose && args.gt.empty())
+    throw InputError(args.dataset, 0, "--gt-align-first-pose aligns the evaluation, which needs the ground truth",
+                     "--gt GT.tum --gt-align-first-pose");
   // The measured gyro integrated alone (the reference of the evaluation's relative rotation error).
   evaluation::GyroIntegrator gyro;
   const int rc = run_vio_estimation(args, out, args.gt.empty() ? nullptr : &gyro);

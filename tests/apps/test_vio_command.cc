@@ -147,6 +147,24 @@ TEST(VioConfig, EveryExampleConfigInDatasetsParses) {
   EXPECT_GE(n, 3);
 }
 
+// --gt-align-first-pose without --gt: rejected before any dataset is read.
+TEST(VioCommand, FirstPoseAlignmentNeedsGroundTruth) {
+  evio_test::TempDir dir;
+  VioArgs va;
+  va.dataset = dir.file("missing");
+  va.out = dir.file("out");
+  va.progress = false;
+  va.gt_align_first_pose = true;
+  std::ostringstream o;
+  try {
+    run_vio(va, o);
+    ADD_FAILURE() << "no error for --gt-align-first-pose without --gt";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("--gt GT.tum"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("missing"), std::string::npos) << e.what();
+  }
+}
+
 // A 6 s simulated poster_6dof sequence through `evio vio --gt`.
 // --oracle-tracks: rejected before any dataset is read without --gt, or with a scene that is not
 // made of planes (no ray caster), naming the scene file.

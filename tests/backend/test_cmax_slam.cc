@@ -217,20 +217,20 @@ TEST(CmaxSlam, SlidingWindowCorrectsBiasedFrontEndRates) {
 TEST(CmaxSlam, GlobalGradientMatchesCentralDifferences) {
   const Scene s = make_scene(0.2, 4);
   for (CmaxSlamSpline spline : {CmaxSlamSpline::kLinear, CmaxSlamSpline::kCubic}) {
-  CmaxSlamOptions o;
-  o.spline = spline;
-  o.panorama_width = 512;
-  o.panorama_height = 256;
-  o.global_rate_weight = 0.5;
-  std::vector<Mat3> knots;
-  std::mt19937_64 rng(11);
-  std::normal_distribution<double> N(0, 0.01);
-  for (int i = 0; i <= 11; ++i) knots.push_back(s.truth(std::min(i, 10) * o.knot_spacing_ns) * calib::so3_exp(Vec3(N(rng), N(rng), N(rng))));
-  std::vector<int64_t> t;
-  std::vector<Vec3> b;
-  for (size_t k = 0; k < s.t.size() && s.t[k] < 180'000'000; k += 4) {
-    t.push_back(s.t[k]);
-    b.push_back(s.b[k]);
+    CmaxSlamOptions o;
+    o.spline = spline;
+    o.panorama_width = 512;
+    o.panorama_height = 256;
+    o.global_rate_weight = 0.5;
+    std::vector<Mat3> knots;
+    std::mt19937_64 rng(11);
+    std::normal_distribution<double> N(0, 0.01);
+    for (int i = 0; i <= 11; ++i) knots.push_back(s.truth(std::min(i, 10) * o.knot_spacing_ns) * calib::so3_exp(Vec3(N(rng), N(rng), N(rng))));
+    std::vector<int64_t> t;
+    std::vector<Vec3> b;
+    for (size_t k = 0; k < s.t.size() && s.t[k] < 180'000'000; k += 4) {
+      t.push_back(s.t[k]);
+      b.push_back(s.b[k]);
   }
   // The panorama's seam: turn the world so that the events cross longitude 180 deg.
   const Mat3 turn = calib::so3_exp(Vec3(0, 0, kPi - 0.3));
