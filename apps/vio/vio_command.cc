@@ -36,6 +36,7 @@
 #include "evio/simulator/scene_config.h"
 #include "evio/sensors/config_table.h"
 #include "evio/frontend/option_tables.h"
+#include "evio/mapping/option_tables.h"
 #include "option_tables.h"
 #include "vio_stats.h"
 
@@ -115,6 +116,21 @@ const Table<C>& vio_config_table() {
         .integer("health_min_landmarks", &C::health_min_landmarks, 0, 100000)
         .number("health_gyro_bias_sigmas_max", &C::health_gyro_bias_sigmas_max, Range::kPositive, "sigmas of the gyro-bias prior");
 
+    using MO = pipeline::MosaicPipelineOptions;
+    Table<MO> rt_tracker("rotation tracker settings");
+    rt_tracker.choice("method", &MO::tracker_method,
+                      {{"pf", pipeline::MosaicTracker::kParticleFilter}, {"odometry+pf", pipeline::MosaicTracker::kOdometryParticleFilter}})
+        .section("particles", frontend::rotation_particle_filter_table(), &MO::tracker)
+        .section("mosaic", mapping::gradient_mosaic_table(), &MO::mosaic);
+    Table<C> rotation_tracker("rotation tracker settings");
+    rotation_tracker.boolean("enabled", &C::rotation_tracker)
+        .integer("start_keyframes", &C::rotation_tracker_start_keyframes, 1, 1000000)
+        .integer("stop_keyframes", &C::rotation_tracker_stop_keyframes, 1, 1000000)
+        .duration_ms("history_ms", &C::rotation_tracker_history_ns, Range::kNonNegative)
+        .number("max_flow_deg_s", &C::rotation_tracker_max_flow_deg_s, Range::kPositive, "deg/s (speed over the median landmark depth)")
+        .include(rt_tracker, &C::rotation_tracker_options)
+        .note("enabled", "the mosaic's particle filter with the gyro in rotation-dominant spans; factors: window.tracker_*");
+
     Table<C> top("VIO settings");
     top.choice("inputs", &C::inputs,
                {{"events", VioInputs::kEvents}, {"aps", VioInputs::kAps}, {"events+aps", VioInputs::kEventsAndAps}})
@@ -132,6 +148,7 @@ const Table<C>& vio_config_table() {
         .section("efast", frontend::efast_table(), &C::efast)
         .section("corner_tracker", corner_tracker, self)
         .section("window", sliding_window_table(), &C::window)
+        .section("rotation_tracker", rotation_tracker, self)
         .boolean("keyframe_chaining", &C::keyframe_chaining)
         .section("imu", imu, self)
         .section("init", init, self)

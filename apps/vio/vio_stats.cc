@@ -92,7 +92,9 @@ void write_keyframe_lists(std::ostream& j, const backend::SlidingWindowStats& st
       << ", \"gric_static\": " << json_number(m.gric_static, 10) << ", \"gric_rotation\": " << json_number(m.gric_rotation, 10)
       << ", \"gric_general\": " << json_number(m.gric_general, 10) << ", \"imu_chi2\": " << json_number(m.imu_chi2, 10)
       << ", \"imu_dof\": " << m.imu_dof << ", \"landmarks\": " << m.landmarks << ", \"best\": \""
-      << backend::two_view_model_name(m.best) << "\", \"imu_veto\": " << json_bool(m.imu_veto)
+      << backend::two_view_model_name(m.best) << "\", \"image_best\": \"" << backend::two_view_model_name(m.image_best)
+      << "\", \"translation_flow_deg_s\": " << json_number(m.translation_flow_deg_s, 6)
+      << ", \"imu_veto\": " << json_bool(m.imu_veto)
       << ", \"centre\": \"" << (m.centre_imu ? "imu" : "camera") << "\", \"rotation_only\": " << json_bool(m.rotation_only) << "}";
   }
 }
@@ -107,6 +109,31 @@ void write_health(std::ostream& j, const backend::SlidingWindowStats& st, const 
   }
   j << "], \"unreliable_segments\": [";
   write_segments(j, r.unreliable);
+  j << "]}";
+}
+
+// The rotation tracker (rotation_tracker.enabled): its segments and spans, and every factor with
+// its residual after the last solve that held it.
+void write_rotation_tracker(std::ostream& j, const VioConfig& cfg, const pipeline::VioResult& r) {
+  const pipeline::VioStats& vs = r.stats;
+  const backend::SlidingWindowStats& st = vs.window;
+  int64_t dropped = 0;
+  for (const auto& f : st.tracker_factors) dropped += f.dropped ? 1 : 0;
+  j << ",\n  \"rotation_tracker\": {\"enabled\": " << json_bool(cfg.rotation_tracker) << ", \"segments\": " << vs.rotation_tracker_segments
+    << ", \"events\": " << vs.rotation_tracker_events << ", \"lost_samples\": " << vs.rotation_tracker_lost_samples << ", \"time_s\": " << json_number(vs.rotation_tracker_time_s, 10)
+    << ", \"samples\": " << st.tracker_samples << ", \"anchors\": " << st.tracker_anchors
+    << ", \"factors_added\": " << st.tracker_factors.size() << ", \"factors_dropped\": " << dropped << ",\n    \"spans\": [";
+  write_segments(j, r.rotation_tracker);
+  j << "],\n    \"factors\": [";
+  for (size_t i = 0; i < st.tracker_factors.size(); ++i) {
+    const auto& f = st.tracker_factors[i];
+    j << (i ? ",\n      " : "\n      ")
+      << "{\"t\": " << format_seconds(f.t_ns) << ", \"anchor_t\": " << format_seconds(f.anchor_t_ns) << ", \"segment\": " << f.segment
+      << ", \"sigma_deg\": " << json_number(f.sigma_deg, 6) << ", \"residual_deg\": " << json_number(f.error_deg, 6)
+      << ", \"chi2\": " << json_number(f.chi2, 6) << ", \"dropped\": " << json_bool(f.dropped) << ", \"measured_xyzw\": ["
+      << json_number(f.measured.x(), 10) << ", " << json_number(f.measured.y(), 10) << ", " << json_number(f.measured.z(), 10) << ", "
+      << json_number(f.measured.w(), 10) << "]}";
+  }
   j << "]}";
 }
 
@@ -186,6 +213,7 @@ void write_vio_stats(const std::string& path, const VioArgs& args, const VioConf
   for (const pipeline::VioSegment& l : r.imu_only) imu_only_s += 1e-9 * static_cast<double>(l.t_end_ns - l.t_begin_ns);
   j << "],\n  \"imu_only_s\": " << json_number(imu_only_s, 10);
   write_frontend_stats(j, cfg, vs);
+  write_rotation_tracker(j, cfg, r);
   if (oracle) write_oracle(j, args, *oracle);
   j << ",\n  \"outliers_removed\": " << st.outliers_removed << ",\n  \"landmarks_marginalised\": " << st.landmarks_marginalised
     << ",\n  \"observations_dropped\": " << st.observations_dropped
@@ -212,6 +240,14 @@ void print_vio_summary(std::ostream& out, const pipeline::VioResult& r, const Vi
   out << "motion model  ";
   for (const auto& m : r.motion_models) out << m.what << " " << format_seconds(m.t_begin_ns) << ".." << format_seconds(m.t_end_ns) << "  ";
   out << "\n";
+  if (vs.rotation_tracker_segments > 0) {
+    size_t kept = 0;
+    for (const auto& f : vs.window.tracker_factors) kept += f.dropped ? 0 : 1;
+    std::snprintf(buf, sizeof(buf), "rotation tracker %lld segment(s), %zu factors (%zu dropped), %.2f s of tracking\n",
+                  static_cast<long long>(vs.rotation_tracker_segments), kept, vs.window.tracker_factors.size() - kept,
+                  vs.rotation_tracker_time_s);
+    out << buf;
+  }
   if (!r.tracking_lost.empty()) out << "tracking lost " << r.tracking_lost.size() << " segment(s), see stats.json\n";
 }
 

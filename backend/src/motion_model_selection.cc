@@ -282,6 +282,9 @@ TwoViewGric two_view_gric(const std::vector<Vector3d>& b0, const std::vector<Vec
   out.gric_static = cost_s + lambda1 * 2 * n;
   out.gric_rotation = cost_r + lambda1 * 2 * n + lambda2 * 3;
   out.gric_general = cost_g + lambda1 * 3 * n + lambda2 * 5;
+  out.image_best = out.gric_general < std::min(out.gric_static, out.gric_rotation)
+                       ? TwoViewModel::kGeneral
+                       : (out.gric_rotation < out.gric_static ? TwoViewModel::kRotation : TwoViewModel::kStatic);
   if (imu_dof > 0) {
     out.imu_dof = imu_dof;
     out.imu_chi2 = std::max(0.0, imu_chi2);

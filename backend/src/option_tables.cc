@@ -57,6 +57,11 @@ const Table<SlidingWindowOptions>& sliding_window_table() {
           .number("init_bias_gyro_turn_on_radps", &O::init_bias_gyro_turn_on_radps, Range::kPositive, "rad/s")
           .number("init_bias_accel_turn_on_mps2", &O::init_bias_accel_turn_on_mps2, Range::kPositive, "m/s^2")
           .number("init_bias_horizon_s", &O::init_bias_horizon_s, Range::kNonNegative, "s")
+          .seconds_as_ms("tracker_max_gap_ms", &O::tracker_max_gap_s, Range::kPositive)
+          .number("tracker_min_sigma_deg", &O::tracker_min_sigma_deg, Range::kPositive, "deg")
+          .number("tracker_loss_scale", &O::tracker_loss_scale, Range::kPositive, "sigmas (Huber)")
+          .number("tracker_reject_p", &O::tracker_reject_p, Interval::open(0, 1), "probability")
+          .number("tracker_centre_px", &O::tracker_centre_px, Range::kNonNegative, "px (0: off)")
           .validate();
   return t;
 }

@@ -155,4 +155,47 @@ bool TimeOffsetReprojectionError::Evaluate(double const* const* parameters, doub
   return true;
 }
 
+RelativeRotationError::RelativeRotationError(const Eigen::Quaterniond& R_ci_cj, const Eigen::Matrix3d& cov_c,
+                                             const calib::SE3& T_c_b) {
+  const Eigen::Matrix3d R_c_b = T_c_b.rotation.toRotationMatrix();
+  dR_ = R_c_b.transpose() * R_ci_cj.normalized().toRotationMatrix() * R_c_b;
+  const Eigen::Matrix3d cov_b = R_c_b.transpose() * cov_c * R_c_b;
+  const Eigen::LLT<Eigen::Matrix3d> llt(cov_b.inverse());
+  if (!cov_c.allFinite() || !R_ci_cj.coeffs().allFinite() || llt.info() != Eigen::Success || !(cov_c.determinant() > 0))
+    throw std::invalid_argument("relative rotation error: the rotation must be finite and the covariance positive definite");
+  S_ = llt.matrixU();
+}
+
+Eigen::Vector3d RelativeRotationError::error(const double* pose_i, const double* pose_j) const {
+  const Eigen::Matrix3d R_i = Eigen::Map<const Eigen::Quaterniond>(pose_i).normalized().toRotationMatrix();
+  const Eigen::Matrix3d R_j = Eigen::Map<const Eigen::Quaterniond>(pose_j).normalized().toRotationMatrix();
+  return calib::so3_log(Eigen::Matrix3d(dR_.transpose() * R_i.transpose() * R_j));
+}
+
+bool RelativeRotationError::Evaluate(double const* const* parameters, double* residuals, double** jacobians) const {
+  const Eigen::Matrix3d R_i = Eigen::Map<const Eigen::Quaterniond>(parameters[0]).normalized().toRotationMatrix();
+  const Eigen::Matrix3d R_j = Eigen::Map<const Eigen::Quaterniond>(parameters[1]).normalized().toRotationMatrix();
+  const Eigen::Matrix3d R_ij = R_i.transpose() * R_j;
+  const Eigen::Vector3d e = calib::so3_log(Eigen::Matrix3d(dR_.transpose() * R_ij));
+  Eigen::Map<Eigen::Vector3d> r(residuals);
+  r = S_ * e;
+  if (jacobians == nullptr) return true;
+  const Eigen::Matrix3d Jr_inv = calib::so3_right_jacobian_inv(e);
+  if (jacobians[0] != nullptr) {
+    // R_i Exp(d): dR^T Exp(-d) R_ij = dR^T R_ij Exp(-R_ij^T d)  ->  de/dd = -Jr^-1(e) R_ij^T
+    Eigen::Matrix<double, 3, 6> J = Eigen::Matrix<double, 3, 6>::Zero();
+    J.leftCols<3>() = -S_ * Jr_inv * R_ij.transpose();
+    Eigen::Map<Eigen::Matrix<double, 3, 7, Eigen::RowMajor>> out(jacobians[0]);
+    out = J * PoseManifold::minus_jacobian(parameters[0]);
+  }
+  if (jacobians[1] != nullptr) {
+    // R_j Exp(d): de/dd = Jr^-1(e)
+    Eigen::Matrix<double, 3, 6> J = Eigen::Matrix<double, 3, 6>::Zero();
+    J.leftCols<3>() = S_ * Jr_inv;
+    Eigen::Map<Eigen::Matrix<double, 3, 7, Eigen::RowMajor>> out(jacobians[1]);
+    out = J * PoseManifold::minus_jacobian(parameters[1]);
+  }
+  return true;
+}
+
 }  // namespace evio::backend

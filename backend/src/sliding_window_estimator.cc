@@ -290,7 +290,9 @@ bool SlidingWindowEstimator::add_frame(const FeatureObservations& frame) {
     predicted = propagate(*window_.back(), frame.t_ns);
     latest_ = predicted;
     last_prediction_ = std::make_pair(state_of(*window_.back()), predicted);
-    if (!is_keyframe(frame, predicted)) return false;
+    // A frame within 2 ms of the newest keyframe (the last frame of a recording) never becomes
+    // one: over a single IMU sample the preintegration's covariance is not positive definite.
+    if (frame.t_ns - window_.back()->t_ns < 2'000'000 || !is_keyframe(frame, predicted)) return false;
   }
 
   auto kf = std::make_unique<Keyframe>();
@@ -310,6 +312,7 @@ bool SlidingWindowEstimator::add_frame(const FeatureObservations& frame) {
     kf->pre = std::make_unique<ImuPreintegration>(
         ImuPreintegration::between(imu_, prev.t_ns, kf->t_ns, ps.bias_gyro, ps.bias_accel, noise_));
     kf->rotation_only = choose_rotation_only(prev, frame, predicted, *kf->pre);
+    kf->tracker_eligible = stats_.motion_model_tests.back().image_best != TwoViewModel::kGeneral;
     if (kf->rotation_only && options_.rotation_only_static_centre) {
       // The model says the centre does not move: by at most the velocity sigma over the interval.
       const double dt = 1e-9 * static_cast<double>(kf->t_ns - prev.t_ns);
@@ -375,9 +378,20 @@ bool SlidingWindowEstimator::add_frame(const FeatureObservations& frame) {
     if (!lm.triangulated) triangulate(track, &lm);
   }
   const auto t0 = std::chrono::steady_clock::now();
+  attach_tracked_rotations();
   solve();
+  review_tracker_factors();
   remove_outliers();
-  if (static_cast<int>(window_.size()) > options_.window_size) marginalize_oldest();
+  if (static_cast<int>(window_.size()) > options_.window_size) {
+    // A segment's anchor leaving the window stays as its last estimate.
+    for (auto& [id, anchor] : tracker_anchors_) {
+      if (anchor.last == window_.front().get()) anchor.last = nullptr;
+      if (anchor.kf != window_.front().get()) continue;
+      anchor.pose = anchor.kf->pose;
+      anchor.kf = nullptr;
+    }
+    marginalize_oldest();
+  }
   stats_.solve_time_s.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
   stats_.time_offset_s = time_offset_[0];
   latest_ = state_of(*window_.back());
@@ -474,6 +488,25 @@ void SlidingWindowEstimator::solve() {
     }
     if (b.static_centre) problem.AddResidualBlock(b.static_centre.get(), nullptr, in_buf(a.pose.data()), in_buf(b.pose.data()));
   }
+  // Rotation-tracker factors to their segments' anchors (a marginalised anchor: constant).
+  std::vector<double*> frozen;
+  const auto tracker_loss = make_loss(RobustLoss::kHuber, options_.tracker_loss_scale);
+  for (auto& k : window_) {
+    if (!k->tracker_factor) continue;
+    TrackerAnchor& anchor = tracker_anchors_.at(k->tracker_anchor_id);
+    double* pa = nullptr;
+    if (anchor.kf) {
+      pa = in_buf(anchor.kf->pose.data());
+    } else {
+      pa = anchor.pose.data();
+      if (!problem.HasParameterBlock(pa)) {
+        problem.AddParameterBlock(pa, 7, &manifold);
+        problem.SetParameterBlockConstant(pa);
+        frozen.push_back(pa);
+      }
+    }
+    problem.AddResidualBlock(k->tracker_factor.get(), tracker_loss.get(), pa, in_buf(k->pose.data()));
+  }
   for (auto& [track, lm] : landmarks_) {
     if (!at.count(lm.p.data())) continue;  // not used
     for (auto& k : window_) {
@@ -504,6 +537,7 @@ void SlidingWindowEstimator::solve() {
   }
   if (options_.estimate_time_offset) ordering->AddElementToGroup(in_buf(time_offset_.data()), 1);
   for (double* p : outside) ordering->AddElementToGroup(p, 1);
+  for (double* p : frozen) ordering->AddElementToGroup(p, 1);
   so.linear_solver_ordering = ordering;
   so.max_num_iterations = options_.max_iterations;
   so.function_tolerance = options_.function_tolerance;

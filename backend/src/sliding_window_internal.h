@@ -37,6 +37,17 @@ struct SlidingWindowEstimator::Keyframe {
   bool rotation_only = false;                                                // no parallax to the previous keyframe
   std::unordered_map<int64_t, std::unique_ptr<RotationOnlyError>> rot;      // track -> residual to the previous keyframe
   std::unique_ptr<StaticCentreError> static_centre;  // rotation-only: the camera centre stays (to the previous keyframe)
+  // Rotation tracker (add_tracked_rotation): the bearings alone do not call for a translation
+  // (the model test's image_best is not G), so the tracker's orientation may constrain it.
+  bool tracker_eligible = false;
+  // Its orientation here, once attached.
+  bool tracked = false;               // attached (or found unbracketed: tracker_tried)
+  bool tracker_tried = false;         // the samples passed its time without bracketing it
+  int64_t tracker_anchor_id = 0;      // its segment's anchor (tracker_anchors_)
+  Eigen::Quaterniond tracker_q_m_c = Eigen::Quaterniond::Identity();
+  Eigen::Matrix3d tracker_cov_c = Eigen::Matrix3d::Zero();
+  std::unique_ptr<RelativeRotationError> tracker_factor;  // to the segment's anchor (none for the anchor)
+  int tracker_stat = -1;              // its entry in stats().tracker_factors
 };
 
 struct SlidingWindowEstimator::Landmark {

@@ -144,6 +144,7 @@ bool SlidingWindowEstimator::choose_rotation_only(const Keyframe& prev, const Fe
     test.imu_chi2 = g.imu_chi2;
     test.imu_dof = g.imu_dof;
     test.best = g.best;
+    test.image_best = g.image_best;
     // IMU veto: a camera centre whose velocity change (or displacement) the IMU rejects cannot
     // be rotating in place, whatever the image test says.
     if (test.best == TwoViewModel::kRotation && g.imu_dof > 0 && options_.model_selection_imu_veto_p > 0 &&
@@ -211,6 +212,9 @@ bool SlidingWindowEstimator::choose_rotation_only(const Keyframe& prev, const Fe
     }
   }
   test.run = rotation_only_run_;
+  // The translational part of the image motion: the body's predicted speed over the median
+  // landmark depth (for the rotation tracker's start and stop, VioPipelineOptions).
+  if (last_median_depth_m_ > 0) test.translation_flow_deg_s = predicted.v_w.norm() / last_median_depth_m_ * 180.0 / M_PI;
   test.rotation_only = rotation_only_active_ && small_motion;
   rotation_centre_b_ = centre_b;
   stats_.motion_model_tests.push_back(test);

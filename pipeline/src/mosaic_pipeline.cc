@@ -286,6 +286,21 @@ bool MosaicPipeline::Impl::tracking_step() {
     while (cp_times.size() > static_cast<size_t>(opt.failure_checkpoints)) cp_times.pop_front();
   }
   record(t_pf, R_pf);
+  if (on_track) {
+    // The particles' spread about their mean, in the mean's right tangent.
+    const Eigen::Quaterniond mean = pf->mean();
+    const std::vector<Eigen::Quaterniond>& particles = pf->particles();
+    const std::vector<double> w = pf->weights();
+    Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+    double total = 0;
+    for (size_t i = 0; i < particles.size() && i < w.size(); ++i) {
+      const Eigen::Vector3d d = calib::so3_log(Eigen::Quaterniond(mean.conjugate() * particles[i]));
+      cov += w[i] * d * d.transpose();
+      total += w[i];
+    }
+    if (total > 0) cov /= total;
+    on_track(t_pf, mean, cov, lost);
+  }
   head += n;
   odo_ahead = odo_ahead > n ? odo_ahead - n : 0;
   processed += static_cast<int64_t>(n);
@@ -338,6 +353,7 @@ MosaicPipeline::MosaicPipeline(const MosaicPipelineOptions& options, const calib
 MosaicPipeline::~MosaicPipeline() = default;
 
 void MosaicPipeline::set_snapshot_callback(SnapshotCallback callback) { impl_->on_snapshot = std::move(callback); }
+void MosaicPipeline::set_track_callback(TrackCallback callback) { impl_->on_track = std::move(callback); }
 
 void MosaicPipeline::add_imu(const ImuSample& sample) {
   Impl& m = *impl_;

@@ -55,6 +55,7 @@ struct MosaicPipeline::Impl {
   bool finished = false;
   bool finishing = false;  // finish(): process what is buffered without waiting for more
   SnapshotCallback on_snapshot;
+  TrackCallback on_track;
 
   // Events not yet processed: pending[head, size). Compacted on every add_events.
   std::vector<Event> pending;

@@ -65,6 +65,16 @@ bool VioPipelineOptions::Validate(std::string* why) const {
   if (!efast.Validate(&w)) return fail("efast: " + w);
   if (!corner_tracker.Validate(&w)) return fail("corner_tracker: " + w);
   if (!window.Validate(&w)) return fail("window: " + w);
+  if (!rotation_tracker_options.Validate(&w)) return fail("rotation_tracker: " + w);
+  if (rotation_tracker_start_keyframes < 1 || rotation_tracker_stop_keyframes < 1)
+    return fail("rotation_tracker: start_keyframes and stop_keyframes must be >= 1");
+  if (rotation_tracker_history_ns < 0) return fail("rotation_tracker: history_ms must be >= 0");
+  if (!(rotation_tracker_max_flow_deg_s > 0) || !std::isfinite(rotation_tracker_max_flow_deg_s))
+    return fail("rotation_tracker: max_flow_deg_s must be finite and > 0");
+  if (rotation_tracker && (!rotation_tracker_options.use_gyro ||
+                           (rotation_tracker_options.tracker_method != MosaicTracker::kParticleFilter &&
+                            rotation_tracker_options.tracker_method != MosaicTracker::kOdometryParticleFilter)))
+    return fail("rotation_tracker: the tracker is the particle filter (pf or odometry+pf) with the gyro");
   if (!static_init.Validate(&w)) return fail("static_init: " + w);
   if (!vi_init.Validate(&w)) return fail("vi_init: " + w);
   if (observation_period_ns <= 0) return fail("observation_period_ns must be > 0");
@@ -240,11 +250,15 @@ void VioPipeline::Impl::chain_final(int64_t t_final) {
         // No common solve: carry the previous keyframe's correction over.
         T = prev_c->second.T_w_b * pf.T_w_b.inverse() * f.T_w_b;
       }
+      // A keyframe held by a rotation-tracker factor (or anchoring one) keeps its own orientation: the factor ties it
+      // to the segment's anchor, which chaining the relative rotations would undo.
+      if (tracker_keyframes.count(it->first)) T.rotation = f.T_w_b.rotation;
       const Eigen::Matrix3d R_corr = T.rotation.toRotationMatrix() * f.T_w_b.rotation.toRotationMatrix().transpose();
       c.T_w_b = T;
       c.v_w = R_corr * f.v_w;
     }
     chained_keyframes[it->first] = c;
+    tracker_keyframes.erase(it->first);
   }
 }
 
@@ -266,7 +280,25 @@ void VioPipeline::Impl::feed(const FeatureObservations& f) {
     }
     predictions.push_back(std::move(fp));
   }
+  if (kf && opt.rotation_tracker && !est->stats().motion_model_tests.empty() &&
+      est->stats().motion_model_tests.back().t_ns == f.t_ns) {
+    const auto& test = est->stats().motion_model_tests.back();
+    // For the start: bearings without G and a known flow below the bound (a tracker started on the
+    // rotation-only model before any depth was known tracked worse: docs/design-notes.md). For the stop: G, or a
+    // flow at the bound from a window with opt.health_min_landmarks landmarks (the velocity of a
+    // window without them has spikes of metres per second while the camera pans in place).
+    const double flow = test.translation_flow_deg_s, bound = opt.rotation_tracker_max_flow_deg_s;
+    const bool image_rotation = test.image_best != backend::TwoViewModel::kGeneral;
+    const bool moving = flow >= bound && test.landmarks >= std::max(1, opt.health_min_landmarks);
+    update_rotation_tracker(f.t_ns, rot_tracker ? image_rotation && !moving : image_rotation && flow >= 0 && flow < bound);
+  }
   if (kf) {
+    const auto& factors = est->stats().tracker_factors;
+    for (; tracker_factors_seen < factors.size(); ++tracker_factors_seen)
+      if (!factors[tracker_factors_seen].dropped) {
+        tracker_keyframes.insert(factors[tracker_factors_seen].t_ns);
+        tracker_keyframes.insert(factors[tracker_factors_seen].anchor_t_ns);
+      }
     for (const auto& [id, p] : est->landmarks()) result.landmarks[id] = p;
     const std::vector<VioState> window = est->keyframe_states();
     for (const VioState& k : window) final_keyframes[k.t_ns] = k;
@@ -548,6 +580,11 @@ bool VioPipeline::Impl::frame_motion_at(int64_t t, frontend::FrameMotion* m) {
 // One chunk of raw events through the filters and the front-end.
 void VioPipeline::Impl::process(EventSpan chunk) {
   VioStats& st = result.stats;
+  if (rot_tracker) {
+    rotation_tracker_events(chunk);  // before the frames: its orientations then cover their keyframes
+  } else if (opt.rotation_tracker) {
+    keep_rotation_tracker_history(chunk);
+  }
   filtered.clear();
   constexpr size_t kAhead = 16;  // events: the filters' per-pixel tables are fetched ahead
   const bool prefetch = use_frames && chunk.size() > kAhead;
@@ -679,6 +716,7 @@ void VioPipeline::add_imu(const ImuSample& sample) {
   p.check_open();
   p.imu.push_back(sample);
   if (p.frame_builder) p.frame_builder->add_imu(sample);
+  if (p.rot_tracker) p.rotation_tracker_imu();
   p.drain_frames(false);
   p.drain(false);
   p.try_init_on_stall();
@@ -775,6 +813,7 @@ VioResult VioPipeline::finish() {
   if (p.est) {
     st.window = p.est->stats();
     p.health_segments();
+    p.rotation_tracker_spans();
     const std::vector<VioState> window = p.est->keyframe_states();
     for (const VioState& k : window) p.final_keyframes[k.t_ns] = k;
     for (size_t i = 0; i + 1 < window.size(); ++i)

@@ -13,6 +13,7 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <set>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -120,6 +121,24 @@ struct VioPipeline::Impl {
   // were empty gap frames (no events) or frames with too few tracks.
   int64_t last_visual_t = -1;
   bool gap_since_visual = false;
+
+  // Rotation tracker (options rotation_tracker): runs while the motion model is rotation-only.
+  std::unique_ptr<MosaicPipeline> rot_tracker;
+  int64_t rot_segment = 0;          // the current segment's id (the estimator's tracker segment)
+  bool rot_lost = false;            // the tracker reported lost since its last orientation
+  int rot_run = 0;                  // consecutive keyframes against the tracker's state (to start or stop it)
+  std::set<int64_t> tracker_keyframes;  // keyframes (IMU clock) with a tracker factor, until chained
+  size_t tracker_factors_seen = 0;      // entries of the estimator's tracker_factors taken
+  int64_t rot_imu_fed_t = std::numeric_limits<int64_t>::min();  // IMU clock, last sample given to it
+  int64_t rot_run_start_t = 0;       // IMU clock: the first keyframe of the current run
+  std::deque<Event> rot_history;     // raw events of the last rotation_tracker_history_ns while the tracker is off
+  // After the keyframe at t_kf (IMU clock), whose bearings are (or are not) rotation-dominant:
+  // starts or stops the tracker.
+  void update_rotation_tracker(int64_t t_kf, bool rotation_dominant);
+  void keep_rotation_tracker_history(EventSpan chunk);
+  void rotation_tracker_events(EventSpan chunk);
+  void rotation_tracker_imu();
+  void rotation_tracker_spans();
 
   // ---- IMU ------------------------------------------------------------------------------------
 

@@ -226,6 +226,68 @@ TEST(StaticCentreError, ABodyPointAsTheCentre) {
   EXPECT_LT(worst, 1e-5);
 }
 
+// The tracker's relative rotation (issue 37): zero at the measured rotation, the whitening by
+// the covariance (a turn of one sigma about a camera axis reads 1), Jacobians checked, and a
+// covariance that is not positive definite is refused.
+TEST(RelativeRotationError, GradientCheckerZeroAtTheMeasurementAndWhitening) {
+  std::mt19937 rng(8);
+  std::normal_distribution<double> n(0.0, 1.0);
+  const PoseManifold pm;
+  const calib::SE3 T_c_b(calib::so3_exp_quat(Eigen::Vector3d(-0.1, 0.2, 0.05)), Eigen::Vector3d(0.02, -0.01, 0.03));
+  const Eigen::Quaterniond q_c_b = T_c_b.rotation;
+  const Eigen::Matrix3d cov = Eigen::Vector3d(1e-4, 4e-4, 9e-4).asDiagonal();  // sigmas 0.01, 0.02, 0.03 rad
+  double worst = 0;
+  for (int trial = 0; trial < 50; ++trial) {
+    auto pi = random_pose(rng);
+    const Eigen::Quaterniond qi(pi[3], pi[0], pi[1], pi[2]);
+    const Eigen::Quaterniond qj = qi * calib::so3_exp_quat(Eigen::Vector3d(n(rng), n(rng), n(rng)) * 0.5);
+    std::array<double, 7> pj = {qj.x(), qj.y(), qj.z(), qj.w(), n(rng), n(rng), n(rng)};
+    // The camera's rotation from i to j: R_c_b R_bi_bj R_b_c.
+    const Eigen::Quaterniond R_ci_cj = q_c_b * qi.conjugate() * qj * q_c_b.conjugate();
+    const RelativeRotationError err(R_ci_cj, cov, T_c_b);
+    double r[3];
+    const double* params[2] = {pi.data(), pj.data()};
+    ASSERT_TRUE(err.Evaluate(params, r, nullptr));
+    EXPECT_LT(Eigen::Map<Eigen::Vector3d>(r).norm(), 1e-9);
+    // Camera j turned by 0.02 rad (one sigma) about its y axis.
+    const Eigen::Quaterniond qj2 = qj * q_c_b.conjugate() * calib::so3_exp_quat(Eigen::Vector3d(0, 0.02, 0)) * q_c_b;
+    std::array<double, 7> pj2 = {qj2.x(), qj2.y(), qj2.z(), qj2.w(), pj[4], pj[5], pj[6]};
+    const double* params2[2] = {pi.data(), pj2.data()};
+    ASSERT_TRUE(err.Evaluate(params2, r, nullptr));
+    EXPECT_NEAR(Eigen::Map<Eigen::Vector3d>(r).norm(), 1.0, 1e-6);
+    EXPECT_NEAR(err.error(pi.data(), pj2.data()).norm(), 0.02, 1e-9);
+    // Tangent-space central differences (h = 1e-6 rad) against the analytic Jacobians, relative to
+    // max(1, |entry|): the whitening scales the entries up to 100, beyond what the ambient-space
+    // GradientChecker resolves.
+    double J[2][21];
+    double* jac[2] = {J[0], J[1]};
+    ASSERT_TRUE(err.Evaluate(params2, r, jac));
+    for (int b = 0; b < 2; ++b) {
+      const Eigen::Matrix<double, 3, 6> Jt =
+          Eigen::Map<const Eigen::Matrix<double, 3, 7, Eigen::RowMajor>>(J[b]) * PoseManifold::plus_jacobian(params2[b]);
+      for (int k = 0; k < 6; ++k) {
+        double d[6] = {0, 0, 0, 0, 0, 0}, xp[7], xm[7], rp[3], rm[3];
+        d[k] = 1e-6;
+        pm.Plus(params2[b], d, xp);
+        d[k] = -1e-6;
+        pm.Plus(params2[b], d, xm);
+        const double* pp[2] = {b ? pi.data() : xp, b ? xp : pj2.data()};
+        const double* pn[2] = {b ? pi.data() : xm, b ? xm : pj2.data()};
+        ASSERT_TRUE(err.Evaluate(pp, rp, nullptr));
+        ASSERT_TRUE(err.Evaluate(pn, rm, nullptr));
+        for (int a = 0; a < 3; ++a) {
+          const double numeric = (rp[a] - rm[a]) / 2e-6;
+          worst = std::max(worst, std::abs(Jt(a, k) - numeric) / std::max(1.0, std::abs(numeric)));
+        }
+      }
+    }
+  }
+  std::printf("RelativeRotationError: worst Jacobian error %.2e\n", worst);
+  EXPECT_LT(worst, 1e-5);
+  EXPECT_THROW(RelativeRotationError(Eigen::Quaterniond::Identity(), Eigen::Matrix3d::Zero(), T_c_b), std::invalid_argument);
+  EXPECT_THROW(RelativeRotationError(Eigen::Quaterniond::Identity(), -cov, T_c_b), std::invalid_argument);
+}
+
 TEST(LinearPrior, GradientCheckerWithPoseAndEuclideanBlocks) {
   std::mt19937 rng(5);
   std::normal_distribution<double> n(0.0, 1.0);

@@ -40,6 +40,9 @@ struct TwoViewGric {
   double imu_chi2 = 0;           // chi2 of the static-centre hypothesis on the IMU (0 when not used)
   int imu_dof = 0;               // its degrees of freedom (0: IMU not used)
   TwoViewModel best = TwoViewModel::kNone;  // lowest GRIC; kNone when n < 6
+  // Lowest GRIC of the bearings alone (without the IMU terms): what the images say, whatever the
+  // velocity estimate (a rotation-dominant motion whose few cm of translation the IMU sees).
+  TwoViewModel image_best = TwoViewModel::kNone;
   Eigen::Matrix3d R_c1_c0 = Eigen::Matrix3d::Identity();  // model R's rotation (c0 bearings into c1)
   Eigen::Vector3d t_c1 = Eigen::Vector3d::Zero();          // model G's unit translation direction (c1)
 };

@@ -92,4 +92,24 @@ class StaticCentreError final : public ceres::SizedCostFunction<3, 7, 7> {
   double inv_sigma_;
 };
 
+// A relative-rotation measurement between two keyframes (a rotation tracker's orientations of
+// the camera against its panorama at both times, issue 37): with the body-frame measurement
+// dR = R_b_c R_ci_cj R_c_b,
+//   r = S Log(dR^T R_w_bi^T R_w_bj),
+// S the upper Cholesky factor of the inverse covariance of Log (body frame j tangent, rad^2).
+// Parameters: the two poses (7, PoseManifold); the position columns are zero.
+class RelativeRotationError final : public ceres::SizedCostFunction<3, 7, 7> {
+ public:
+  // R_ci_cj: the camera's rotation from i to j; cov_c: its covariance on the right (camera j
+  // tangent), symmetric positive definite. Throws std::invalid_argument otherwise.
+  RelativeRotationError(const Eigen::Quaterniond& R_ci_cj, const Eigen::Matrix3d& cov_c, const calib::SE3& T_c_b);
+  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override;
+  // The rotation error Log(dR^T R_i^T R_j) (rad, body j) at two poses, unwhitened.
+  Eigen::Vector3d error(const double* pose_i, const double* pose_j) const;
+
+ private:
+  Eigen::Matrix3d dR_;  // measured body rotation i -> j
+  Eigen::Matrix3d S_;   // whitening
+};
+
 }  // namespace evio::backend

@@ -56,6 +56,7 @@
 #include <array>
 #include <cstdint>
 #include <deque>
+#include <map>
 #include <memory>
 #include <optional>
 #include <utility>
@@ -65,6 +66,7 @@
 #include <vector>
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 
 #include "evio/backend/initialization.h"
 #include "evio/backend/motion_model_selection.h"
@@ -216,6 +218,32 @@ struct SlidingWindowOptions {
   double init_bias_gyro_turn_on_radps = 5e-4;   // rad/s, > 0
   double init_bias_accel_turn_on_mps2 = 0.1;    // m/s^2, > 0
   double init_bias_horizon_s = 60.0;            // s, >= 0
+  // Rotation-tracker factors (add_tracked_rotation): a keyframe whose bearings alone do not call
+  // for a translation (the model test's image_best is S, R or none: rotation-dominant motion, even
+  // where the IMU datum rejects a static centre and the rotation-only model stays off) and whose
+  // time two samples of one tracker segment at most tracker_max_gap_s apart bracket gets the tracker's
+  // orientation (slerped; covariance interpolated). The segment's first such keyframe is its
+  // anchor; every later one gets a RelativeRotationError to the anchor, whose covariance is the two
+  // orientations' (the tracker's particle spread) plus tracker_min_sigma_deg^2 per axis (the
+  // spread leaves out the panorama's own error: parallax, the map's registration). The anchor keeps its last estimate as a constant once
+  // it is marginalised, so a revisit of the panorama pulls the newest keyframes back to it without
+  // moving any state by a jump (a Huber loss of scale tracker_loss_scale sigmas: the pull of a
+  // large correction stays, bounded). Jump test: the tracker's rotation since the segment's
+  // previous keyframe against the estimate's between the two (the gyro's, at this scale) under both
+  // orientations' covariances, twice the floor and the gyro's white noise over the interval; a chi2
+  // (3 dof) beyond the upper quantile of probability tracker_reject_p is a registration jump: the
+  // keyframe gets no factor and anchors the segment anew (the panorama's frame has moved for the
+  // tracker). The factors are not marginalised.
+  double tracker_max_gap_s = 0.05;        // s, > 0
+  double tracker_min_sigma_deg = 0.5;     // deg, > 0
+  double tracker_loss_scale = 2.0;        // sigmas, > 0
+  double tracker_reject_p = 0.001;        // probability in (0, 1)
+  // A keyframe that gets a tracker factor and is not rotation-only also gets a StaticCentreError
+  // to the previous keyframe: its camera centre moves by at most what its bearings cannot show,
+  // sigma = tracker_centre_px * (median landmark depth) / focal (m; none before any depth is
+  // known). Without it nothing but the IMU carries the position through a rotation-dominant span
+  // (too little baseline to triangulate), and a consumer gyro's bias takes it away. px, >= 0 (0: off).
+  double tracker_centre_px = 1.0;
   bool Validate(std::string* why) const;
 };
 
@@ -243,6 +271,10 @@ struct SlidingWindowStats {
     bool centre_imu = false;        // the IMU's origin, not the camera centre, was the likelier static centre
     int run = 0;                    // consecutive keyframes R has won by the margin
     bool rotation_only = false;     // the decision after hysteresis
+    TwoViewModel image_best = TwoViewModel::kNone;  // lowest GRIC of the bearings alone (no IMU terms)
+    // The body's predicted speed over the median landmark depth (deg/s: the translational part of
+    // the image motion); -1 before any depth is known.
+    double translation_flow_deg_s = -1;
   };
   std::vector<MotionModelTest> motion_model_tests;
   std::vector<double> solve_time_s;   // per keyframe (solve + marginalisation)
@@ -258,6 +290,20 @@ struct SlidingWindowStats {
   std::vector<Health> health;
   double time_offset_s = 0;           // estimate_time_offset: td after the last solve (s)
   std::vector<int> solve_landmarks;   // landmarks in each solve
+  // Rotation-tracker factors (add_tracked_rotation), one per keyframe that got one, time order.
+  struct TrackerFactor {
+    int64_t t_ns = 0;          // the keyframe
+    int64_t anchor_t_ns = 0;   // its segment's anchor keyframe
+    int64_t segment = 0;       // the tracker's segment (panorama), as add_tracked_rotation numbered it
+    double sigma_deg = 0;      // the factor's largest axis sigma, deg
+    double error_deg = 0;      // |Log(measured^T estimated)| after the last solve that held it, deg (dropped: the jump)
+    double chi2 = 0;           // its whitened squared residual then (3 dof, without the loss)
+    bool dropped = false;      // failed the jump test: no factor, the keyframe anchors the segment anew
+    Eigen::Quaterniond measured = Eigen::Quaterniond::Identity();  // the camera's rotation R_ca_ck from the anchor
+  };
+  std::vector<TrackerFactor> tracker_factors;
+  int64_t tracker_samples = 0;   // orientations given to add_tracked_rotation
+  int64_t tracker_anchors = 0;   // keyframes that anchored a segment
 };
 
 class SlidingWindowEstimator {
@@ -277,6 +323,18 @@ class SlidingWindowEstimator {
 
   // IMU samples in time order (body clock).
   void add_imu(const ImuSample& sample);
+  // A rotation tracker's orientation of the camera (see the tracker_* options): q_m_c in the
+  // frame m of the tracker's panorama, cov_c its covariance on the right (camera tangent, rad^2),
+  // segment the panorama's id (orientations of different segments are unrelated). In time order
+  // (body clock; a sample not after the previous one is ignored). Throws std::invalid_argument on
+  // non-finite values.
+  struct TrackedRotation {
+    int64_t t_ns = 0;
+    Eigen::Quaterniond q_m_c = Eigen::Quaterniond::Identity();
+    Eigen::Matrix3d cov_c = Eigen::Matrix3d::Zero();
+    int64_t segment = 0;
+  };
+  void add_tracked_rotation(const TrackedRotation& r);
   // A frame's observations (camera clock = body clock - T_c_b time shift already removed by the
   // caller); each observation's sigma_px (0: options.pixel_sigma) weighs its reprojection error.
   // Needs IMU samples up to its time. Returns true when it became a keyframe (and the window was
@@ -326,6 +384,10 @@ class SlidingWindowEstimator {
   void solve();
   void remove_outliers();
   void marginalize_oldest();
+  // Rotation-tracker factors: window keyframes get the tracker's orientation where its samples
+  // bracket them; after a solve, each factor's error and chi2 (and drop).
+  void attach_tracked_rotations();
+  void review_tracker_factors();
 
   SlidingWindowOptions options_;
   calib::CameraCalibration camera_;
@@ -361,6 +423,22 @@ class SlidingWindowEstimator {
   int rotation_only_run_ = 0;          // consecutive keyframes R has won by the margin
   int64_t rotation_only_run_start_ns_ = 0;  // time of the first of them
   SlidingWindowStats stats_;
+  std::deque<TrackedRotation> tracked_;  // tracker samples not yet older than the window
+  // Per tracker segment: its anchor keyframe (while in the window) or its last estimate (after).
+  struct TrackerAnchor {
+    int64_t t_ns = 0;
+    Eigen::Quaterniond q_m_c = Eigen::Quaterniond::Identity();
+    Eigen::Matrix3d cov_c = Eigen::Matrix3d::Zero();
+    std::array<double, 7> pose{};   // the marginalised anchor's last estimate (constant in solves)
+    const Keyframe* kf = nullptr;   // in the window
+    // The segment's latest keyframe with the tracker's orientation (in the window; for the jump test).
+    const Keyframe* last = nullptr;
+    Eigen::Quaterniond last_q = Eigen::Quaterniond::Identity();
+    Eigen::Matrix3d last_cov = Eigen::Matrix3d::Zero();
+  };
+  std::map<int64_t, TrackerAnchor> tracker_anchors_;   // by anchor id
+  std::map<int64_t, int64_t> tracker_segments_;         // the caller's segment -> its current anchor id
+  int64_t next_tracker_anchor_ = 0;
 };
 
 }  // namespace evio::backend

@@ -347,6 +347,14 @@ class MosaicPipeline {
 
   void set_snapshot_callback(SnapshotCallback callback);
 
+  // Called after each particle-filter batch (trackers pf and odometry+pf) with the batch's time
+  // (camera clock), the camera's orientation in the mosaic frame, the particles' weighted covariance
+  // (right, camera tangent, rad^2) and whether the tracker counts as lost, on the caller's thread:
+  // for an estimator that takes the orientation as it comes (evio vio's rotation tracker).
+  using TrackCallback =
+      std::function<void(int64_t t_ns, const Eigen::Quaterniond& q_m_c, const Eigen::Matrix3d& cov_c, bool lost)>;
+  void set_track_callback(TrackCallback callback);
+
   // Diagnostic (splitting the error into bootstrap and tracking): the bootstrap maps its events with
   // these body rotations R_w_b(t) (camera clock; e.g. the ground truth), expressed in the mosaic
   // frame relative to the first event's, instead of gyro or contrast-maximisation rates; the

@@ -30,6 +30,7 @@
 #include "evio/frontend/feature_tracker.h"
 #include "evio/frontend/frame_undistorter.h"
 #include "evio/mapping/reconstruction.h"
+#include "evio/pipeline/mosaic_pipeline.h"
 #include "evio/sensors/event_buffer.h"
 #include "evio/sensors/measurements.h"
 #include "evio/sensors/vio_types.h"
@@ -211,6 +212,38 @@ struct VioPipelineOptions {
 
   // Back-end.
   backend::SlidingWindowOptions window;                          // window size, solver, keyframe rules (see its header)
+  // Rotation tracker (the mosaic's particle filter with the gyro, MosaicPipeline). A keyframe is
+  // rotation-dominant when its bearings do not call for a translation (the model test's image-only
+  // GRIC: S or R rather than G; a hand-held pan with a few cm of translation is, although the IMU
+  // datum keeps the rotation-only model off) and the translational image motion is small: the
+  // body's predicted speed over the median landmark depth below rotation_tracker_max_flow_deg_s
+  // (deg/s, > 0; the keyframe-to-keyframe test misses the parallax of a walk through a room, which
+  // shows over seconds). The tracker starts after rotation_tracker_start_keyframes consecutive
+  // rotation-dominant keyframes (with a depth known: no landmark, no start),
+  // against a fresh panorama, and stops after rotation_tracker_stop_keyframes consecutive keyframes
+  // whose bearings call for G or whose flow is at or above the bound while the window holds
+  // health_min_landmarks landmarks (counts, >= 1; without landmarks the window's velocity has
+  // spikes of metres per second during a pan). Its orientations go to the estimator
+  // (SlidingWindowEstimator::add_tracked_rotation: relative-rotation factors from each eligible
+  // keyframe to the segment's first, window.tracker_* options). A span the tracker reports lost
+  // ends its segment; it restarts a new one (a new anchor) once it tracks again.
+  bool rotation_tracker = false;
+  int rotation_tracker_start_keyframes = 3;
+  int rotation_tracker_stop_keyframes = 10;
+  double rotation_tracker_max_flow_deg_s = 3.0;
+  // While the tracker is off, the raw events of this long are kept (ns, >= 0), so a tracker
+  // started after the run's rotation_tracker_start_keyframes keyframes begins at the run's first
+  // keyframe: the front-end's frames reach the estimator up to about half a second after their
+  // events are read.
+  int64_t rotation_tracker_history_ns = 2'000'000'000;
+  MosaicPipelineOptions rotation_tracker_options = [] {
+    MosaicPipelineOptions m;
+    m.tracker_method = MosaicTracker::kParticleFilter;
+    m.use_gyro = true;
+    m.tracker.event_stride = 4;    // as evio mosaic --use-imu
+    m.tracker.min_particles = 20;
+    return m;
+  }();
   // Output trajectory (trajectory.tum, keyframes.txt): each final keyframe is the previous one
   // composed with their relative pose in the last solve that held both (true), or its own last
   // optimised state (false). The window's solves move its keyframes together by small amounts (the
@@ -282,6 +315,12 @@ struct VioStats {
   frontend::FeatureTrackerStats tracker;         // frames front-end
   frontend::CornerTrackerStats corner_tracker;   // corners front-end
   backend::SlidingWindowStats window;            // back-end (empty when not initialised)
+  // rotation_tracker: segments started, events given to the tracker, and the time its calls took
+  // on the caller's thread (s; the mosaic's reconstructions may run on a second thread besides).
+  int64_t rotation_tracker_segments = 0;
+  int64_t rotation_tracker_events = 0;
+  int64_t rotation_tracker_lost_samples = 0;  // orientations withheld: the tracker counted itself lost
+  double rotation_tracker_time_s = 0;
 };
 
 struct VioResult {
@@ -307,6 +346,9 @@ struct VioResult {
   // Runs of keyframes whose estimate failed a health check (options health_*), one reason each:
   // "visual residuals", "inertial residuals", "few landmarks", "gyro bias off its prior".
   std::vector<VioSegment> unreliable;
+  // rotation_tracker: the spans where the tracker fed the window (from each segment's anchor
+  // keyframe to its last keyframe with a factor kept), what: "segment N".
+  std::vector<VioSegment> rotation_tracker;
   VioStats stats;
 };
 
