@@ -532,14 +532,14 @@ TEST(VioPipelineOptions, ApsOptionsAreChecked) {
 namespace evio::pipeline {
 namespace {
 
-// 12 s of datasets/room_6dof.yaml turned into a hand-held pan (3 cm of position spread, 30 deg of
+// 8 s of datasets/room_6dof.yaml turned into a hand-held pan (3 cm of position spread, 30 deg of
 // rotation spread) with a consumer-grade gyro (noise density 5e-3 rad/s/sqrt(Hz), bias random
 // walk 1e-4 rad/s^2/sqrt(Hz), a 0.5 deg/s turn-on bias), simulated in memory: the rotation
 // tracker's sequence (issue 37; docs/results/vio.md, "Rotation-dominant motion").
 const Sequence& rotation_dominant_room() {
   static const Sequence seq = [] {
     simulator::SimulateOverrides ov;
-    ov.duration_s = 12.0;
+    ov.duration_s = 8.0;
     ov.set = {"trajectory.position_std_m=[0.03,0.03,0.02]", "trajectory.rotation_std_deg=30",
               "imu.gyroscope_noise_density=0.005", "imu.gyroscope_random_walk=0.0001",
               "imu.initial_bias_gyro_radps=[0.005,-0.005,0.005]"};
@@ -570,7 +570,7 @@ double final_yaw_deg(const VioResult& r, const Trajectory& groundtruth) {
   return std::abs(evaluation::evaluate(groundtruth, Trajectory(std::move(poses)), eo).final_yaw_error_deg);
 }
 
-// The panorama lost: from 6 s on the events come mirrored left-right (a view the tracker's map
+// The panorama lost: from 5 s on the events come mirrored left-right (a view the tracker's map
 // cannot explain, as in the mosaic's failure test). The tracker reports itself lost and its
 // orientations are withheld while it is (no factor from them); the run completes, to the end of
 // the data, with a finite estimate. (The front-end's own tracks are mirrored too: the estimate
@@ -578,7 +578,7 @@ double final_yaw_deg(const VioResult& r, const Trajectory& groundtruth) {
 void check_losing_the_panorama() {
   const Sequence& s = rotation_dominant_room();
   Sequence m = s;
-  const int64_t t_change = s.events.front().t_ns + 6'000'000'000;
+  const int64_t t_change = s.events.front().t_ns + 5'000'000'000;
   const int W = s.camera.camera.width();
   for (Event& e : m.events)
     if (e.t_ns >= t_change) e.x = static_cast<uint16_t>(W - 1 - e.x);
@@ -587,10 +587,10 @@ void check_losing_the_panorama() {
   const int64_t t_change_imu = t_change + s.camera.time_shift_ns;
   size_t before = 0;
   for (const auto& f : r.stats.window.tracker_factors) before += !f.dropped && f.t_ns < t_change_imu ? 1 : 0;
-  std::printf("mirrored from 6 s: %zu factors before the change, %zu in all, %lld orientations withheld as lost, %zu states\n",
+  std::printf("mirrored from 5 s: %zu factors before the change, %zu in all, %lld orientations withheld as lost, %zu states\n",
               before, r.stats.window.tracker_factors.size(), static_cast<long long>(r.stats.rotation_tracker_lost_samples),
               r.trajectory.size());
-  EXPECT_GT(before, 20u);
+  EXPECT_GT(before, 10u);  // measured 13
   EXPECT_GT(r.stats.rotation_tracker_lost_samples, 0);
   for (const VioState& st : r.trajectory) ASSERT_TRUE(st.T_w_b.translation.allFinite() && st.T_w_b.rotation.coeffs().allFinite());
   ASSERT_FALSE(r.trajectory.empty());
@@ -620,13 +620,14 @@ TEST(VioPipelineSimulated, RotationTrackerHoldsTheYawOfARotationDominantPan) {
   EXPECT_TRUE(off.stats.window.tracker_factors.empty());
   EXPECT_EQ(off.stats.rotation_tracker_segments, 0);
   EXPECT_GE(on.stats.rotation_tracker_segments, 1);
-  EXPECT_GT(kept, 50u);
+  EXPECT_GT(kept, 35u);
   ASSERT_FALSE(on.rotation_tracker.empty());
   for (const VioSegment& sp : on.rotation_tracker) EXPECT_LT(sp.t_begin_ns, sp.t_end_ns);
-  // Measured: 4.697 deg without, 1.763 with (2.7x less); 103 factors, residuals up to 2.40 deg.
+  // Measured on these 8 s: 3.278 deg without, 1.819 with (1.8x less; 4.697 -> 1.763 over 12 s);
+  // 41 factors, residuals up to 2.40 deg.
   EXPECT_LT(worst, 3.0);
   EXPECT_LT(yaw_on, 2.2);
-  EXPECT_LT(yaw_on, yaw_off / 2.2);
+  EXPECT_LT(yaw_on, yaw_off / 1.5);
   check_losing_the_panorama();
 }
 
