@@ -295,7 +295,7 @@ void VioPipeline::Impl::feed(const FeatureObservations& f) {
   if (kf) {
     const auto& factors = est->stats().tracker_factors;
     for (; tracker_factors_seen < factors.size(); ++tracker_factors_seen)
-      if (!factors[tracker_factors_seen].dropped) {
+      if (opt.keyframe_chaining && !factors[tracker_factors_seen].dropped) {  // for chain_final only
         tracker_keyframes.insert(factors[tracker_factors_seen].t_ns);
         tracker_keyframes.insert(factors[tracker_factors_seen].anchor_t_ns);
       }

@@ -61,6 +61,40 @@ TEST(VioPipelineOptions, DefaultsAreValidAndBadValuesAreRejectedWithAReason) {
   o.window.window_size = 1;
   rejected(o, "window: ");
   EXPECT_THROW(VioPipeline(o, test_camera(), test_noise()), std::invalid_argument);
+  // The rotation tracker's options (issue 37).
+  o = {};
+  o.window.tracker_min_sigma_deg = 0;
+  rejected(o, "window: ");
+  o = {};
+  o.window.tracker_reject_p = 1;
+  rejected(o, "window: ");
+  o = {};
+  o.rotation_tracker_start_keyframes = 0;
+  rejected(o, "start_keyframes");
+  o = {};
+  o.rotation_tracker_max_flow_deg_s = 0;
+  rejected(o, "max_flow_deg_s");
+  o = {};
+  o.rotation_tracker_history_ns = -1;
+  rejected(o, "history_ms");
+  o = {};
+  o.rotation_tracker = true;
+  o.rotation_tracker_options.use_gyro = false;
+  rejected(o, "with the gyro");
+  o.rotation_tracker_options.use_gyro = true;
+  o.rotation_tracker_options.tracker_method = MosaicTracker::kCmaxSlam;
+  rejected(o, "pf or odometry+pf");
+  {
+    backend::SlidingWindowEstimator est(backend::SlidingWindowOptions{}, test_camera(), test_noise());
+    backend::SlidingWindowEstimator::TrackedRotation r;
+    r.cov_c(0, 0) = std::nan("");
+    EXPECT_THROW(est.add_tracked_rotation(r), std::invalid_argument);
+    r.cov_c.setZero();
+    r.q_m_c.coeffs().setConstant(std::nan(""));
+    EXPECT_THROW(est.add_tracked_rotation(r), std::invalid_argument);
+    r.q_m_c.setIdentity();
+    EXPECT_NO_THROW(est.add_tracked_rotation(r));
+  }
   EXPECT_THROW(VioPipeline(VioPipelineOptions{}, test_camera(), calib::ImuNoise{}), std::invalid_argument);
   EXPECT_NO_THROW(VioPipeline(VioPipelineOptions{}, test_camera(), test_noise()));
 }
