@@ -1,7 +1,10 @@
 // Read rate (events/s, one core) of every reader through the generic DatasetReader interface:
 // synthetic 20-million-event files written here (HDF5 uncompressed, HDF5 Blosc, EVT 3.0) and the
-// real samples in ../shared/data/real when present (EVT 2.0/3.0, AEDAT 4.0 LZ4, ROS1 bag, AEDAT
-// 2.0, ECD text). Prints Google Benchmark's table, then one JSON line per input.
+// real samples in ../shared/data/real when present (EVT 2.0/3.0, AEDAT 4.0 LZ4, ROS1 bag, ROS 2
+// bag, AEDAT 2.0, ECD text). With the tests' support library (EVIO_BUILD_TESTS), also ROS 2 bags
+// written here: the real rosbag2 sample's messages repackaged as MCAP (none, lz4, zstd chunks), and
+// the synthetic events as dvs_msgs/msg/EventArray messages of 10,000 events (MCAP zstd, SQLite3).
+// Prints Google Benchmark's table, then one JSON line per input.
 //   bench_read_formats [--events N] [benchmark flags]      (synthetic files cached in $TMPDIR)
 #include <benchmark/benchmark.h>
 
@@ -18,6 +21,12 @@
 #include "evio/sensors/h5.h"
 #include "bench_reporter.h"
 #include "make_ecd_sequence.h"
+#ifdef EVIO_BENCH_ROSBAG2_WRITER
+#include <sqlite3.h>
+
+#include "evio_test/mcap_writer.h"
+#include "evio_test/rosbag2_writer.h"
+#endif
 
 namespace {
 namespace fs = std::filesystem;
@@ -60,6 +69,54 @@ void write_evt3(const std::string& path, const evio::EventBuffer& events, int wi
   std::fclose(f);
 }
 
+#ifdef EVIO_BENCH_ROSBAG2_WRITER
+// The messages of a rosbag2 SQLite3 file, repackaged as one MCAP file with the given compression.
+void repackage_as_mcap(const std::string& db3, const std::string& mcap, const std::string& compression) {
+  sqlite3* db = nullptr;
+  if (sqlite3_open_v2(db3.c_str(), &db, SQLITE_OPEN_READONLY, nullptr) != SQLITE_OK) return;
+  evio_test::McapWriterOptions o;
+  o.compression = compression;
+  o.chunk_size = 1 << 20;
+  evio_test::McapWriter w(mcap, o);
+  std::map<int64_t, uint16_t> channels;
+  sqlite3_stmt* st = nullptr;
+  sqlite3_prepare_v2(db, "SELECT id, name, type FROM topics", -1, &st, nullptr);
+  while (sqlite3_step(st) == SQLITE_ROW) {
+    const std::string name = reinterpret_cast<const char*>(sqlite3_column_text(st, 1));
+    const std::string type = reinterpret_cast<const char*>(sqlite3_column_text(st, 2));
+    channels[sqlite3_column_int64(st, 0)] = w.add_channel(w.add_schema(type, "ros2msg", ""), name, "cdr");
+  }
+  sqlite3_finalize(st);
+  sqlite3_prepare_v2(db, "SELECT topic_id, timestamp, data FROM messages ORDER BY timestamp, id", -1, &st, nullptr);
+  while (sqlite3_step(st) == SQLITE_ROW) {
+    const auto* data = static_cast<const char*>(sqlite3_column_blob(st, 2));
+    const std::string bytes(data, static_cast<size_t>(sqlite3_column_bytes(st, 2)));
+    const auto t = static_cast<uint64_t>(sqlite3_column_int64(st, 1));
+    w.write(channels[sqlite3_column_int64(st, 0)], t, bytes, t);
+  }
+  sqlite3_finalize(st);
+  sqlite3_close(db);
+  w.close();
+}
+
+// Synthetic events as dvs_msgs/msg/EventArray messages of 10,000 events in a ROS 2 bag folder.
+void write_event_array_bag(const std::string& folder, const evio::EventBuffer& events, const std::string& storage) {
+  fs::create_directories(folder);
+  evio_test::Rosbag2WriterOptions o;
+  o.storage = storage;
+  o.mcap_compression = "zstd";
+  o.mcap_chunk_size = 4 << 20;
+  evio_test::Rosbag2Writer w(folder, o);
+  const size_t topic = w.add_topic("/dvs/events", "dvs_msgs/msg/EventArray");
+  for (size_t i = 0; i < events.size(); i += 10000) {
+    const std::vector<evio::Event> batch(events.begin() + static_cast<std::ptrdiff_t>(i),
+                                         events.begin() + static_cast<std::ptrdiff_t>(std::min(events.size(), i + 10000)));
+    w.write(topic, batch.back().t_ns, evio_test::cdr_event_array(batch.front().t_ns, 1280, 720, batch));
+  }
+  w.close();
+}
+#endif
+
 struct Input {
   std::string name;
   std::string path;
@@ -97,7 +154,13 @@ int main(int argc, char** argv) {
   fs::create_directories(dir);
   const std::string h5 = (dir / "events.h5").string(), h5b = (dir / "events_blosc.h5").string(),
                     evt3 = (dir / "events.raw").string();
-  if (!fs::exists(h5) || !fs::exists(h5b) || !fs::exists(evt3)) {
+  const std::string bag_mcap = (dir / "eventarray_mcap").string(), bag_sqlite = (dir / "eventarray_sqlite").string();
+  bool bags = false;
+#ifdef EVIO_BENCH_ROSBAG2_WRITER
+  bags = true;
+#endif
+  if (!fs::exists(h5) || !fs::exists(h5b) || !fs::exists(evt3) ||
+      (bags && (!fs::exists(bag_mcap + "/metadata.yaml") || !fs::exists(bag_sqlite + "/metadata.yaml")))) {
     std::fprintf(stderr, "generating %lld synthetic events in %s ...\n", static_cast<long long>(g_events), dir.c_str());
     evio::bench::SequenceSpec spec;
     spec.events = g_events;
@@ -115,18 +178,41 @@ int main(int argc, char** argv) {
       w.close();
     }
     write_evt3(evt3, events, spec.width, spec.height);
+#ifdef EVIO_BENCH_ROSBAG2_WRITER
+    fs::remove_all(bag_mcap);
+    fs::remove_all(bag_sqlite);
+    write_event_array_bag(bag_mcap, events, "mcap");
+    write_event_array_bag(bag_sqlite, events, "sqlite3");
+#endif
   }
   g_inputs = {{"h5_synthetic_uncompressed", h5}, {"h5_synthetic_blosc", h5b}, {"evt3_synthetic", evt3}};
+  if (bags) {
+    g_inputs.push_back({"rosbag2_mcap_zstd_synthetic_eventarray", bag_mcap});
+    g_inputs.push_back({"rosbag2_sqlite_synthetic_eventarray", bag_sqlite});
+  }
   const fs::path real = fs::path(EVIO_SOURCE_DIR) / ".." / "shared" / "data" / "real";
   for (const auto& [name, rel] : std::vector<std::pair<std::string, std::string>>{
            {"evt2_real", "prophesee_raw/evt2_sample.raw"},
            {"evt3_real", "prophesee_raw/evt3_sample.raw"},
            {"aedat4_real_lz4", "davis346_aedat4/davis.aedat4"},
            {"rosbag_real_evt3", "rosbag_eventpacket/test_events_1.bag"},
+           {"rosbag2_sqlite_real_evt3", "rosbag2_sqlite/test_events_1"},
            {"aedat2_real", "dvs128_aedat2/DVS128-2017-03-21-short.aedat"},
            {"ecd_text_real", "ecd_slider_depth_head"}}) {
     if (fs::exists(real / rel)) g_inputs.push_back({name, (real / rel).string()});
   }
+#ifdef EVIO_BENCH_ROSBAG2_WRITER
+  // The same real messages as MCAP files, one per chunk compression.
+  const fs::path db3 = real / "rosbag2_sqlite" / "test_events_1" / "test_events_1.db3";
+  if (fs::exists(db3)) {
+    for (const std::string comp : {"", "lz4", "zstd"}) {
+      const std::string name = "rosbag2_mcap_" + (comp.empty() ? std::string("none") : comp) + "_real_evt3";
+      const std::string path = (dir / (name + ".mcap")).string();
+      if (!fs::exists(path)) repackage_as_mcap(db3.string(), path, comp);
+      g_inputs.push_back({name, path});
+    }
+  }
+#endif
   for (const Input& in : g_inputs) {
     benchmark::RegisterBenchmark(in.name.c_str(), [in](benchmark::State& s) { read_all(s, in); })
         ->Unit(benchmark::kMillisecond)

@@ -26,9 +26,9 @@ mkdir -p "$build/crashes"
 test_build=${BUILD_DIR:-build}
 if [ "$skip" != 1 ]; then
   cmake -S . -B "$test_build" -DCMAKE_BUILD_TYPE=Release >/dev/null
-  cmake --build "$test_build" -j"$(nproc)" --target test_aedat2 test_aedat4 test_evt test_h5 test_rosbag >/dev/null
+  cmake --build "$test_build" -j"$(nproc)" --target test_aedat2 test_aedat4 test_evt test_h5 test_rosbag test_mcap test_rosbag2 >/dev/null
   rm -rf "$build/seeds"
-  for t in test_aedat2 test_aedat4 test_evt test_h5 test_rosbag; do
+  for t in test_aedat2 test_aedat4 test_evt test_h5 test_rosbag test_mcap test_rosbag2; do
     EVIO_FUZZ_SEED_DIR="$build/seeds" "$test_build/tests/sensors/$t" --gtest_brief=1 >/dev/null 2>&1 || true
   done
 fi

@@ -13,7 +13,7 @@ packages=(
   build-essential cmake pkg-config ccache
   libeigen3-dev libceres-dev libopencv-dev libopengv-dev libpcl-dev
   libgtest-dev libgmock-dev libbenchmark-dev libyaml-cpp-dev libcli11-dev libhdf5-dev
-  liblz4-dev libzstd-dev libbz2-dev hdf5-filter-plugin-blosc-serial
+  liblz4-dev libzstd-dev libbz2-dev libsqlite3-dev hdf5-filter-plugin-blosc-serial
   clang libclang-rt-14-dev
   python3-numpy python3-matplotlib
 )

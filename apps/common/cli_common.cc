@@ -77,8 +77,9 @@ CLI::Validator time_unit_check() { return CLI::IsMember({"auto", "s", "ms", "us"
 void add_dataset_options(CLI::App* cmd, DatasetOptions* opts) {
   cmd->add_option_function<std::string>(
          "--format", [opts](const std::string& s) { opts->format = *dataset_format_from_name(s); },
-         "Dataset format; auto detects it from the folder layout and extension")
-      ->check(CLI::IsMember({"auto", "ecd", "ecd-events", "h5", "aedat4", "evt2", "evt3", "rosbag", "aedat2"}))
+         "Dataset format; auto detects it from the folder layout, magic bytes and extension (rosbag = ROS1 bag, "
+         "rosbag2 = ROS 2 bag folder or .db3 / .mcap file)")
+      ->check(CLI::IsMember({"auto", "ecd", "ecd-events", "h5", "aedat4", "evt2", "evt3", "rosbag", "aedat2", "rosbag2"}))
       ->default_str("auto");
   cmd->add_option_function<std::string>(
          "--time-unit", [opts](const std::string& s) { opts->text.time_unit = *time_unit_from_name(s); },
@@ -107,9 +108,11 @@ void add_dataset_options(CLI::App* cmd, DatasetOptions* opts) {
       "Accept a time unit even when the first records imply an implausible event rate (outside 10 Hz..2 GHz) "
       "or IMU/pose rate (outside 0.1 Hz..100 kHz)");
   cmd->add_option("--events-topic", opts->topics.events,
-                  "ROS bag: topic of dvs_msgs/EventArray or event_camera_msgs/EventPacket (default: the only one)");
-  cmd->add_option("--imu-topic", opts->topics.imu, "ROS bag: topic of sensor_msgs/Imu (default: the only one)");
-  cmd->add_option("--image-topic", opts->topics.image, "ROS bag: topic of sensor_msgs/Image mono8 (default: the only one)");
+                  "ROS1/ROS 2 bag: topic of dvs_msgs/EventArray, prophesee_event_msgs/EventArray or "
+                  "event_camera_msgs/EventPacket (evt3, evt2, mono) (default: the only one)");
+  cmd->add_option("--imu-topic", opts->topics.imu, "ROS1/ROS 2 bag: topic of sensor_msgs/Imu (default: the only one)");
+  cmd->add_option("--image-topic", opts->topics.image,
+                  "ROS1/ROS 2 bag: topic of sensor_msgs/Image, mono8/mono16/rgb8/bgr8 (default: the only one)");
 }
 
 int64_t parse_seconds_flag(const std::string& flag, const std::string& s) {

@@ -57,7 +57,10 @@ void print_text(const DatasetSummary& s, std::ostream& out) {
   } else {
     out << "frames         none\n";
   }
-  if (s.triggers > 0) out << "triggers       " << s.triggers << "\n";
+  if (s.triggers > 0) {
+    out << "triggers       " << s.triggers << " (" << s.triggers_rising << " rising, " << s.triggers_falling
+        << " falling edges)\n";
+  }
   for (const StreamInfo& st : s.streams) {
     out << "stream         " << st.name << " [" << st.type << "]";
     if (st.messages >= 0) out << " " << st.messages << " " << st.count_unit;
@@ -95,7 +98,8 @@ void print_json(const DatasetSummary& s, std::ostream& out) {
     << ", \"rate_hz\": " << DatasetSummary::rate_hz(s.imu_samples, s.imu_t_first_ns, s.imu_t_last_ns) << "}";
   o << ", \"frames\": {\"count\": " << s.frames << ", \"width\": " << s.frame_width << ", \"height\": " << s.frame_height
     << ", \"rate_hz\": " << DatasetSummary::rate_hz(s.frames, s.frames_t_first_ns, s.frames_t_last_ns) << "}";
-  o << ", \"triggers\": " << s.triggers << ", \"streams\": [";
+  o << ", \"triggers\": " << s.triggers << ", \"triggers_rising\": " << s.triggers_rising
+    << ", \"triggers_falling\": " << s.triggers_falling << ", \"streams\": [";
   for (size_t i = 0; i < s.streams.size(); ++i) {
     o << (i ? ", " : "") << "{\"name\": \"" << json_escape(s.streams[i].name) << "\", \"type\": \""
       << json_escape(s.streams[i].type) << "\", \"count\": " << s.streams[i].messages << ", \"count_unit\": \""

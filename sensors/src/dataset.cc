@@ -15,6 +15,7 @@
 #include "evio/sensors/evt.h"
 #include "evio/sensors/h5.h"
 #include "evio/sensors/rosbag.h"
+#include "evio/sensors/rosbag2.h"
 
 namespace evio {
 namespace fs = std::filesystem;
@@ -30,6 +31,7 @@ const char* dataset_format_name(DatasetFormat f) {
     case DatasetFormat::kEvt3: return "evt3";
     case DatasetFormat::kRosbag: return "rosbag";
     case DatasetFormat::kAedat2: return "aedat2";
+    case DatasetFormat::kRosbag2: return "rosbag2";
   }
   return "?";
 }
@@ -37,7 +39,8 @@ const char* dataset_format_name(DatasetFormat f) {
 const std::vector<DatasetFormat>& all_dataset_formats() {
   static const std::vector<DatasetFormat> all = {
       DatasetFormat::kEcdFolder, DatasetFormat::kEcdEvents, DatasetFormat::kHdf5,   DatasetFormat::kAedat4,
-      DatasetFormat::kEvt2,      DatasetFormat::kEvt3,      DatasetFormat::kRosbag, DatasetFormat::kAedat2};
+      DatasetFormat::kEvt2,      DatasetFormat::kEvt3,      DatasetFormat::kRosbag, DatasetFormat::kAedat2,
+      DatasetFormat::kRosbag2};
   return all;
 }
 
@@ -66,9 +69,11 @@ DatasetFormat detect_dataset_format(const std::string& path) {
         fs::is_regular_file(fs::path(path) / "events_undistorted.txt", ec)) {
       return DatasetFormat::kEcdFolder;
     }
-    throw InputError(path, 0, "folder of unknown layout (no events.txt or events_undistorted.txt)",
+    if (is_rosbag2_folder(path)) return DatasetFormat::kRosbag2;
+    throw InputError(path, 0, "folder of unknown layout (no events.txt, events_undistorted.txt or metadata.yaml)",
                      "an Event Camera Dataset folder (events.txt or events_undistorted.txt "
-                     "[imu.txt groundtruth.txt images.txt calib.txt])");
+                     "[imu.txt groundtruth.txt images.txt calib.txt]) or a ROS 2 bag folder (metadata.yaml, "
+                     ".db3 or .mcap files)");
   }
   // Magic bytes first, extension second.
   char head[16] = {};
@@ -80,6 +85,8 @@ DatasetFormat detect_dataset_format(const std::string& path) {
     if (h.rfind("#!AER-DAT", 0) == 0) return DatasetFormat::kAedat2;  // the reader names unsupported versions
     if (h.rfind("#ROSBAG V2.0", 0) == 0) return DatasetFormat::kRosbag;
     if (h.rfind("\x89HDF\r\n\x1a\n", 0) == 0) return DatasetFormat::kHdf5;
+    if (h.rfind(std::string("SQLite format 3\0", 16), 0) == 0) return DatasetFormat::kRosbag2;
+    if (h.rfind("\x89MCAP0\r\n", 0) == 0) return DatasetFormat::kRosbag2;
     if (h.rfind("%", 0) == 0) {
       const EvtRawHeader header = parse_evt_raw_header(path);
       if (header.version == 2) return DatasetFormat::kEvt2;
@@ -107,8 +114,9 @@ DatasetFormat detect_dataset_format(const std::string& path) {
   const std::string ext = fs::path(path).extension().string();
   if (ext == ".h5" || ext == ".hdf5" || ext == ".hdf") return DatasetFormat::kHdf5;
   if (ext == ".txt" || ext == ".dat" || ext == ".csv") return DatasetFormat::kEcdEvents;
+  if (fs::path(path).filename() == "metadata.yaml" || ext == ".db3" || ext == ".mcap") return DatasetFormat::kRosbag2;
   throw InputError(path, 0, "unknown file format (no known magic bytes, extension '" + ext + "')",
-                   "an ECD folder or events .txt, HDF5, AEDAT 4.0/2.0, Prophesee RAW EVT 2.0/3.0 or ROS1 bag; "
+                   "an ECD folder or events .txt, HDF5, AEDAT 4.0/2.0, Prophesee RAW EVT 2.0/3.0, ROS1 bag or ROS 2 bag; "
                    "or name the format with --format");
 }
 
@@ -218,6 +226,8 @@ std::unique_ptr<DatasetReader> open_dataset(const std::string& path, const Datas
       return open_h5_dataset(path, options);
     case DatasetFormat::kRosbag:
       return open_rosbag_dataset(path, options);
+    case DatasetFormat::kRosbag2:
+      return open_rosbag2_dataset(path, options);
     case DatasetFormat::kAuto:
       break;
   }
@@ -261,7 +271,9 @@ DatasetSummary summarize_dataset(DatasetReader* reader, const std::function<void
     s.frame_width = frames.front().image.cols;
     s.frame_height = frames.front().image.rows;
   }
-  s.triggers = static_cast<int64_t>(reader->read_triggers().size());
+  const std::vector<Trigger> triggers = reader->read_triggers();
+  s.triggers = static_cast<int64_t>(triggers.size());
+  for (const Trigger& t : triggers) (t.polarity > 0 ? s.triggers_rising : s.triggers_falling) += 1;
   s.streams = reader->streams();
   if (const auto gt = reader->read_groundtruth()) {
     s.poses = static_cast<int64_t>(gt->size());

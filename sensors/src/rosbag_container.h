@@ -54,25 +54,6 @@ inline std::string hex_op(uint8_t op) {
   return std::string("0x") + d[op >> 4] + d[op & 15];
 }
 
-// Text for error messages: printable ASCII as is, other bytes as \xNN, cut after 40 characters.
-inline std::string printable(std::string_view s) {
-  static const char* d = "0123456789abcdef";
-  std::string out;
-  for (size_t i = 0; i < s.size() && i < 40; ++i) {
-    const auto c = static_cast<unsigned char>(s[i]);
-    if (c >= 0x20 && c < 0x7f) {
-      out += static_cast<char>(c);
-    } else if (c == '\n') {
-      out += "\\n";
-    } else {
-      out += "\\x";
-      out += d[c >> 4];
-      out += d[c & 15];
-    }
-  }
-  if (s.size() > 40) out += "...";
-  return out;
-}
 
 // Where a buffer lies in the file, for messages: the data of an uncompressed chunk (or the file)
 // maps to file offsets; a compressed chunk's data is named by its offset in the decompressed chunk.

@@ -208,5 +208,24 @@ int prepare_time_unit(const std::string& path, const TextReadOptions& options, i
   return time_unit_exponent(report->time_unit);
 }
 
+std::string printable(std::string_view s) {
+  static const char* d = "0123456789abcdef";
+  std::string out;
+  for (size_t i = 0; i < s.size() && i < 40; ++i) {
+    const auto c = static_cast<unsigned char>(s[i]);
+    if (c >= 0x20 && c < 0x7f) {
+      out += static_cast<char>(c);
+    } else if (c == '\n') {
+      out += "\\n";
+    } else {
+      out += "\\x";
+      out += d[c >> 4];
+      out += d[c & 15];
+    }
+  }
+  if (s.size() > 40) out += "...";
+  return out;
+}
+
 }  // namespace detail
 }  // namespace evio

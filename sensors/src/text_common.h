@@ -28,6 +28,10 @@ inline bool is_comment_or_blank(std::string_view line) {
 // The line in double quotes, cut after 96 characters (for error messages).
 std::string quote_line(std::string_view line);
 
+// Bytes for error messages: printable ASCII as is, '\n' as \n, other bytes as \xNN, cut after 40
+// characters (with "...").
+std::string printable(std::string_view s);
+
 // Number of whitespace/comma separated tokens (for error messages).
 int count_tokens(std::string_view line);
 

@@ -143,6 +143,7 @@ TEST(ConvertCommandRealData, EverySampleToH5AndEcd) {
       {"prophesee_raw/evt2_sample.raw", 539481},
       {"prophesee_raw/evt3_sample.raw", 219596},
       {"rosbag_eventpacket/test_events_1.bag", 343474},
+      {"rosbag2_sqlite/test_events_1", 343474},
       {"dvs128_aedat2/DVS128-2017-03-21-short.aedat", 130114},
       {"ecd_slider_depth_head", 50000}};
   int tried = 0;

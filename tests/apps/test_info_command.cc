@@ -84,5 +84,25 @@ TEST(InfoCommandRealData, RosbagListsTopics) {
   EXPECT_NE(out.str().find("events         343474\n"), std::string::npos) << out.str();
 }
 
+// The ROS 2 copy of the same recording (rosbag2, SQLite3): the counts of shared/data/README.md,
+// the topic with its ROS 2 type, and the clock stated.
+TEST(InfoCommandRealData, Rosbag2ListsTopicsAndCounts) {
+  const auto dir = evio_test::real_data_dir("rosbag2_sqlite/test_events_1");
+  if (!dir) GTEST_SKIP() << "real data not found (../shared/data/real/rosbag2_sqlite/test_events_1)";
+  InfoArgs args;
+  args.path = *dir;
+  std::ostringstream out;
+  ASSERT_EQ(run_info(args, out), 0);
+  const std::string t = out.str();
+  EXPECT_NE(t.find("format         rosbag2"), std::string::npos) << t;
+  EXPECT_NE(t.find("stream         /event_camera/events [event_camera_msgs/msg/EventPacket] 517 messages (read)"),
+            std::string::npos)
+      << t;
+  EXPECT_NE(t.find("events         343474\n"), std::string::npos) << t;
+  EXPECT_NE(t.find("125183 ON / 218291 OFF"), std::string::npos) << t;
+  EXPECT_NE(t.find("triggers       4157 (2079 rising, 2078 falling edges)"), std::string::npos) << t;
+  EXPECT_NE(t.find("header.stamp of the first packet"), std::string::npos) << t;
+}
+
 }  // namespace
 }  // namespace evio::apps

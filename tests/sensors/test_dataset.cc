@@ -43,7 +43,15 @@ TEST(Dataset, DetectsFormats) {
   EXPECT_EQ(detect_dataset_format(dir.file("events.txt")), DatasetFormat::kEcdEvents);
   EXPECT_EQ(dataset_format_from_name("auto"), DatasetFormat::kAuto);
   for (DatasetFormat f : all_dataset_formats()) EXPECT_EQ(dataset_format_from_name(dataset_format_name(f)), f);
-  EXPECT_EQ(all_dataset_formats().size(), 8u);
+  EXPECT_EQ(all_dataset_formats().size(), 9u);
+  // ROS 2 bags: SQLite3 and MCAP magic, the extensions, metadata.yaml and a bag folder.
+  EXPECT_EQ(detect_dataset_format(dir.write("i.bin", std::string("SQLite format 3\0", 16))), DatasetFormat::kRosbag2);
+  EXPECT_EQ(detect_dataset_format(dir.write("j.bin", std::string("\x89MCAP0\r\n", 8))), DatasetFormat::kRosbag2);
+  EXPECT_EQ(detect_dataset_format(dir.write("k.mcap", "")), DatasetFormat::kRosbag2);
+  evio_test::TempDir bag;
+  bag.write("metadata.yaml", "rosbag2_bagfile_information: {}\n");
+  EXPECT_EQ(detect_dataset_format(bag.path()), DatasetFormat::kRosbag2);
+  EXPECT_EQ(detect_dataset_format(bag.file("metadata.yaml")), DatasetFormat::kRosbag2);
 }
 
 TEST(Dataset, SummaryOfAFolderWithoutSideFiles) {

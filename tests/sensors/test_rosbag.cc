@@ -561,12 +561,12 @@ TEST(Rosbag, EventPacketWithAnotherEncodingIsAnError) {
   TempDir dir;
   TestBagWriter w;
   const uint32_t c = w.connection("/ev", "event_camera_msgs/EventPacket");
-  const size_t m = w.message(c, 1000000000, event_packet(1000000000, 64, 32, "mono", {0, 0, 0, 0}));
-  const std::string path = write_file(dir, "mono.bag", w.bytes());
+  const size_t m = w.message(c, 1000000000, event_packet(1000000000, 64, 32, "libcaer_cmp", {0, 0, 0, 0}));
+  const std::string path = write_file(dir, "libcaer.bag", w.bytes());
   const WrittenMessage& at = w.written(m);
   // The encoding string starts after header, height, width, seq and time_base.
   const uint64_t off = at.chunk_data_pos + at.data_off + kHeaderBytes + 8 + 16;
-  expect_error(path, {"encoding 'mono' is not supported", "byte offset " + std::to_string(off),
+  expect_error(path, {"encoding 'libcaer_cmp' is not supported", "byte offset " + std::to_string(off),
                       "event_camera_msgs/EventPacket: std_msgs/Header header"});
 }
 
@@ -604,7 +604,7 @@ TEST(Rosbag, TopicSelection) {
                o);
   o.topics.events = "/imu";
   expect_error(path, {"topic '/imu' chosen for events has type sensor_msgs/Imu",
-                      "dvs_msgs/EventArray or event_camera_msgs/EventPacket"},
+                      "dvs_msgs/EventArray, prophesee_event_msgs/EventArray or event_camera_msgs/EventPacket"},
                o);
   o.topics.events = "/left/events";
   o.topics.image = "/compressed";
@@ -668,10 +668,10 @@ TEST(Rosbag, ColourImagesAreConvertedToGreyAndOtherEncodingsRejected) {
 
   TestBagWriter w2;
   const uint32_t c2 = w2.connection("/img", "sensor_msgs/Image");
-  const size_t m = w2.message(c2, 10, image_message(10, 2, 1, "mono16", 4, std::string(4, '\0')));
-  const std::string path = write_file(dir, "mono16.bag", w2.bytes());
+  const size_t m = w2.message(c2, 10, image_message(10, 2, 1, "yuv422", 4, std::string(4, '\0')));
+  const std::string path = write_file(dir, "yuv422.bag", w2.bytes());
   const uint64_t off = w2.written(m).chunk_data_pos + w2.written(m).data_off + kHeaderBytes + 8;
-  expect_error(path, {"image encoding 'mono16' is not supported", "byte offset " + std::to_string(off),
+  expect_error(path, {"image encoding 'yuv422' is not supported", "byte offset " + std::to_string(off),
                       "sensor_msgs/Image: std_msgs/Header header"});
 
   TestBagWriter w3;

@@ -2,7 +2,7 @@
 // binary formats, magic bytes) with an override, a streaming event source, and whole-file access
 // to IMU, frames, triggers, ground truth and calibration. Formats: ECD text folder, a bare ECD
 // events.txt, HDF5 (DSEC and configurable layouts), AEDAT 4.0, Prophesee EVT 2.0/3.0, ROS1 bag,
-// jAER AEDAT 2.0.
+// ROS 2 bag (rosbag2: SQLite3 or MCAP storage), jAER AEDAT 2.0.
 #pragma once
 
 #include <cstdint>
@@ -31,6 +31,7 @@ enum class DatasetFormat {
   kEvt3,       // "evt3": Prophesee RAW EVT 3.0
   kRosbag,     // "rosbag": ROS1 bag v2.0
   kAedat2,     // "aedat2": jAER AEDAT 2.0 (DVS128)
+  kRosbag2,    // "rosbag2": ROS 2 bag folder (metadata.yaml + .db3 / .mcap files) or one .db3 / .mcap file
 };
 const char* dataset_format_name(DatasetFormat f);
 std::optional<DatasetFormat> dataset_format_from_name(const std::string& name);
@@ -54,11 +55,12 @@ struct H5Layout {
   PolarityConvention polarity = PolarityConvention::kUnknown;  // kUnknown: accept 0/1 and -1/+1
 };
 
-// ROS1 bag topic selection; empty strings pick the single topic of the matching message type.
+// ROS bag (ROS1 and rosbag2) topic selection; empty strings pick the single topic of the matching
+// message type.
 struct BagTopics {
-  std::string events;  // dvs_msgs/EventArray or event_camera_msgs/EventPacket
+  std::string events;  // dvs_msgs/EventArray, prophesee_event_msgs/EventArray or event_camera_msgs/EventPacket
   std::string imu;     // sensor_msgs/Imu
-  std::string image;   // sensor_msgs/Image (mono8)
+  std::string image;   // sensor_msgs/Image (mono8, mono16, rgb8, bgr8, rgba8, bgra8)
 };
 
 struct DatasetOptions {
@@ -67,13 +69,14 @@ struct DatasetOptions {
   // Sensor size assumed for an ECD calib.txt, which does not store it (DAVIS240C), px.
   SensorSize ecd_calib_sensor{240, 180};
   H5Layout h5;       // HDF5 layout (auto-detected by default)
-  BagTopics topics;  // ROS1 bag topic selection
+  BagTopics topics;  // ROS bag topic selection (ROS1 and rosbag2)
 
   bool Validate(std::string* why) const;
 };
 
-// By folder layout, magic bytes (AEDAT "#!AER-DAT4.0", "#!AER-DAT2.0", "#ROSBAG V2.0", HDF5
-// signature, Prophesee "% " header with its evt version) and extension. Throws InputError naming
+// By folder layout (ECD files; rosbag2's metadata.yaml or .db3 / .mcap files), magic bytes (AEDAT
+// "#!AER-DAT4.0", "#!AER-DAT2.0", "#ROSBAG V2.0", HDF5 signature, SQLite "SQLite format 3", MCAP
+// "\x89MCAP0", Prophesee "% " header with its evt version) and extension. Throws InputError naming
 // what was looked at when the format cannot be recognised.
 DatasetFormat detect_dataset_format(const std::string& path);
 
@@ -149,6 +152,7 @@ struct DatasetSummary {
   int64_t frames_t_first_ns = 0, frames_t_last_ns = 0;
   int frame_width = 0, frame_height = 0;  // of the first frame, 0 if none
   int64_t triggers = 0;
+  int64_t triggers_rising = 0, triggers_falling = 0;  // by Trigger::polarity (+1 / -1)
   std::vector<StreamInfo> streams;
   int64_t poses = 0;
   int64_t gt_t_first_ns = 0, gt_t_last_ns = 0;
