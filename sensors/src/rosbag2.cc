@@ -564,8 +564,8 @@ class Rosbag2Source final : public detail::ros::MessageSource {
   }
   DatasetFormat format() const override { return DatasetFormat::kRosbag2; }
   std::string describe() const override {
-    std::string s = "ROS 2 bag, " + std::to_string(files_.size()) + " " + files_[0].storage->describe() + " file(s), " +
-                    std::to_string(topics_.size()) + " topic(s)";
+    std::string s = "ROS 2 bag: " + std::to_string(files_.size()) + (files_.size() == 1 ? " file, " : " files, first ") +
+                    files_[0].storage->describe() + "; " + std::to_string(topics_.size()) + " topic(s)";
     if (!plan_.has_metadata) s += ", no metadata.yaml";
     if (!plan_.compression_mode.empty()) s += ", zstd compression per " + plan_.compression_mode;
     return s;

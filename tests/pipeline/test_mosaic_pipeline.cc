@@ -6,9 +6,11 @@
 // and without the weighted Poisson solve; bit-identical results with the mapper on a second thread.
 #include "evio/pipeline/mosaic_pipeline.h"
 
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <cstdlib>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -256,8 +258,10 @@ class CollectEvents final : public simulator::SimulationSink {
 
 const Sequence& rotation_sequence() {
   static const Sequence seq = [] {
+    const auto t0 = std::chrono::steady_clock::now();
+    struct P { std::chrono::steady_clock::time_point t; ~P() { std::printf("TIMING simulation %.2f s\n", std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count()); } } pr{t0};
     simulator::SimulateOverrides ov;
-    ov.duration_s = 1.5;
+    ov.duration_s = std::getenv("EVIO_DUR") ? std::atof(std::getenv("EVIO_DUR")) : 1.5;
     simulator::SimulationConfig c = simulator::load_simulation_config(std::string(EVIO_SOURCE_DIR) + "/datasets/poster_rotation.yaml", ov);
     c.simulator.threads = 2;  // identical output for any thread count
     Sequence s;
@@ -298,6 +302,8 @@ struct PipelineRun {
 // The IMU first (or interleaved: before each chunk only the samples up to its first event, so
 // every chunk waits for the IMU of the next one), then the events in chunks of `chunk` events.
 PipelineRun run(const MosaicPipelineOptions& o, const Sequence& s, size_t chunk, bool imu_first) {
+  struct Tm { std::chrono::steady_clock::time_point t0 = std::chrono::steady_clock::now(); size_t n; size_t c; int m; bool g;
+    ~Tm() { std::printf("TIMING run method %d gyro %d chunk %zu events %zu: %.2f s\n", m, g, c, n, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()); } } tm_{std::chrono::steady_clock::now(), s.events.size(), chunk, static_cast<int>(o.tracker_method), o.use_gyro};
   MosaicPipeline p(o, s.camera);
   PipelineRun r;
   size_t next_imu = 0;

@@ -109,6 +109,35 @@ TEST(Rosbag2, RealSqliteBagGivesTheKnownCountsAndEqualsTheRos1Copy) {
   }
 }
 
+// An MCAP file of the official writer (tests/sensors/data/make_official_writer_ros2.js): another
+// implementation's chunks, summary and Metadata record, and CDR encoded apart from evio's.
+TEST(Rosbag2, McapOfTheOfficialWriter) {
+  const std::string path = std::string(EVIO_SOURCE_DIR) + "/tests/sensors/data/official_writer_ros2.mcap";
+  auto r = open_dataset(path, {});
+  EXPECT_EQ(r->format(), DatasetFormat::kRosbag2);
+  EXPECT_EQ(r->sensor_size().width, 346);
+  std::map<std::string, StreamInfo> by_name;
+  for (const StreamInfo& st : r->streams()) by_name[st.name] = st;
+  EXPECT_EQ(by_name["/dvs/events"].type, "dvs_msgs/msg/EventArray");
+  EXPECT_EQ(by_name["/dvs/events"].messages, 5);
+  EXPECT_EQ(by_name["/dvs/imu"].messages, 5);
+  const EventBuffer e = read_all_events(r.get(), 77);
+  ASSERT_EQ(e.size(), 500u);
+  const int64_t t0 = 1700000000000000000LL;
+  for (int k = 0; k < 500; ++k) {
+    const Event want{t0 + 1000 * k + 7 * (k % 3), static_cast<uint16_t>((37 * k) % 346),
+                     static_cast<uint16_t>((11 * k) % 260), static_cast<int8_t>(k % 3 == 0 ? 1 : -1)};
+    ASSERT_EQ(e[static_cast<size_t>(k)], want) << k;
+  }
+  const std::vector<ImuSample> imu = r->read_imu();
+  ASSERT_EQ(imu.size(), 5u);
+  for (int m = 0; m < 5; ++m) {
+    EXPECT_EQ(imu[static_cast<size_t>(m)].t_ns, t0 + 100000 * m + 50000);
+    EXPECT_EQ(imu[static_cast<size_t>(m)].gyro, Eigen::Vector3d(0.01 * m, -0.02, 0.03));
+    EXPECT_EQ(imu[static_cast<size_t>(m)].accel, Eigen::Vector3d(0.1, 9.81, -0.5 * m));
+  }
+}
+
 // ---------------------------------------------------------------------------------------------
 // Round trips through the test writer.
 
