@@ -237,8 +237,10 @@ class Statement {
 
 class SqliteCursor final : public StorageCursor {
  public:
-  SqliteCursor(const SqliteDb& db, const std::vector<int64_t>& ids, int64_t start_ns, int64_t total, bool zstd_messages)
-      : db_(db), total_(total), zstd_(zstd_messages) {
+  // Progress is by timestamp over [t_first, t_last], the messages table's range.
+  SqliteCursor(const SqliteDb& db, const std::vector<int64_t>& ids, int64_t start_ns, int64_t t_first, int64_t t_last,
+               bool zstd_messages)
+      : db_(db), t_first_(t_first), t_last_(t_last), zstd_(zstd_messages) {
     std::string in;
     for (int64_t id : ids) in += (in.empty() ? "" : ",") + std::to_string(id);
     const std::string from = start_ns == INT64_MIN ? "" : " AND timestamp >= " + std::to_string(start_ns);
@@ -252,7 +254,6 @@ class SqliteCursor final : public StorageCursor {
       done_ = true;
       return false;
     }
-    ++rows_;
     row_ = st_->i64(0);
     *local_id = st_->i64(1);
     stamp_ = st_->i64(2);
@@ -271,8 +272,9 @@ class SqliteCursor final : public StorageCursor {
     return "byte " + std::to_string(k) + " of the " + (zstd_ ? "decompressed " : "") + at_raw();
   }
   double progress() const override {
-    if (done_ || total_ <= 0) return done_ ? 1.0 : 0.0;
-    return std::min(1.0, static_cast<double>(rows_) / static_cast<double>(total_));
+    if (done_) return 1.0;
+    if (t_last_ <= t_first_ || row_ == 0) return 0.0;
+    return std::clamp(static_cast<double>(stamp_ - t_first_) / static_cast<double>(t_last_ - t_first_), 0.0, 1.0);
   }
 
  private:
@@ -282,14 +284,16 @@ class SqliteCursor final : public StorageCursor {
 
   const SqliteDb& db_;
   std::unique_ptr<Statement> st_;
-  int64_t total_ = 0, rows_ = 0, row_ = 0, stamp_ = 0;
+  int64_t t_first_ = 0, t_last_ = 0, row_ = 0, stamp_ = 0;
   bool zstd_ = false, done_ = false;
   std::vector<uint8_t> buf_;
 };
 
 class SqliteStorage final : public Storage {
  public:
-  SqliteStorage(const std::string& path, bool zstd_messages) : db_(path), zstd_(zstd_messages) {
+  // count_topics: count each topic's messages (a pass over the table's rows; metadata.yaml states
+  // the counts when there is one).
+  SqliteStorage(const std::string& path, bool zstd_messages, bool count_topics) : db_(path), zstd_(zstd_messages) {
     Statement st(db_, "SELECT id, name, type, serialization_format FROM topics ORDER BY id", "the topics table");
     while (st.step()) {
       LocalTopic t;
@@ -297,6 +301,12 @@ class SqliteStorage final : public Storage {
       t.topic = Topic{st.text(1), st.text(2), st.text(3), -1};
       topics_.push_back(std::move(t));
     }
+    Statement range(db_, "SELECT MIN(timestamp), MAX(timestamp) FROM messages", "the messages table");  // timestamp_idx
+    if (range.step()) {
+      t_first_ = range.i64(0);
+      t_last_ = range.i64(1);
+    }
+    if (!count_topics) return;
     Statement count(db_, "SELECT topic_id, COUNT(*) FROM messages GROUP BY topic_id", "the messages table");
     while (count.step()) {
       for (LocalTopic& t : topics_) {
@@ -309,11 +319,7 @@ class SqliteStorage final : public Storage {
   }
   const std::vector<LocalTopic>& topics() const override { return topics_; }
   std::unique_ptr<StorageCursor> cursor(const std::vector<int64_t>& ids, int64_t start_ns) const override {
-    int64_t total = 0;
-    for (const LocalTopic& t : topics_) {
-      if (std::find(ids.begin(), ids.end(), t.id) != ids.end()) total += t.topic.messages;
-    }
-    return std::make_unique<SqliteCursor>(db_, ids, start_ns, total, zstd_);
+    return std::make_unique<SqliteCursor>(db_, ids, start_ns, t_first_, t_last_, zstd_);
   }
   std::string describe() const override { return "SQLite3"; }
   bool seekable() const override { return true; }
@@ -321,6 +327,7 @@ class SqliteStorage final : public Storage {
  private:
   SqliteDb db_;
   bool zstd_;
+  int64_t t_first_ = 0, t_last_ = 0;
   std::vector<LocalTopic> topics_;
 };
 
@@ -594,7 +601,7 @@ class Rosbag2Source final : public detail::ros::MessageSource {
     }
     const bool per_message = plan_.compression_mode == "message";
     if (plan_.storage == "sqlite3") {
-      of.storage = std::make_unique<SqliteStorage>(storage_path, per_message);
+      of.storage = std::make_unique<SqliteStorage>(storage_path, per_message, !plan_.has_metadata);
     } else {
       of.storage = std::make_unique<McapStorage>(storage_path, per_message);
     }
