@@ -642,6 +642,10 @@ bool Rosbag2Cursor::next(MessageView* m) {
         const auto& locals = file.storage->topics();
         size_t k = 0;
         while (k < locals.size() && locals[k].id != local) ++k;
+        if (k == locals.size()) {
+          throw InputError(file.path, 0, "message on topic id " + std::to_string(local) + " not listed by the file",
+                           "messages of the topics in the file's topics table or Channel records");
+        }
         m->topic = (*local_to_global_)[k];
         m->data = data;
         m->size = size;
