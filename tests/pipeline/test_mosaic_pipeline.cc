@@ -1,16 +1,16 @@
-// pipeline::MosaicPipeline driven in memory: option validation, no input, and 1.5 s of the
-// simulated poster_rotation panorama (events and IMU from the simulator, no files): rotation error
-// against ground truth with the gyro and events only, results independent of the event chunking
-// and of how the IMU is interleaved, and the events kept in memory bounded by one bootstrap window
-// or tracker batch plus one chunk; the final mosaic's PSNR / SSIM against the true panorama with
-// and without the weighted Poisson solve; bit-identical results with the mapper on a second thread.
+// pipeline::MosaicPipeline driven in memory: option validation, no input, and 0.8 s (1.5 s for the
+// mirrored view and the mosaic's PSNR) of the simulated poster_rotation panorama (events and IMU
+// from the simulator, no files): rotation error against ground truth with the gyro and events
+// only, results independent of the event chunking and of how the IMU is interleaved, and the
+// events kept in memory bounded by one bootstrap window or tracker batch plus one chunk; the final
+// mosaic's PSNR / SSIM against the true panorama with and without the weighted Poisson solve;
+// bit-identical results with the mapper on a second thread.
 #include "evio/pipeline/mosaic_pipeline.h"
 
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
-#include <cstdlib>
+#include <map>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -235,14 +235,20 @@ TEST(MosaicPipeline, NoiseOnlyWindowsReadAsStill) {
   EXPECT_GT(largest_turn_deg(g), 6.5);
 }
 
-// 1.5 s of datasets/poster_rotation.yaml simulated in memory (events on the camera clock, IMU,
-// ground truth every 1 ms).
+// datasets/poster_rotation.yaml simulated in memory (events on the camera clock, IMU, ground
+// truth every 1 ms): kSequenceS (the 0.3 s bootstrap, then 0.5 s of tracking), or kLongSequenceS
+// for the tests that need the longer span (MirroredViewIsDetectedAsLost,
+// WeightedPoissonRaisesMosaicPsnr). Each test process simulates the span it asks for, once.
+constexpr double kSequenceS = 0.8;
+constexpr double kLongSequenceS = 1.5;
+
 struct Sequence {
   calib::CameraCalibration camera;
   std::vector<Event> events;
   std::vector<ImuSample> imu;
   Trajectory groundtruth;
   std::shared_ptr<const simulator::Texture> panorama;  // the scene's true panorama
+  int64_t t_begin_ns = 0, t_end_ns = 0;                // the simulated span (body clock)
 };
 
 class CollectEvents final : public simulator::SimulationSink {
@@ -256,29 +262,48 @@ class CollectEvents final : public simulator::SimulationSink {
   std::vector<Event>* out_;
 };
 
-const Sequence& rotation_sequence() {
-  static const Sequence seq = [] {
-    const auto t0 = std::chrono::steady_clock::now();
-    struct P { std::chrono::steady_clock::time_point t; ~P() { std::printf("TIMING simulation %.2f s\n", std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count()); } } pr{t0};
-    simulator::SimulateOverrides ov;
-    ov.duration_s = std::getenv("EVIO_DUR") ? std::atof(std::getenv("EVIO_DUR")) : 1.5;
-    simulator::SimulationConfig c = simulator::load_simulation_config(std::string(EVIO_SOURCE_DIR) + "/datasets/poster_rotation.yaml", ov);
-    c.simulator.threads = 2;  // identical output for any thread count
-    Sequence s;
-    s.camera = c.camera;
-    s.panorama = c.panorama;
-    simulator::Simulator sim(c.scene, c.trajectory, c.simulator);
-    CollectEvents sink(&s.events);
-    sim.run(&sink);
-    s.imu = simulator::simulate_imu(*c.trajectory, c.simulator.t_begin_ns, c.simulator.t_end_ns, c.imu);
-    std::vector<StampedPose> gt;
-    for (int64_t t = c.simulator.t_begin_ns; t <= c.simulator.t_end_ns; t += 1'000'000) {
-      gt.push_back({t, c.trajectory->evaluate(t).T_w_b});
-    }
-    s.groundtruth = Trajectory(std::move(gt));
-    return s;
-  }();
-  return seq;
+// The part of s up to t_end_ns (body clock): its events, IMU samples and ground truth.
+Sequence first_part(const Sequence& s, int64_t t_end_ns) {
+  Sequence p;
+  p.camera = s.camera;
+  p.panorama = s.panorama;
+  p.t_begin_ns = s.t_begin_ns;
+  p.t_end_ns = std::min(t_end_ns, s.t_end_ns);
+  const int64_t t_end_cam = p.t_end_ns - s.camera.time_shift_ns;
+  for (const Event& e : s.events)
+    if (e.t_ns <= t_end_cam) p.events.push_back(e);
+  for (const ImuSample& m : s.imu)
+    if (m.t_ns <= p.t_end_ns) p.imu.push_back(m);
+  std::vector<StampedPose> gt;
+  for (const StampedPose& g : s.groundtruth.poses())
+    if (g.t_ns <= p.t_end_ns) gt.push_back(g);
+  p.groundtruth = Trajectory(std::move(gt));
+  return p;
+}
+
+const Sequence& rotation_sequence(double duration_s = kSequenceS) {
+  static std::map<double, Sequence> cache;
+  auto it = cache.find(duration_s);
+  if (it != cache.end()) return it->second;
+  simulator::SimulateOverrides ov;
+  ov.duration_s = duration_s;
+  simulator::SimulationConfig c = simulator::load_simulation_config(std::string(EVIO_SOURCE_DIR) + "/datasets/poster_rotation.yaml", ov);
+  c.simulator.threads = 2;  // identical output for any thread count
+  Sequence s;
+  s.camera = c.camera;
+  s.panorama = c.panorama;
+  s.t_begin_ns = c.simulator.t_begin_ns;
+  s.t_end_ns = c.simulator.t_end_ns;
+  simulator::Simulator sim(c.scene, c.trajectory, c.simulator);
+  CollectEvents sink(&s.events);
+  sim.run(&sink);
+  s.imu = simulator::simulate_imu(*c.trajectory, c.simulator.t_begin_ns, c.simulator.t_end_ns, c.imu);
+  std::vector<StampedPose> gt;
+  for (int64_t t = c.simulator.t_begin_ns; t <= c.simulator.t_end_ns; t += 1'000'000) {
+    gt.push_back({t, c.trajectory->evaluate(t).T_w_b});
+  }
+  s.groundtruth = Trajectory(std::move(gt));
+  return cache.emplace(duration_s, std::move(s)).first->second;
 }
 
 // The command's defaults (apps/mosaic_command.cc): 100 events per particle update, event stride 4
@@ -302,8 +327,6 @@ struct PipelineRun {
 // The IMU first (or interleaved: before each chunk only the samples up to its first event, so
 // every chunk waits for the IMU of the next one), then the events in chunks of `chunk` events.
 PipelineRun run(const MosaicPipelineOptions& o, const Sequence& s, size_t chunk, bool imu_first) {
-  struct Tm { std::chrono::steady_clock::time_point t0 = std::chrono::steady_clock::now(); size_t n; size_t c; int m; bool g;
-    ~Tm() { std::printf("TIMING run method %d gyro %d chunk %zu events %zu: %.2f s\n", m, g, c, n, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()); } } tm_{std::chrono::steady_clock::now(), s.events.size(), chunk, static_cast<int>(o.tracker_method), o.use_gyro};
   MosaicPipeline p(o, s.camera);
   PipelineRun r;
   size_t next_imu = 0;
@@ -385,21 +408,23 @@ TEST(MosaicPipelineSimulated, PosterRotationWithGyro) {
   EXPECT_GE(r.stats.bootstrap.t_end_ns - r.stats.t_first_event_ns, o.bootstrap_ns);
   EXPECT_GT(r.stats.seen_fraction, 0.05);
   // The snapshot-free run's trajectory: one pose per 5 ms at most.
-  EXPECT_LE(r.rotation.size(), static_cast<size_t>(1.5e9 / o.trajectory_period_ns) + 2);
-  EXPECT_GT(r.rotation.size(), static_cast<size_t>(1.0e9 / o.trajectory_period_ns));
-  // Measured 0.139 deg RMS, 0.349 deg max on these 1.5 s (bounds ~1.2x). With each gyro sample
-  // held until the next (the former integration): 0.101 / 0.225, with the bootstrap at 0.091 /
-  // 0.154: that lag of half a sample period countered the events' own lag behind the edges on this
-  // medium-speed scene; on the fast one it was 0.39 deg RMS against 0.065 now (README).
-  EXPECT_LT(rms, 0.17);
+  const int64_t span_ns = s.t_end_ns - s.t_begin_ns;
+  EXPECT_LE(r.rotation.size(), static_cast<size_t>(span_ns / o.trajectory_period_ns) + 2);
+  EXPECT_GT(r.rotation.size(), static_cast<size_t>(span_ns * 2 / 3 / o.trajectory_period_ns));
+  // Measured 0.148 deg RMS, 0.349 deg max on these 0.8 s (bounds ~1.2x; 0.139 / 0.349 on 1.5 s).
+  // With each gyro sample held until the next (the former integration), on 1.5 s: 0.101 / 0.225,
+  // with the bootstrap at 0.091 / 0.154: that lag of half a sample period countered the events' own
+  // lag behind the edges on this medium-speed scene; on the fast one it was 0.39 deg RMS against
+  // 0.065 now (README).
+  EXPECT_LT(rms, 0.18);
   EXPECT_LT(mx, 0.42);
   // Tracking quality: no lost segment; the probe contrast's 100 ms means stay well above the lost
   // level (0.05).
   std::printf("gyro: probe contrast over %lld windows: min %.3f, mean %.3f\n", static_cast<long long>(r.stats.quality_windows),
               r.stats.quality_min, r.stats.quality_mean);
   EXPECT_TRUE(r.tracking_lost.empty());
-  EXPECT_GE(r.stats.quality_windows, 8);  // measured 9 decided (of 11)
-  EXPECT_GT(r.stats.quality_min, 0.25);  // measured 0.330 (mean 0.395)
+  EXPECT_GE(r.stats.quality_windows, 3);  // measured 4 decided (9 on 1.5 s)
+  EXPECT_GT(r.stats.quality_min, 0.25);  // measured 0.330 (mean 0.356)
   EXPECT_EQ(r.stats.events_unmapped_lost, 0);
   // The bootstrap alone (gyro integration over 0.3 s): measured 0.009 deg RMS, 0.014 deg max.
   const auto [boot_rms, boot_max] = rotation_error_deg(r.rotation, s.groundtruth, r.stats.bootstrap.t_end_ns);
@@ -430,14 +455,15 @@ TEST(MosaicPipelineSimulated, PosterRotationEventsOnly) {
   EXPECT_FALSE(r.stats.bootstrap.gyro);
   EXPECT_GT(r.stats.bootstrap.cmax_windows, 5);
   EXPECT_EQ(r.stats.tracker.gyro_predictions, 0);
-  // Measured 1.146 deg RMS, 2.260 deg max on these 1.5 s (bounds ~1.2x; 1.266 / 2.453 with the
-  // map re-solved every 20 ms and 100 particles, 1.081 / 2.108 with the new schedule and 100).
-  EXPECT_LT(rms, 1.4);
-  EXPECT_LT(mx, 2.75);
+  // Measured 1.353 deg RMS, 2.196 deg max on these 0.8 s (bounds ~1.2x). On 1.5 s 1.108 / 2.196;
+  // there 1.266 / 2.453 with the map re-solved every 20 ms and 100 particles, 1.081 / 2.108 with
+  // the new schedule and 100.
+  EXPECT_LT(rms, 1.65);
+  EXPECT_LT(mx, 2.65);
   std::printf("events only: probe contrast over %lld windows: min %.3f, mean %.3f\n",
               static_cast<long long>(r.stats.quality_windows), r.stats.quality_min, r.stats.quality_mean);
   EXPECT_TRUE(r.tracking_lost.empty());
-  EXPECT_GT(r.stats.quality_min, 0.28);  // measured 0.371 (mean 0.401)
+  EXPECT_GT(r.stats.quality_min, 0.28);  // measured 0.365 (mean 0.400)
   // The bootstrap alone (CMax rates per window over 0.3 s): measured 0.371 deg RMS, 0.612 deg max.
   const auto [boot_rms, boot_max] = rotation_error_deg(r.rotation, s.groundtruth, r.stats.bootstrap.t_end_ns);
   std::printf("CMax bootstrap: rotation error rms %.3f deg, max %.3f deg\n", boot_rms, boot_max);
@@ -476,11 +502,11 @@ TEST(MosaicPipelineSimulated, PosterRotationEventsOnlyParticleVelocity) {
               "(bootstrap rms %.2e deg)\n", rms, mx, g_rms, g_mx, gb_rms);
   EXPECT_EQ(r.stats.tracker.gyro_predictions, 0);
   EXPECT_LT(gb_rms, 1e-6);
-  // Measured 0.452 / 0.615 deg (CMax bootstrap; previous_mean on the same: 1.098 / 2.264) and
-  // 0.206 / 0.405 deg with the true bootstrap (bounds ~1.2x).
-  EXPECT_LT(rms, 0.55);
-  EXPECT_LT(mx, 0.75);
-  EXPECT_LT(g_rms, 0.25);
+  // Measured 0.525 / 0.668 deg (CMax bootstrap; previous_mean on the same, PosterRotationEventsOnly:
+  // 1.353 / 2.196) and 0.241 / 0.405 deg with the true bootstrap (bounds ~1.2x).
+  EXPECT_LT(rms, 0.63);
+  EXPECT_LT(mx, 0.8);
+  EXPECT_LT(g_rms, 0.29);
 }
 
 // The trackers other than the particle filter alone (tracker_method): kOdometry integrates the
@@ -495,7 +521,7 @@ TEST(MosaicPipelineSimulated, OdometryTrackers) {
   const auto [odo_rms, odo_max] = rotation_error_deg(odo.rotation, s.groundtruth);
   EXPECT_EQ(odo.stats.tracker.batches, 0);
   EXPECT_EQ(odo.stats.bootstrap.t_end_ns, odo.stats.t_last_event_ns);
-  EXPECT_GT(odo.stats.bootstrap.cmax_windows, 60);
+  EXPECT_GT(odo.stats.bootstrap.cmax_windows, 55);  // measured 70
   EXPECT_EQ(odo.stats.quality_windows, 0);
   EXPECT_TRUE(odo.tracking_lost.empty());
   EXPECT_GT(odo.stats.events_mapped, odo.stats.events / 2);  // every event is mapped, less the EKF's gates
@@ -511,7 +537,7 @@ TEST(MosaicPipelineSimulated, OdometryTrackers) {
   const PipelineRun a = run(o, s, size_t{1} << 18, true);
   const MosaicResult& opf = a.result;
   const auto [opf_rms, opf_max] = rotation_error_deg(opf.rotation, s.groundtruth);
-  EXPECT_GT(opf.stats.odometry.windows, 50);
+  EXPECT_GT(opf.stats.odometry.windows, 39);  // measured 49
   EXPECT_GT(opf.stats.tracker.gyro_predictions, 0);  // the odometry's rates drive the prediction
   EXPECT_TRUE(opf.tracking_lost.empty());
   // The same in chunks of 5000 events: the windows computed ahead do not depend on the chunking.
@@ -528,20 +554,20 @@ TEST(MosaicPipelineSimulated, OdometryTrackers) {
   std::printf("odometry: events %.3f / %.3f deg (rates from 5000 events per window: %.3f / %.3f), events + filter %.3f / "
               "%.3f deg, gyro %.3f / %.3f deg (rms / max)\n",
               odo_rms, odo_max, cap_rms, cap_max, opf_rms, opf_max, gyro_rms, gyro_max);
-  // Measured (rms / max, deg): the windows' rates integrated 1.699 / 2.798; with the filter
-  // against the map 0.503 / 0.767 (the particle filter alone, PosterRotationEventsOnly: 1.108 /
-  // 2.196); the gyro integrated 0.028 / 0.039 (the filter with the gyro, PosterRotationWithGyro:
-  // 0.139 / 0.349). Bounds ~1.2x.
-  EXPECT_LT(odo_rms, 2.05);
-  EXPECT_LT(odo_max, 3.4);
-  EXPECT_LT(opf_rms, 0.61);
+  // Measured (rms / max, deg): the windows' rates integrated 0.935 / 1.889 (1.699 / 2.798 on 1.5 s:
+  // the drift grows); with the filter against the map 0.515 / 0.767 (the particle filter alone,
+  // PosterRotationEventsOnly: 1.353 / 2.196); the gyro integrated 0.025 / 0.039 (the filter with
+  // the gyro, PosterRotationWithGyro: 0.148 / 0.349). Bounds ~1.2x.
+  EXPECT_LT(odo_rms, 1.15);
+  EXPECT_LT(odo_max, 2.3);
+  EXPECT_LT(opf_rms, 0.62);
   EXPECT_LT(opf_max, 0.93);
-  EXPECT_LT(gyro_rms, 0.034);
+  EXPECT_LT(gyro_rms, 0.03);
   EXPECT_LT(gyro_max, 0.047);
-  // Fewer events per rate, less accurate odometry: measured 3.672 / 5.696 deg from 5000 of each
+  // Fewer events per rate, less accurate odometry: measured 2.171 / 4.097 deg from 5000 of each
   // window's events (poster's windows hold up to 40000).
-  EXPECT_LT(cap_rms, 4.4);
-  EXPECT_LT(cap_max, 6.9);
+  EXPECT_LT(cap_rms, 2.6);
+  EXPECT_LT(cap_max, 4.9);
   EXPECT_GT(cap_rms, 1.5 * odo_rms);
 }
 
@@ -554,7 +580,7 @@ TEST(MosaicPipelineSimulated, CmaxSlamBackEnd) {
   const MosaicResult& slam = a.result;
   const auto [slam_rms, slam_max] = rotation_error_deg(slam.rotation, s.groundtruth);
   EXPECT_EQ(slam.stats.tracker.batches, 0);
-  EXPECT_GT(slam.stats.cmax_slam.windows, 10);
+  EXPECT_GT(slam.stats.cmax_slam.windows, 5);  // measured 7
   EXPECT_GT(slam.stats.cmax_slam.mean_contrast_gain, 1.0);
   EXPECT_GT(slam.stats.events_mapped, slam.stats.events / 2);
   // Every event with a valid pixel votes once in the event map.
@@ -571,17 +597,17 @@ TEST(MosaicPipelineSimulated, CmaxSlamBackEnd) {
   std::printf("cmax_slam: events %.3f / %.3f deg, gyro %.3f / %.3f deg (rms / max); %lld windows, gain %.4f\n", slam_rms,
               slam_max, gyro_rms, gyro_max, static_cast<long long>(slam.stats.cmax_slam.windows),
               slam.stats.cmax_slam.mean_contrast_gain);
-  // Measured (rms / max, deg), with the global pass (the default): events only 0.318 / 0.611
-  // (without it 0.425 / 0.799; the odometry alone, OdometryTrackers: 1.699 / 2.798; with the
-  // filter 0.503 / 0.767); with the gyro 0.275 / 0.514 (without it 0.377 / 0.684; the gyro
-  // integrated: 0.028 / 0.039; a window's contrast optimum is about a panorama texel, 0.35 deg,
+  // Measured (rms / max, deg), with the global pass (the default): events only 0.241 / 0.365
+  // (without it 0.315 / 0.515; the odometry alone, OdometryTrackers: 0.935 / 1.889; with the
+  // filter 0.515 / 0.767); with the gyro 0.182 / 0.367 (without it 0.259 / 0.490; the gyro
+  // integrated: 0.025 / 0.039; a window's contrast optimum is about a panorama texel, 0.35 deg,
   // from the truth). Bounds ~1.2x.
   EXPECT_TRUE(slam.stats.cmax_slam.global_refined);
   EXPECT_GT(slam.stats.cmax_slam.global_contrast_gain, 1.0);
-  EXPECT_LT(slam_rms, 0.38);
-  EXPECT_LT(slam_max, 0.73);
-  EXPECT_LT(gyro_rms, 0.33);
-  EXPECT_LT(gyro_max, 0.62);
+  EXPECT_LT(slam_rms, 0.29);
+  EXPECT_LT(slam_max, 0.44);
+  EXPECT_LT(gyro_rms, 0.22);
+  EXPECT_LT(gyro_max, 0.44);
 }
 
 // The error budget's other diagnostics: the tracker against the true panorama (set_tracker_map_reference:
@@ -624,14 +650,14 @@ TEST(MosaicPipelineSimulated, OracleMapAndTrueMappingSplitTheError) {
               a.stats.bootstrap.tracker_contrast, b_rms, b_mx);
   EXPECT_TRUE(a.tracking_lost.empty());
   EXPECT_TRUE(b.tracking_lost.empty());
-  // Measured 0.048 / 0.134 deg on the true map (C calibrated on it 0.191) and 0.138 / 0.312 deg
-  // with the true mapping; with only the true bootstrap 0.206 deg and from the CMax bootstrap 0.452
-  // (PosterRotationEventsOnlyParticleVelocity): tracker 0.05, the map from true rotations +0.09,
-  // the tracker's feedback into the map +0.07, the bootstrap's drift +0.25 deg RMS. Bounds ~1.2x.
-  EXPECT_LT(a_rms, 0.06);
-  EXPECT_LT(a_mx, 0.17);
-  EXPECT_LT(b_rms, 0.17);
-  EXPECT_LT(b_mx, 0.38);
+  // Measured 0.041 / 0.119 deg on the true map (C calibrated on it 0.191) and 0.124 / 0.287 deg
+  // with the true mapping; with only the true bootstrap 0.241 deg and from the CMax bootstrap 0.525
+  // (PosterRotationEventsOnlyParticleVelocity): tracker 0.04, the map from true rotations +0.08,
+  // the tracker's feedback into the map +0.12, the bootstrap's drift +0.28 deg RMS. Bounds ~1.2x.
+  EXPECT_LT(a_rms, 0.05);
+  EXPECT_LT(a_mx, 0.145);
+  EXPECT_LT(b_rms, 0.15);
+  EXPECT_LT(b_mx, 0.35);
   // A map of the wrong size is refused.
   MosaicPipeline bad(o, s.camera);
   bad.set_tracker_map_reference([](const Eigen::Matrix3d&, int64_t) { return std::vector<float>(10, 0.0f); });
@@ -641,9 +667,11 @@ TEST(MosaicPipelineSimulated, OracleMapAndTrueMappingSplitTheError) {
 // Tracking failure: the events after 0.8 s come mirrored left-right (a view the map cannot
 // explain): the probe contrast collapses, a lost segment is reported from the first low window
 // after the change (declared after two), the mosaic is not written while lost, and with the gyro
-// the particles are not spread.
+// the particles are not spread. On the 1.5 s: a loss shows 0.1-0.3 s after the change and is
+// declared two windows later, and the segment must then run to the end (on 1.0 s no change time
+// from 0.4 to 0.7 s gave one lost segment starting within two windows of it and reaching the end).
 TEST(MosaicPipelineSimulated, MirroredViewIsDetectedAsLost) {
-  const Sequence& s = rotation_sequence();
+  const Sequence& s = rotation_sequence(kLongSequenceS);
   Sequence m = s;
   const int64_t t_change = s.events.front().t_ns + 800'000'000;
   const int W = s.camera.camera.width();
@@ -690,8 +718,10 @@ TEST(MosaicPipelineSimulated, MirroredViewIsDetectedAsLost) {
 // The mapper on a second thread (threads = 2) gives bit-identical results: trajectory, final
 // mosaic and mapper counts, with the tracker switching maps at once (reconstruct_latency_events 0)
 // and 30000 events after each reconstruction's point (the mapper solving while the tracker runs on).
+// On the first 0.6 s (the bootstrap and 0.3 s of tracking), both sides.
 TEST(MosaicPipelineSimulated, TwoThreadsGiveBitIdenticalResults) {
-  const Sequence& s = rotation_sequence();
+  const Sequence& full = rotation_sequence();
+  const Sequence s = first_part(full, full.t_begin_ns + 600'000'000);
   for (const int64_t latency : {int64_t{0}, int64_t{30000}}) {
     MosaicPipelineOptions o = command_options(true);
     o.reconstruct_latency_events = latency;
@@ -704,7 +734,7 @@ TEST(MosaicPipelineSimulated, TwoThreadsGiveBitIdenticalResults) {
     EXPECT_EQ(two.stats.events_mapped, one.stats.events_mapped);
     EXPECT_EQ(two.stats.reconstructions, one.stats.reconstructions);
     EXPECT_EQ(two.stats.snapshots, one.stats.snapshots);
-    EXPECT_GT(one.stats.reconstructions, 5);
+    EXPECT_GT(one.stats.reconstructions, 5);  // measured 7
     EXPECT_TRUE(same_image(two.reconstruction, one.reconstruction));
     EXPECT_EQ(two.reconstruction.unweighted_log_intensity, one.reconstruction.unweighted_log_intensity);
   }
@@ -713,9 +743,10 @@ TEST(MosaicPipelineSimulated, TwoThreadsGiveBitIdenticalResults) {
 // The final mosaic (gyro run, 1.5 s, 18 % of the mosaic's texels seen) against the true panorama over
 // the seen texels, after the affine log-intensity fit (the mosaic knows log intensity up to an
 // offset, and up to a gain when the contrast threshold is off): the default weighted Poisson solve
-// against the unweighted solve that seeded it, in the same run.
+// against the unweighted solve that seeded it, in the same run. On the 1.5 s: on shorter spans the
+// weighted solve gains less (measured on 0.8 s: +0.39 dB, +0.0103 SSIM; on 1.0 s: +0.42 dB).
 TEST(MosaicPipelineSimulated, WeightedPoissonRaisesMosaicPsnr) {
-  const Sequence& s = rotation_sequence();
+  const Sequence& s = rotation_sequence(kLongSequenceS);
   ASSERT_TRUE(s.panorama);
   const MosaicPipelineOptions o = command_options(true);
   ASSERT_EQ(o.output_weighting, mapping::PoissonWeighting::kInformation);
