@@ -18,6 +18,7 @@
 
 #include "evio/calib/error.h"
 #include "evio/calib/log.h"
+#include "frame_decompress.h"
 #include "mcap_container.h"
 #include "ros_messages.h"
 
@@ -25,6 +26,7 @@ namespace evio {
 namespace fs = std::filesystem;
 namespace {
 
+using detail::DecompressLimit;
 using detail::ros::MessageView;
 using detail::ros::Topic;
 
@@ -109,35 +111,9 @@ std::unique_ptr<TempFile> decompress_file(const std::string& src) {
   return out;
 }
 
-// Decompresses one zstd frame (a message with compression_mode message) into out.
-void decompress_message(const uint8_t* src, size_t n, std::vector<uint8_t>* out, const std::string& path,
-                        const std::string& where) {
-  std::unique_ptr<ZSTD_DCtx, size_t (*)(ZSTD_DCtx*)> ctx(ZSTD_createDCtx(), &ZSTD_freeDCtx);
-  out->resize(std::max<size_t>(n * 4, 4096));
-  ZSTD_inBuffer ib{src, n, 0};
-  size_t produced = 0;
-  for (;;) {
-    ZSTD_outBuffer ob{out->data() + produced, out->size() - produced, 0};
-    const size_t rc = ZSTD_decompressStream(ctx.get(), &ob, &ib);
-    produced += ob.pos;
-    if (ZSTD_isError(rc)) {
-      throw InputError(path, 0, "zstd message data corrupt (" + zstd_error(rc) + ") at " + where,
-                       "zstd-compressed messages (compression_mode message)");
-    }
-    if (rc == 0) break;
-    if (ib.pos == ib.size && ob.pos < ob.size) {
-      throw InputError(path, 0, "zstd message data ends inside a frame at " + where,
-                       "zstd-compressed messages (compression_mode message)");
-    }
-    if (produced == out->size()) {
-      if (out->size() >= kMaxMessageBytes) {
-        throw InputError(path, 0, "a decompressed message exceeds 1 GiB at " + where, "messages up to 1 GiB");
-      }
-      out->resize(std::min<uint64_t>(kMaxMessageBytes, uint64_t{out->size()} * 2));
-    }
-  }
-  out->resize(produced);
-}
+// zstd-compressed messages (compression_mode message): one frame per message, up to 1 GiB.
+const DecompressLimit kMessageLimit{kMaxMessageBytes, "zstd-compressed messages of at most 1 GiB"};
+constexpr char kZstdMessageForm[] = "zstd-compressed messages (compression_mode message)";
 
 // ---------------------------------------------------------------------------------------------
 // One storage file: its topics (local ids) and a cursor over some of them.
@@ -262,7 +238,7 @@ class SqliteCursor final : public StorageCursor {
     *data = static_cast<const uint8_t*>(blob);
     *size = static_cast<size_t>(std::max(n, 0));
     if (zstd_) {
-      decompress_message(*data, *size, &buf_, db_.path(), at_raw());
+      decoder_.decode(*data, *size, &buf_, kMessageLimit, db_.path(), at_raw(), kZstdMessageForm);
       *data = buf_.data();
       *size = buf_.size();
     }
@@ -286,6 +262,7 @@ class SqliteCursor final : public StorageCursor {
   std::unique_ptr<Statement> st_;
   int64_t t_first_ = 0, t_last_ = 0, row_ = 0, stamp_ = 0;
   bool zstd_ = false, done_ = false;
+  detail::ZstdFrameDecoder decoder_;  // one context for every message
   std::vector<uint8_t> buf_;
 };
 
@@ -344,7 +321,8 @@ class McapCursor final : public StorageCursor {
     *data = m_.data;
     *size = m_.size;
     if (zstd_) {
-      decompress_message(m_.data, m_.size, &buf_, path_, "the data of the message at " + m_.at(0));
+      decoder_.decode(m_.data, m_.size, &buf_, kMessageLimit, path_, "the data of the message at " + m_.at(0),
+                   kZstdMessageForm);
       *data = buf_.data();
       *size = buf_.size();
     }
@@ -361,6 +339,7 @@ class McapCursor final : public StorageCursor {
   detail::mcap::MessageCursor cursor_;
   detail::mcap::Message m_;
   bool zstd_;
+  detail::ZstdFrameDecoder decoder_;  // one context for every message
   std::vector<uint8_t> buf_;
 };
 

@@ -7,6 +7,7 @@
 #include <map>
 
 #include <gtest/gtest.h>
+#include <sqlite3.h>
 #include <opencv2/core.hpp>
 
 #include "evio/calib/error.h"
@@ -519,6 +520,29 @@ TEST(Rosbag2, TruncatedMcapKeepsTheMessagesBeforeTheDamage) {
   EXPECT_GT(got.size(), s.events.size() / 3);
   ASSERT_LT(got.size(), s.events.size());
   for (size_t i = 0; i < got.size(); ++i) ASSERT_EQ(got[i], s.events[i]) << i;
+}
+
+// A message whose zstd frame (compression_mode message) is corrupt: an error naming the row.
+TEST(Rosbag2, CorruptCompressedMessageNamesTheRow) {
+  TempDir dir;
+  Rosbag2WriterOptions o;
+  o.compression_mode = "message";
+  Rosbag2Writer w(dir.path(), o);
+  write_sample(&w);
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open(w.files()[0].c_str(), &db), SQLITE_OK);
+  ASSERT_EQ(sqlite3_exec(db, "UPDATE messages SET data = X'28B52FFD0400FFFF' WHERE id = 3", nullptr, nullptr, nullptr),
+            SQLITE_OK);
+  sqlite3_close(db);
+  auto r = open_dataset(dir.path(), {});
+  try {
+    read_all_events(r.get());
+    r->read_imu();
+    r->read_frames();
+    FAIL() << "corrupt zstd message accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("messages row id 3"), std::string::npos) << e.what();
+  }
 }
 
 TEST(Rosbag2, BadInputNamesTheProblem) {
