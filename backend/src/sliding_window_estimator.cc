@@ -390,6 +390,8 @@ bool SlidingWindowEstimator::add_frame(const FeatureObservations& frame) {
       anchor.pose = anchor.kf->pose;
       anchor.kf = nullptr;
     }
+    past_keyframes_.emplace_back(window_.front()->t_ns, window_.front()->pose);
+    if (past_keyframes_.size() > kMaxPastKeyframes) past_keyframes_.pop_front();
     marginalize_oldest();
   }
   stats_.solve_time_s.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());

@@ -290,14 +290,15 @@ void VioPipeline::Impl::feed(const FeatureObservations& f) {
     const double flow = test.translation_flow_deg_s, bound = opt.rotation_tracker_max_flow_deg_s;
     const bool image_rotation = test.image_best != backend::TwoViewModel::kGeneral;
     const bool moving = flow >= bound && test.landmarks >= std::max(1, opt.health_min_landmarks);
-    update_rotation_tracker(f.t_ns, rot_tracker ? image_rotation && !moving : image_rotation && flow >= 0 && flow < bound);
+    update_rotation_tracker(f.t_ns, image_rotation && flow >= 0 && flow < bound, image_rotation && !moving);
   }
   if (kf) {
     const auto& factors = est->stats().tracker_factors;
     for (; tracker_factors_seen < factors.size(); ++tracker_factors_seen)
       if (opt.keyframe_chaining && !factors[tracker_factors_seen].dropped) {  // for chain_final only
         tracker_keyframes.insert(factors[tracker_factors_seen].t_ns);
-        tracker_keyframes.insert(factors[tracker_factors_seen].anchor_t_ns);
+        if (!chained_keyframes.count(factors[tracker_factors_seen].anchor_t_ns))  // an anchor already final stays as it is
+          tracker_keyframes.insert(factors[tracker_factors_seen].anchor_t_ns);
       }
     for (const auto& [id, p] : est->landmarks()) result.landmarks[id] = p;
     const std::vector<VioState> window = est->keyframe_states();
@@ -580,6 +581,8 @@ bool VioPipeline::Impl::frame_motion_at(int64_t t, frontend::FrameMotion* m) {
 // One chunk of raw events through the filters and the front-end.
 void VioPipeline::Impl::process(EventSpan chunk) {
   VioStats& st = result.stats;
+  if (opt.rotation_tracker && opt.rotation_tracker_from_start && !rot_lead_started && !chunk.empty())
+    start_rotation_tracker_lead(chunk.front().t_ns + shift);
   if (rot_tracker) {
     rotation_tracker_events(chunk);  // before the frames: its orientations then cover their keyframes
   } else if (opt.rotation_tracker) {

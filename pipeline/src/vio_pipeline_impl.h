@@ -132,9 +132,19 @@ struct VioPipeline::Impl {
   int64_t rot_imu_fed_t = std::numeric_limits<int64_t>::min();  // IMU clock, last sample given to it
   int64_t rot_run_start_t = 0;       // IMU clock: the first keyframe of the current run
   std::deque<Event> rot_history;     // raw events of the last rotation_tracker_history_ns while the tracker is off
-  // After the keyframe at t_kf (IMU clock), whose bearings are (or are not) rotation-dominant:
-  // starts or stops the tracker.
-  void update_rotation_tracker(int64_t t_kf, bool rotation_dominant);
+  // The first segment's tracker from the recording's start (rotation_tracker_from_start): whether it
+  // was started, whether its orientations are still held back (the start rule has not opened),
+  // those orientations, and the consecutive keyframes that meet the start rule.
+  bool rot_lead_started = false;
+  bool rot_lead = false;
+  std::vector<backend::SlidingWindowEstimator::TrackedRotation> rot_held;
+  int rot_lead_start_run = 0;
+  // After the keyframe at t_kf (IMU clock): starts or stops the tracker. can_start: the keyframe
+  // meets the start rule; can_continue: it does not count towards the stop.
+  void update_rotation_tracker(int64_t t_kf, bool can_start, bool can_continue);
+  // A tracker whose first event is at or after from_t (IMU clock), fed the IMU from a little before.
+  void start_rotation_tracker(int64_t from_t);
+  void start_rotation_tracker_lead(int64_t t_first_event);
   void keep_rotation_tracker_history(EventSpan chunk);
   void rotation_tracker_events(EventSpan chunk);
   void rotation_tracker_imu();

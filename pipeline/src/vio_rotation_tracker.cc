@@ -19,8 +19,32 @@ struct ScopeTimer {
 };
 }  // namespace
 
-void VioPipeline::Impl::update_rotation_tracker(int64_t t_kf, bool rotation_dominant) {
+void VioPipeline::Impl::update_rotation_tracker(int64_t t_kf, bool can_start, bool can_continue) {
+  if (rot_lead) {
+    // The tracker from the recording's start: the start rule releases its orientations, the stop
+    // rule ends it.
+    rot_lead_start_run = can_start ? rot_lead_start_run + 1 : 0;
+    rot_run = can_continue ? 0 : rot_run + 1;
+    if (rot_run >= opt.rotation_tracker_stop_keyframes) {
+      ScopeTimer timer(&result.stats.rotation_tracker_time_s);
+      rot_tracker.reset();
+      rot_lead = false;
+      rot_held.clear();
+      rot_held.shrink_to_fit();
+      rot_run = 0;
+      ++result.stats.rotation_tracker_discarded;
+    } else if (rot_lead_start_run >= opt.rotation_tracker_start_keyframes) {
+      rot_lead = false;
+      rot_run = 0;
+      ++result.stats.rotation_tracker_segments;
+      for (const auto& r : rot_held) est->add_tracked_rotation(r);
+      rot_held.clear();
+      rot_held.shrink_to_fit();
+    }
+    return;
+  }
   // rot_run counts the keyframes that disagree with the tracker's state.
+  const bool rotation_dominant = rot_tracker ? can_continue : can_start;
   rot_run = rotation_dominant == static_cast<bool>(rot_tracker) ? 0 : rot_run + 1;
   if (rot_run == 1 && !rot_tracker) rot_run_start_t = t_kf;
   if (rot_tracker) {
@@ -34,9 +58,32 @@ void VioPipeline::Impl::update_rotation_tracker(int64_t t_kf, bool rotation_domi
   if (rot_run < opt.rotation_tracker_start_keyframes) return;
   rot_run = 0;
   ScopeTimer timer(&result.stats.rotation_tracker_time_s);
+  // The tracker starts at the run's first keyframe: the events kept since (the front-end's frames
+  // lag the events read).
+  start_rotation_tracker(rot_run_start_t);
+  ++result.stats.rotation_tracker_segments;
+  auto first = std::lower_bound(rot_history.begin(), rot_history.end(), rot_run_start_t - shift,
+                                [](const Event& e, int64_t t) { return e.t_ns < t; });
+  const std::vector<Event> kept(first, rot_history.end());
+  rot_history.clear();
+  if (!kept.empty()) {
+    result.stats.rotation_tracker_events += static_cast<int64_t>(kept.size());
+    rot_tracker->add_events(EventSpan(kept.data(), kept.size()));
+  }
+}
+
+void VioPipeline::Impl::start_rotation_tracker_lead(int64_t t_first_event) {
+  rot_lead_started = true;
+  rot_lead = true;
+  rot_lead_start_run = 0;
+  rot_run = 0;
+  ScopeTimer timer(&result.stats.rotation_tracker_time_s);
+  start_rotation_tracker(t_first_event);
+}
+
+void VioPipeline::Impl::start_rotation_tracker(int64_t from_t) {
   rot_tracker = std::make_unique<MosaicPipeline>(opt.rotation_tracker_options, cal);
   ++rot_segment;
-  ++result.stats.rotation_tracker_segments;
   rot_lost = false;
   rot_tracker->set_track_callback([this](int64_t t_cam, const Eigen::Quaterniond& q_m_c, const Eigen::Matrix3d& cov_c, bool lost) {
     if (lost) {
@@ -53,24 +100,20 @@ void VioPipeline::Impl::update_rotation_tracker(int64_t t_kf, bool rotation_domi
     r.q_m_c = q_m_c;
     r.cov_c = cov_c;
     r.segment = rot_segment;
-    est->add_tracked_rotation(r);
+    if (rot_lead) {  // held back: one orientation per millisecond is plenty for keyframes
+      if (rot_held.empty() || r.segment != rot_held.back().segment || r.t_ns - rot_held.back().t_ns >= 1'000'000)
+        rot_held.push_back(r);
+    } else {
+      est->add_tracked_rotation(r);
+    }
   });
-  // The tracker starts at the run's first keyframe: the gyro from a little before it, the events
-  // kept since (the front-end's frames lag the events read).
-  const int64_t from = rot_run_start_t - 50'000'000;
+  // The gyro from a little before the first event.
+  const int64_t from = from_t - 50'000'000;
   rot_imu_fed_t = std::numeric_limits<int64_t>::min();
   for (const ImuSample& s : imu) {
     if (s.t_ns < from) continue;
     rot_tracker->add_imu(s);
     rot_imu_fed_t = s.t_ns;
-  }
-  auto first = std::lower_bound(rot_history.begin(), rot_history.end(), rot_run_start_t - shift,
-                                [](const Event& e, int64_t t) { return e.t_ns < t; });
-  const std::vector<Event> kept(first, rot_history.end());
-  rot_history.clear();
-  if (!kept.empty()) {
-    result.stats.rotation_tracker_events += static_cast<int64_t>(kept.size());
-    rot_tracker->add_events(EventSpan(kept.data(), kept.size()));
   }
 }
 

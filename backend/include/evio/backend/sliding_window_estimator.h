@@ -225,7 +225,10 @@ struct SlidingWindowOptions {
   // orientation (slerped; covariance interpolated). The segment's first such keyframe is its
   // anchor; every later one gets a RelativeRotationError to the anchor, whose covariance is the two
   // orientations' (the tracker's particle spread) plus tracker_min_sigma_deg^2 per axis (the
-  // spread leaves out the panorama's own error: parallax, the map's registration). The anchor keeps its last estimate as a constant once
+  // spread leaves out the panorama's own error: parallax, the map's registration). A segment whose
+  // orientations begin before the window's oldest keyframe (a tracker that ran before its
+  // orientations were given) is anchored instead at the earliest marginalised keyframe they
+  // bracket (among the last 4096), as that keyframe's last estimate. The anchor keeps its last estimate as a constant once
   // it is marginalised, so a revisit of the panorama pulls the newest keyframes back to it without
   // moving any state by a jump (a Huber loss of scale tracker_loss_scale sigmas: the pull of a
   // large correction stays, bounded). Jump test: the tracker's rotation since the segment's
@@ -437,6 +440,10 @@ class SlidingWindowEstimator {
     Eigen::Matrix3d last_cov = Eigen::Matrix3d::Zero();
   };
   std::map<int64_t, TrackerAnchor> tracker_anchors_;   // by anchor id
+  // Marginalised keyframes' last estimates (time, pose), oldest first, at most kMaxPastKeyframes:
+  // the anchors of tracker segments whose orientations begin before the window.
+  static constexpr size_t kMaxPastKeyframes = 4096;
+  std::deque<std::pair<int64_t, std::array<double, 7>>> past_keyframes_;
   std::map<int64_t, int64_t> tracker_segments_;         // the caller's segment -> its current anchor id
   int64_t next_tracker_anchor_ = 0;
 };

@@ -236,6 +236,15 @@ struct VioPipelineOptions {
   // keyframe: the front-end's frames reach the estimator up to about half a second after their
   // events are read.
   int64_t rotation_tracker_history_ns = 2'000'000'000;
+  // The first segment's tracker runs from the recording's first event (true): its orientations are
+  // held back until the start rule above opens (a landmark depth is needed for it, seconds into a
+  // recording), then given to the estimator, which anchors the segment at the earliest keyframe
+  // they cover, marginalised or not (SlidingWindowEstimator::add_tracked_rotation). That keyframe
+  // is the trajectory's start, whose orientation the prior fixes, so the gyro's drift until the
+  // start rule opens does not stay in the anchor. rotation_tracker_stop_keyframes consecutive
+  // keyframes that would stop a running tracker end this one too, its orientations discarded.
+  // false: the first segment starts like every later one.
+  bool rotation_tracker_from_start = true;
   MosaicPipelineOptions rotation_tracker_options = [] {
     MosaicPipelineOptions m;
     m.tracker_method = MosaicTracker::kParticleFilter;
@@ -317,7 +326,8 @@ struct VioStats {
   backend::SlidingWindowStats window;            // back-end (empty when not initialised)
   // rotation_tracker: segments started, events given to the tracker, and the time its calls took
   // on the caller's thread (s; the mosaic's reconstructions may run on a second thread besides).
-  int64_t rotation_tracker_segments = 0;
+  int64_t rotation_tracker_segments = 0;   // segments whose orientations went to the estimator
+  int64_t rotation_tracker_discarded = 0;  // trackers from the start ended before the start rule opened
   int64_t rotation_tracker_events = 0;
   int64_t rotation_tracker_lost_samples = 0;  // orientations withheld: the tracker counted itself lost
   double rotation_tracker_time_s = 0;
