@@ -128,6 +128,7 @@ const Table<C>& vio_config_table() {
         .integer("stop_keyframes", &C::rotation_tracker_stop_keyframes, 1, 1000000)
         .duration_ms("history_ms", &C::rotation_tracker_history_ns, Range::kNonNegative)
         .boolean("from_start", &C::rotation_tracker_from_start)
+        .boolean("hold_on_stop", &C::rotation_tracker_hold_on_stop)
         .number("max_flow_deg_s", &C::rotation_tracker_max_flow_deg_s, Range::kPositive, "deg/s (speed over the median landmark depth)")
         .include(rt_tracker, &C::rotation_tracker_options)
         .note("enabled", "the mosaic's particle filter with the gyro in rotation-dominant spans; factors: window.tracker_*");

@@ -139,6 +139,7 @@ struct VioPipeline::Impl {
   bool rot_lead = false;
   std::vector<backend::SlidingWindowEstimator::TrackedRotation> rot_held;
   int rot_lead_start_run = 0;
+  bool rot_fed = false;  // the tracker's orientations have gone to the estimator
   // After the keyframe at t_kf (IMU clock): starts or stops the tracker. can_start: the keyframe
   // meets the start rule; can_continue: it does not count towards the stop.
   void update_rotation_tracker(int64_t t_kf, bool can_start, bool can_continue);

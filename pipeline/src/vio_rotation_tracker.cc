@@ -36,7 +36,8 @@ void VioPipeline::Impl::update_rotation_tracker(int64_t t_kf, bool can_start, bo
     } else if (rot_lead_start_run >= opt.rotation_tracker_start_keyframes) {
       rot_lead = false;
       rot_run = 0;
-      ++result.stats.rotation_tracker_segments;
+      if (!rot_fed) ++result.stats.rotation_tracker_segments;
+      rot_fed = true;
       for (const auto& r : rot_held) est->add_tracked_rotation(r);
       rot_held.clear();
       rot_held.shrink_to_fit();
@@ -49,9 +50,14 @@ void VioPipeline::Impl::update_rotation_tracker(int64_t t_kf, bool can_start, bo
   if (rot_run == 1 && !rot_tracker) rot_run_start_t = t_kf;
   if (rot_tracker) {
     if (rot_run >= opt.rotation_tracker_stop_keyframes) {
-      ScopeTimer timer(&result.stats.rotation_tracker_time_s);
-      rot_tracker.reset();
       rot_run = 0;
+      if (opt.rotation_tracker_hold_on_stop) {  // held: its orientations wait for the start rule
+        rot_lead = true;
+        rot_lead_start_run = 0;
+      } else {
+        ScopeTimer timer(&result.stats.rotation_tracker_time_s);
+        rot_tracker.reset();
+      }
     }
     return;
   }
@@ -62,6 +68,7 @@ void VioPipeline::Impl::update_rotation_tracker(int64_t t_kf, bool can_start, bo
   // lag the events read).
   start_rotation_tracker(rot_run_start_t);
   ++result.stats.rotation_tracker_segments;
+  rot_fed = true;
   auto first = std::lower_bound(rot_history.begin(), rot_history.end(), rot_run_start_t - shift,
                                 [](const Event& e, int64_t t) { return e.t_ns < t; });
   const std::vector<Event> kept(first, rot_history.end());
@@ -84,6 +91,7 @@ void VioPipeline::Impl::start_rotation_tracker_lead(int64_t t_first_event) {
 void VioPipeline::Impl::start_rotation_tracker(int64_t from_t) {
   rot_tracker = std::make_unique<MosaicPipeline>(opt.rotation_tracker_options, cal);
   ++rot_segment;
+  rot_fed = false;
   rot_lost = false;
   rot_tracker->set_track_callback([this](int64_t t_cam, const Eigen::Quaterniond& q_m_c, const Eigen::Matrix3d& cov_c, bool lost) {
     if (lost) {

@@ -245,6 +245,13 @@ struct VioPipelineOptions {
   // keyframes that would stop a running tracker end this one too, its orientations discarded.
   // false: the first segment starts like every later one.
   bool rotation_tracker_from_start = true;
+  // A tracker the stop rule stops is held (true): it keeps tracking, its orientations held back,
+  // and goes on feeding its segment (the same anchor) once the start rule opens again; a further
+  // rotation_tracker_stop_keyframes consecutive stopping keyframes end it. A window that goes
+  // wrong (its velocity, hence the flow, jumps) trips the stop rule while the camera still pans in
+  // place; a fresh segment would then be anchored at the wrong estimate, while the held one's
+  // anchor pulls it back. false: the stop ends it.
+  bool rotation_tracker_hold_on_stop = true;
   MosaicPipelineOptions rotation_tracker_options = [] {
     MosaicPipelineOptions m;
     m.tracker_method = MosaicTracker::kParticleFilter;
