@@ -132,9 +132,10 @@ struct VioPipeline::Impl {
   int64_t rot_imu_fed_t = std::numeric_limits<int64_t>::min();  // IMU clock, last sample given to it
   int64_t rot_run_start_t = 0;       // IMU clock: the first keyframe of the current run
   std::deque<Event> rot_history;     // raw events of the last rotation_tracker_history_ns while the tracker is off
-  // The first segment's tracker from the recording's start (rotation_tracker_from_start): whether it
-  // was started, whether its orientations are still held back (the start rule has not opened),
-  // those orientations, and the consecutive keyframes that meet the start rule.
+  // A held tracker (rotation_tracker_from_start: the first one, from the recording's start;
+  // rotation_tracker_hold_on_stop: a stopped one): whether the first was started, whether the
+  // tracker's orientations are held back (the start rule has not opened), those orientations,
+  // and the consecutive keyframes that meet the start rule.
   bool rot_lead_started = false;
   bool rot_lead = false;
   std::vector<backend::SlidingWindowEstimator::TrackedRotation> rot_held;

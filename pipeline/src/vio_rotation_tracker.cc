@@ -21,8 +21,8 @@ struct ScopeTimer {
 
 void VioPipeline::Impl::update_rotation_tracker(int64_t t_kf, bool can_start, bool can_continue) {
   if (rot_lead) {
-    // The tracker from the recording's start: the start rule releases its orientations, the stop
-    // rule ends it.
+    // A held tracker (from the recording's start, or stopped): the start rule releases its
+    // orientations, the stop rule ends it.
     rot_lead_start_run = can_start ? rot_lead_start_run + 1 : 0;
     rot_run = can_continue ? 0 : rot_run + 1;
     if (rot_run >= opt.rotation_tracker_stop_keyframes) {

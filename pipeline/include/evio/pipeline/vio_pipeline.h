@@ -334,7 +334,7 @@ struct VioStats {
   // rotation_tracker: segments started, events given to the tracker, and the time its calls took
   // on the caller's thread (s; the mosaic's reconstructions may run on a second thread besides).
   int64_t rotation_tracker_segments = 0;   // segments whose orientations went to the estimator
-  int64_t rotation_tracker_discarded = 0;  // trackers from the start ended before the start rule opened
+  int64_t rotation_tracker_discarded = 0;  // held trackers (from the start, or stopped) ended before the start rule opened
   int64_t rotation_tracker_events = 0;
   int64_t rotation_tracker_lost_samples = 0;  // orientations withheld: the tracker counted itself lost
   double rotation_tracker_time_s = 0;
