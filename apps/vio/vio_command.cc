@@ -129,6 +129,8 @@ const Table<C>& vio_config_table() {
         .duration_ms("history_ms", &C::rotation_tracker_history_ns, Range::kNonNegative)
         .boolean("from_start", &C::rotation_tracker_from_start)
         .boolean("hold_on_stop", &C::rotation_tracker_hold_on_stop)
+        .duration_ms("hold_ms", &C::rotation_tracker_hold_ns, Range::kNonNegative)
+        .boolean("held_output", &C::rotation_tracker_held_output)
         .number("max_flow_deg_s", &C::rotation_tracker_max_flow_deg_s, Range::kPositive, "deg/s (speed over the median landmark depth)")
         .include(rt_tracker, &C::rotation_tracker_options)
         .note("enabled", "the mosaic's particle filter with the gyro in rotation-dominant spans; factors: window.tracker_*");

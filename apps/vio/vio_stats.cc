@@ -120,7 +120,7 @@ void write_rotation_tracker(std::ostream& j, const VioConfig& cfg, const pipelin
   int64_t dropped = 0;
   for (const auto& f : st.tracker_factors) dropped += f.dropped ? 1 : 0;
   j << ",\n  \"rotation_tracker\": {\"enabled\": " << json_bool(cfg.rotation_tracker) << ", \"segments\": " << vs.rotation_tracker_segments
-    << ", \"discarded\": " << vs.rotation_tracker_discarded << ", \"events\": " << vs.rotation_tracker_events << ", \"lost_samples\": " << vs.rotation_tracker_lost_samples << ", \"time_s\": " << json_number(vs.rotation_tracker_time_s, 10)
+    << ", \"discarded\": " << vs.rotation_tracker_discarded << ", \"corrected_keyframes\": " << vs.rotation_tracker_corrected_keyframes << ", \"events\": " << vs.rotation_tracker_events << ", \"lost_samples\": " << vs.rotation_tracker_lost_samples << ", \"time_s\": " << json_number(vs.rotation_tracker_time_s, 10)
     << ", \"samples\": " << st.tracker_samples << ", \"anchors\": " << st.tracker_anchors
     << ", \"factors_added\": " << st.tracker_factors.size() << ", \"factors_dropped\": " << dropped << ",\n    \"spans\": [";
   write_segments(j, r.rotation_tracker);

@@ -34,42 +34,20 @@ void SlidingWindowEstimator::attach_tracked_rotations() {
   const double floor_var = std::pow(options_.tracker_min_sigma_deg / kDeg, 2);
   const Eigen::Matrix3d R_b_c = camera_.T_c_b.rotation.conjugate().toRotationMatrix();
   const double jump_limit = chi2_upper_quantile(3, options_.tracker_reject_p);
-  // The tracker's orientation at t (slerped between the samples that bracket it, at most
-  // tracker_max_gap_s apart, of one segment): false when there is none.
-  const auto sample_at = [&](int64_t t, int64_t* segment, Eigen::Quaterniond* q, Eigen::Matrix3d* cov) {
-    const auto after = std::lower_bound(tracked_.begin(), tracked_.end(), t,
-                                        [](const TrackedRotation& r, int64_t u) { return r.t_ns < u; });
-    const TrackedRotation* s0 = nullptr;
-    const TrackedRotation* s1 = nullptr;
-    if (after != tracked_.end() && after->t_ns == t) {
-      s0 = s1 = &*after;
-    } else if (after != tracked_.end() && after != tracked_.begin()) {
-      s0 = &*std::prev(after);
-      s1 = &*after;
-    }
-    if (!s0 || s0->segment != s1->segment || s1->t_ns - s0->t_ns > max_gap) return false;
-    const double a = s1->t_ns > s0->t_ns ? static_cast<double>(t - s0->t_ns) / static_cast<double>(s1->t_ns - s0->t_ns) : 0.0;
-    *segment = s0->segment;
-    *q = s0->q_m_c.slerp(a, s1->q_m_c).normalized();
-    *cov = (1 - a) * s0->cov_c + a * s1->cov_c;
-    return true;
-  };
   // Segments whose orientations begin before the window: anchored at the earliest marginalised
   // keyframe they cover.
   if (tracked_.front().t_ns < window_.front()->t_ns) {
     const auto first = std::lower_bound(past_keyframes_.begin(), past_keyframes_.end(), tracked_.front().t_ns,
                                         [](const auto& p, int64_t t) { return p.first < t; });
     for (auto it = first; it != past_keyframes_.end(); ++it) {
-      int64_t segment = 0;
-      Eigen::Quaterniond q;
-      Eigen::Matrix3d cov;
-      if (!sample_at(it->first, &segment, &q, &cov) || tracker_segments_.count(segment)) continue;
+      TrackedRotation r;
+      if (!tracked_rotation_at(tracked_.begin(), tracked_.end(), it->first, max_gap, &r) || tracker_segments_.count(r.segment)) continue;
       const int64_t id = next_tracker_anchor_++;
-      tracker_segments_[segment] = id;
+      tracker_segments_[r.segment] = id;
       TrackerAnchor& anchor = tracker_anchors_[id];
       anchor.t_ns = it->first;
-      anchor.q_m_c = q;
-      anchor.cov_c = cov;
+      anchor.q_m_c = r.q_m_c;
+      anchor.cov_c = r.cov_c;
       anchor.pose = it->second;
       ++stats_.tracker_anchors;
     }
@@ -79,8 +57,11 @@ void SlidingWindowEstimator::attach_tracked_rotations() {
     if (!k.tracker_eligible || k.tracked || k.tracker_tried) continue;
     if (tracked_.back().t_ns < k.t_ns) break;  // the tracker has not reached it (nor any later keyframe)
     k.tracker_tried = true;
-    int64_t segment = 0;
-    if (!sample_at(k.t_ns, &segment, &k.tracker_q_m_c, &k.tracker_cov_c)) continue;
+    TrackedRotation r;
+    if (!tracked_rotation_at(tracked_.begin(), tracked_.end(), k.t_ns, max_gap, &r)) continue;
+    const int64_t segment = r.segment;
+    k.tracker_q_m_c = r.q_m_c;
+    k.tracker_cov_c = r.cov_c;
     k.tracked = true;
     // The tracker's segment as the estimator runs it: a registration jump starts a new one.
     auto [seg, fresh_segment] = tracker_segments_.try_emplace(segment, 0);

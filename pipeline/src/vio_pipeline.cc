@@ -69,6 +69,7 @@ bool VioPipelineOptions::Validate(std::string* why) const {
   if (rotation_tracker_start_keyframes < 1 || rotation_tracker_stop_keyframes < 1)
     return fail("rotation_tracker: start_keyframes and stop_keyframes must be >= 1");
   if (rotation_tracker_history_ns < 0) return fail("rotation_tracker: history_ms must be >= 0");
+  if (rotation_tracker_hold_ns < 0) return fail("rotation_tracker: hold_ms must be >= 0");
   if (!(rotation_tracker_max_flow_deg_s > 0) || !std::isfinite(rotation_tracker_max_flow_deg_s))
     return fail("rotation_tracker: max_flow_deg_s must be finite and > 0");
   if (rotation_tracker && (!rotation_tracker_options.use_gyro ||
@@ -308,7 +309,8 @@ void VioPipeline::Impl::feed(const FeatureObservations& f) {
     // The keyframes before the window's oldest are final (no solve changes them again).
     const auto first_in_window = window.empty() ? final_keyframes.end() : final_keyframes.find(window.front().t_ns);
     if (first_in_window != final_keyframes.begin() && first_in_window != final_keyframes.end()) {
-      release(std::prev(first_in_window)->first);
+      // While a tracker is held, they wait: its orientations may correct them (rotation_tracker_held_output).
+      if (!(rot_lead && opt.rotation_tracker_held_output)) release(std::prev(first_in_window)->first);
     }
   }
 }

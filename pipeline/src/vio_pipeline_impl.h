@@ -140,6 +140,7 @@ struct VioPipeline::Impl {
   bool rot_lead = false;
   std::vector<backend::SlidingWindowEstimator::TrackedRotation> rot_held;
   int rot_lead_start_run = 0;
+  int64_t rot_hold_start_t = -1;  // IMU clock: the held tracker's first keyframe (-1: none yet)
   bool rot_fed = false;  // the tracker's orientations have gone to the estimator
   // After the keyframe at t_kf (IMU clock): starts or stops the tracker. can_start: the keyframe
   // meets the start rule; can_continue: it does not count towards the stop.
@@ -147,6 +148,9 @@ struct VioPipeline::Impl {
   // A tracker whose first event is at or after from_t (IMU clock), fed the IMU from a little before.
   void start_rotation_tracker(int64_t from_t);
   void start_rotation_tracker_lead(int64_t t_first_event);
+  // rotation_tracker_held_output: the final keyframes not yet output take the held tracker's
+  // rotation (called as its orientations are released, before rot_held is cleared).
+  void correct_held_output();
   void keep_rotation_tracker_history(EventSpan chunk);
   void rotation_tracker_events(EventSpan chunk);
   void rotation_tracker_imu();

@@ -3,6 +3,7 @@
 // its orientations against its own panorama given to the estimator as they come.
 #include <algorithm>
 #include <chrono>
+#include <limits>
 #include <map>
 
 #include "vio_pipeline_impl.h"
@@ -22,10 +23,12 @@ struct ScopeTimer {
 void VioPipeline::Impl::update_rotation_tracker(int64_t t_kf, bool can_start, bool can_continue) {
   if (rot_lead) {
     // A held tracker (from the recording's start, or stopped): the start rule releases its
-    // orientations, the stop rule ends it.
+    // orientations; the stop rule ends the one from the start before it was released, and
+    // rotation_tracker_hold_ns ends either.
+    if (rot_hold_start_t < 0) rot_hold_start_t = t_kf;
     rot_lead_start_run = can_start ? rot_lead_start_run + 1 : 0;
     rot_run = can_continue ? 0 : rot_run + 1;
-    if (rot_run >= opt.rotation_tracker_stop_keyframes) {
+    if ((!rot_fed && rot_run >= opt.rotation_tracker_stop_keyframes) || t_kf - rot_hold_start_t > opt.rotation_tracker_hold_ns) {
       ScopeTimer timer(&result.stats.rotation_tracker_time_s);
       rot_tracker.reset();
       rot_lead = false;
@@ -38,6 +41,7 @@ void VioPipeline::Impl::update_rotation_tracker(int64_t t_kf, bool can_start, bo
       rot_run = 0;
       if (!rot_fed) ++result.stats.rotation_tracker_segments;
       rot_fed = true;
+      if (opt.rotation_tracker_held_output) correct_held_output();
       for (const auto& r : rot_held) est->add_tracked_rotation(r);
       rot_held.clear();
       rot_held.shrink_to_fit();
@@ -54,6 +58,7 @@ void VioPipeline::Impl::update_rotation_tracker(int64_t t_kf, bool can_start, bo
       if (opt.rotation_tracker_hold_on_stop) {  // held: its orientations wait for the start rule
         rot_lead = true;
         rot_lead_start_run = 0;
+        rot_hold_start_t = -1;
       } else {
         ScopeTimer timer(&result.stats.rotation_tracker_time_s);
         rot_tracker.reset();
@@ -79,10 +84,33 @@ void VioPipeline::Impl::update_rotation_tracker(int64_t t_kf, bool can_start, bo
   }
 }
 
+void VioPipeline::Impl::correct_held_output() {
+  if (rot_held.empty() || !est) return;
+  const std::vector<VioState> window = est->keyframe_states();
+  const int64_t t_window = window.empty() ? std::numeric_limits<int64_t>::max() : window.front().t_ns;
+  const auto max_gap = static_cast<int64_t>(est->options().tracker_max_gap_s * 1e9);
+  const Eigen::Quaterniond q_b_c = cal.T_c_b.rotation.conjugate();
+  // Per segment: the body orientation and the tracker's at its first waiting keyframe.
+  std::map<int64_t, std::pair<Eigen::Quaterniond, Eigen::Quaterniond>> reference;
+  for (auto it = final_keyframes.upper_bound(last_keyframe_out); it != final_keyframes.end() && it->first < t_window; ++it) {
+    backend::SlidingWindowEstimator::TrackedRotation r;
+    if (!backend::tracked_rotation_at(rot_held.begin(), rot_held.end(), it->first, max_gap, &r)) continue;
+    calib::SE3& T = it->second.T_w_b;
+    const auto [ref, first] = reference.try_emplace(r.segment, T.rotation, r.q_m_c);
+    if (!first) {
+      // R_w_b = R_w_b(ref) R_b_c R_cref_c R_c_b, with R_cref_c the tracker's camera rotation since the reference.
+      T.rotation = (ref->second.first * q_b_c * (ref->second.second.conjugate() * r.q_m_c) * q_b_c.conjugate()).normalized();
+      ++result.stats.rotation_tracker_corrected_keyframes;
+    }
+    if (opt.keyframe_chaining) tracker_keyframes.insert(it->first);  // chain_final keeps its orientation
+  }
+}
+
 void VioPipeline::Impl::start_rotation_tracker_lead(int64_t t_first_event) {
   rot_lead_started = true;
   rot_lead = true;
   rot_lead_start_run = 0;
+  rot_hold_start_t = -1;
   rot_run = 0;
   ScopeTimer timer(&result.stats.rotation_tracker_time_s);
   start_rotation_tracker(t_first_event);

@@ -50,6 +50,36 @@ RunResult run(const test::VioSimulation& sim, const SlidingWindowOptions& o, con
   return {evaluation::evaluate(sim.groundtruth_at_frames(), Trajectory(poses), eo), est.stats()};
 }
 
+// The tracker's orientation between samples: the one at t, the bracketing pair slerped, nothing
+// across a gap, a segment change or the ends.
+TEST(TrackedRotationAt, SlerpsBracketingSamplesOfOneSegmentWithinTheGap) {
+  using R = SlidingWindowEstimator::TrackedRotation;
+  const auto sample = [](int64_t t, double angle, int64_t segment, double var) {
+    R r;
+    r.t_ns = t;
+    r.q_m_c = Eigen::Quaterniond(Eigen::AngleAxisd(angle, Eigen::Vector3d::UnitZ()));
+    r.cov_c = var * Eigen::Matrix3d::Identity();
+    r.segment = segment;
+    return r;
+  };
+  const std::vector<R> s = {sample(100, 0.0, 1, 1.0), sample(200, 0.2, 1, 3.0), sample(400, 0.4, 1, 1.0), sample(450, 0.0, 2, 1.0)};
+  R out;
+  ASSERT_TRUE(tracked_rotation_at(s.begin(), s.end(), 150, 100, &out));
+  EXPECT_NEAR(Eigen::AngleAxisd(out.q_m_c).angle(), 0.1, 1e-12);
+  EXPECT_NEAR(out.cov_c(0, 0), 2.0, 1e-12);
+  EXPECT_EQ(out.segment, 1);
+  EXPECT_EQ(out.t_ns, 150);
+  ASSERT_TRUE(tracked_rotation_at(s.begin(), s.end(), 400, 100, &out));  // a sample at t: itself
+  EXPECT_NEAR(Eigen::AngleAxisd(out.q_m_c).angle(), 0.4, 1e-12);
+  EXPECT_TRUE(tracked_rotation_at(s.begin(), s.end(), 100, 100, &out));
+  EXPECT_FALSE(tracked_rotation_at(s.begin(), s.end(), 300, 100, &out));  // 200 ns apart
+  EXPECT_TRUE(tracked_rotation_at(s.begin(), s.end(), 300, 200, &out));
+  EXPECT_FALSE(tracked_rotation_at(s.begin(), s.end(), 420, 100, &out));  // segments 1 and 2
+  EXPECT_FALSE(tracked_rotation_at(s.begin(), s.end(), 99, 100, &out));   // before the first
+  EXPECT_FALSE(tracked_rotation_at(s.begin(), s.end(), 451, 100, &out));  // after the last
+  EXPECT_FALSE(tracked_rotation_at(s.begin(), s.begin(), 150, 100, &out));
+}
+
 TEST(SlidingWindowSimulated, PosterMocapMeanPositionErrorBelowTarget) {
   if (!evio_test::real_data_dir("trajectories")) GTEST_SKIP() << "real motion-capture trajectory not found";
   test::VioSimOptions so = poster_options();

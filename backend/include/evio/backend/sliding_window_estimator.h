@@ -53,9 +53,11 @@
 // keyframes) once seen from two keyframes with at least `min_triangulation_angle_deg` between rays.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <deque>
+#include <iterator>
 #include <map>
 #include <memory>
 #include <optional>
@@ -238,7 +240,7 @@ struct SlidingWindowOptions {
   // keyframe gets no factor and anchors the segment anew (the panorama's frame has moved for the
   // tracker). The factors are not marginalised.
   double tracker_max_gap_s = 0.05;        // s, > 0
-  double tracker_min_sigma_deg = 0.5;     // deg, > 0
+  double tracker_min_sigma_deg = 0.3;     // deg, > 0
   double tracker_loss_scale = 2.0;        // sigmas, > 0
   double tracker_reject_p = 0.001;        // probability in (0, 1)
   // A keyframe that gets a tracker factor and is not rotation-only also gets a StaticCentreError
@@ -447,5 +449,25 @@ class SlidingWindowEstimator {
   std::map<int64_t, int64_t> tracker_segments_;         // the caller's segment -> its current anchor id
   int64_t next_tracker_anchor_ = 0;
 };
+
+// The tracker's orientation at t from time-ordered samples [begin, end) of
+// SlidingWindowEstimator::TrackedRotation: the sample at t, or the two that bracket it slerped
+// (orientation) and blended (covariance), both of one segment and at most max_gap_ns apart.
+// False when there is none.
+template <class It>
+bool tracked_rotation_at(It begin, It end, int64_t t, int64_t max_gap_ns, SlidingWindowEstimator::TrackedRotation* out) {
+  using R = SlidingWindowEstimator::TrackedRotation;
+  const It after = std::lower_bound(begin, end, t, [](const R& r, int64_t u) { return r.t_ns < u; });
+  if (after == end || (after == begin && after->t_ns != t)) return false;
+  const R& s1 = *after;
+  const R& s0 = after->t_ns == t ? *after : *std::prev(after);
+  if (s0.segment != s1.segment || s1.t_ns - s0.t_ns > max_gap_ns) return false;
+  const double a = s1.t_ns > s0.t_ns ? static_cast<double>(t - s0.t_ns) / static_cast<double>(s1.t_ns - s0.t_ns) : 0.0;
+  out->t_ns = t;
+  out->segment = s0.segment;
+  out->q_m_c = s0.q_m_c.slerp(a, s1.q_m_c).normalized();
+  out->cov_c = (1 - a) * s0.cov_c + a * s1.cov_c;
+  return true;
+}
 
 }  // namespace evio::backend

@@ -246,12 +246,25 @@ struct VioPipelineOptions {
   // false: the first segment starts like every later one.
   bool rotation_tracker_from_start = true;
   // A tracker the stop rule stops is held (true): it keeps tracking, its orientations held back,
-  // and goes on feeding its segment (the same anchor) once the start rule opens again; a further
-  // rotation_tracker_stop_keyframes consecutive stopping keyframes end it. A window that goes
-  // wrong (its velocity, hence the flow, jumps) trips the stop rule while the camera still pans in
-  // place; a fresh segment would then be anchored at the wrong estimate, while the held one's
-  // anchor pulls it back. false: the stop ends it.
+  // and goes on feeding its segment (the same anchor) once the start rule opens again;
+  // rotation_tracker_hold_ns ends it. A window that goes wrong (its velocity, hence the flow,
+  // jumps) trips the stop rule while the camera still pans in place; a fresh segment would then be
+  // anchored at the wrong estimate, while the held one's anchor pulls it back. false: the stop
+  // ends it.
   bool rotation_tracker_hold_on_stop = true;
+  // A held tracker (either kind above) is ended once it has been held this long since the first
+  // keyframe of its hold (ns, >= 0) without the start rule opening: it bounds the memory and the
+  // time a hold costs (the tracker's CPU, and the output waiting below).
+  int64_t rotation_tracker_hold_ns = 30'000'000'000;
+  // While a tracker is held, the keyframes that become final wait (true) before they and their
+  // frames are output. When the start rule releases the tracker's orientations, each waiting
+  // keyframe the tracker covers takes the tracker's rotation from the first such keyframe of its
+  // segment, whose orientation stays (positions, velocities and biases stay too), and the frames
+  // are re-propagated through them. The drift over the held span then leaves the trajectory as
+  // the tracker saw it, rather than in the one step the window takes when its keyframes meet the
+  // segment's anchor. A tracker ended unreleased leaves them as they were. false: they are output
+  // as they become final.
+  bool rotation_tracker_held_output = true;
   MosaicPipelineOptions rotation_tracker_options = [] {
     MosaicPipelineOptions m;
     m.tracker_method = MosaicTracker::kParticleFilter;
@@ -335,6 +348,7 @@ struct VioStats {
   // on the caller's thread (s; the mosaic's reconstructions may run on a second thread besides).
   int64_t rotation_tracker_segments = 0;   // segments whose orientations went to the estimator
   int64_t rotation_tracker_discarded = 0;  // held trackers (from the start, or stopped) ended before the start rule opened
+  int64_t rotation_tracker_corrected_keyframes = 0;  // waiting keyframes given the held tracker's rotation
   int64_t rotation_tracker_events = 0;
   int64_t rotation_tracker_lost_samples = 0;  // orientations withheld: the tracker counted itself lost
   double rotation_tracker_time_s = 0;
