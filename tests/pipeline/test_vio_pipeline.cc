@@ -702,6 +702,18 @@ TEST(VioPipelineSimulated, RotationTrackerHoldsTheYawOfARotationDominantPan) {
   EXPECT_LT(yaw_on, 1.65);
   EXPECT_LT(yaw_on, yaw_off / 2);
   check_losing_the_panorama(anchor_on);
+  // rotation_tracker_hold_ns ends a held tracker: with no hold at all, the tracker from the start
+  // is ended at its second keyframe, nothing waits, and the first segment is started by the rule.
+  VioPipelineOptions o = consumer_gyro_options(true);
+  o.rotation_tracker_hold_ns = 0;
+  const VioResult h = run_imu_first(o, s);
+  ASSERT_TRUE(h.initialized);
+  ASSERT_FALSE(h.stats.window.tracker_factors.empty());
+  std::printf("no hold: first anchor %.3f s, %lld held trackers ended\n", 1e-9 * h.stats.window.tracker_factors.front().anchor_t_ns,
+              static_cast<long long>(h.stats.rotation_tracker_discarded));
+  EXPECT_GE(h.stats.rotation_tracker_discarded, 1);
+  EXPECT_EQ(h.stats.rotation_tracker_corrected_keyframes, 0);
+  EXPECT_GT(h.stats.window.tracker_factors.front().anchor_t_ns, anchor_on + 1'000'000'000);
 }
 
 // A 6-DoF sequence: the bearings call for a translation, the tracker run from the start is ended
