@@ -638,7 +638,7 @@ void check_losing_the_panorama(int64_t anchor_from_start) {
   ASSERT_FALSE(r.stats.window.tracker_factors.empty());
   const int64_t anchor = r.stats.window.tracker_factors.front().anchor_t_ns;
   std::printf("started by the rule: first anchor %.3f s (from the start: %.3f s)\n", 1e-9 * anchor, 1e-9 * anchor_from_start);
-  EXPECT_GT(anchor, anchor_from_start + 1'000'000'000);  // measured 4.450 s against 1.017 s
+  EXPECT_GT(anchor, anchor_from_start + 3'000'000'000);  // measured 4.450 s against 1.017 s
   const int64_t t_change_imu = t_change + s.camera.time_shift_ns;
   size_t before = 0;
   for (const auto& f : r.stats.window.tracker_factors) before += !f.dropped && f.t_ns < t_change_imu ? 1 : 0;
@@ -713,7 +713,7 @@ TEST(VioPipelineSimulated, RotationTrackerHoldsTheYawOfARotationDominantPan) {
               static_cast<long long>(h.stats.rotation_tracker_discarded));
   EXPECT_GE(h.stats.rotation_tracker_discarded, 1);
   EXPECT_EQ(h.stats.rotation_tracker_corrected_keyframes, 0);
-  EXPECT_GT(h.stats.window.tracker_factors.front().anchor_t_ns, anchor_on + 1'000'000'000);
+  EXPECT_GT(h.stats.window.tracker_factors.front().anchor_t_ns, anchor_on + 3'000'000'000);  // measured 4.450 s against 1.017 s
 }
 
 // A 6-DoF sequence: the bearings call for a translation, the tracker run from the start is ended
